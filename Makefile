@@ -1,0 +1,44 @@
+# Two commands for users: `make demo` and `make test`. Both build .venv first (once).
+# Needs only python3 (3.11) with venv and pip, make and a C compiler on the machine.
+
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+PYTEST_ARGS ?=
+
+# Keep DDS traffic on this machine (see ../shared/docs/ros2-notes.md). The tests'
+# conftest sets these too, with a ROS_DOMAIN_ID of its own per test process.
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export FASTDDS_BUILTIN_TRANSPORTS ?= SHM
+export MPLBACKEND ?= Agg
+export PIP_DISABLE_PIP_VERSION_CHECK := 1
+
+.PHONY: demo test bench venv clean
+
+demo: $(STAMP)
+	$(VENV)/bin/reducer-twin demo
+
+test: $(STAMP)
+	$(PY) -m pytest $(PYTEST_ARGS)
+
+# Benchmarks print figures; they are scripts, not timed assertions.
+bench: $(STAMP)
+	@set -e; for script in bench/*.py; do \
+	  [ -e "$$script" ] || continue; \
+	  echo "== $$script"; $(PY) "$$script"; \
+	done
+
+venv: $(STAMP)
+
+# Reinstalled only when the dependency lists change.
+$(STAMP): setup.py setup.cfg requirements-ros.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install -r requirements-ros.txt
+	$(PY) -m pip install -e '.[test]'
+	touch $@
+
+# Removes colcon output left in the checkout; the venv stays (rm -rf .venv for that).
+clean:
+	rm -rf build install log reducer_twin.egg-info
