@@ -1,0 +1,82 @@
+"""
+The ``reducer-twin`` command.
+
+Each subcommand lives in :mod:`reducer_twin.commands` as a module with
+``add_parser(subparsers)`` and ``run(args) -> int``. Usage errors exit 2,
+invalid values exit 1; both print one ``ERROR: ...`` line, no traceback.
+"""
+
+import argparse
+import importlib
+import sys
+
+from reducer_twin.core.errors import ReducerTwinError
+
+COMMANDS = ('paper', 'model', 'simulate', 'analyze', 'demo')
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose usage errors read ``ERROR: ...`` and exit 2."""
+
+    def error(self, message):
+        self.print_usage(sys.stderr)
+        sys.stderr.write(f'ERROR: {message}\n')
+        sys.exit(2)
+
+
+def build_parser():
+    """
+    Build the argument parser with every available subcommand.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        The parser.
+
+    """
+    parser = _Parser(prog='reducer-twin',
+                     description='Digital twin of precision cycloidal (RV) reducers.')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND', parser_class=_Parser)
+    sub.required = True
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f'reducer_twin.commands.{name}')
+        except ModuleNotFoundError as err:
+            if err.name != f'reducer_twin.commands.{name}':
+                raise
+            continue
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv=None):
+    """
+    Run the ``reducer-twin`` command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit code.
+
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except ReducerTwinError as err:
+        sys.stderr.write(f'ERROR: {err}\n')
+        return 1
+    except KeyboardInterrupt:
+        sys.stderr.write('ERROR: interrupted\n')
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``reducer-twin``, one module each."""
