@@ -31,6 +31,10 @@ import pytest
 
 DOMAIN_IDS = range(1, 101)
 
+# Everything the package ships or runs that the lint tests check; .venv, build,
+# install and log are never linted because they are not listed.
+LINTED = ('reducer_twin', 'msg_adapters', 'test', 'bench', 'setup.py')
+
 _domain_lock_fd = None
 
 
@@ -123,3 +127,9 @@ def venv_bin():
     directory is the venv's ``bin``, next to ``colcon`` and the console scripts.
     """
     return Path(sys.executable).parent
+
+
+@pytest.fixture(scope='session')
+def lint_paths(repo_root):
+    """Return the absolute paths the lint tests check (those that exist)."""
+    return [str(repo_root / name) for name in LINTED if (repo_root / name).exists()]
