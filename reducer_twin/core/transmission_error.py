@@ -319,3 +319,163 @@ def wear_to_te(clearance, lever=None, geometry=None):
     if lever is None:
         lever = effective_lever_radius(geometry)
     return np.asarray(clearance, dtype=float) / lever
+
+
+class ModelTables:
+    """
+    Tabulated mean mesh rotation for fast observation models.
+
+    ``beta_mean(|T|, w)`` on a grid (mesh ripple is below 0.3 arcsec, so
+    the period mean is what windows of encoder data see), interpolated
+    bilinearly. Built once per parameter set (:func:`model_tables`).
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    max_wear : float
+        Largest tabulated wear [m].
+    max_torque : float, optional
+        Largest tabulated torque [N·m] (default 3 x rated).
+
+    """
+
+    def __init__(self, params, max_wear=150e-6, max_torque=None):
+        self.params = params
+        t0 = params.rating.rated_torque
+        max_torque = 3.0 * t0 if max_torque is None else max_torque
+        # Dense at low torque where the contacts engage one after another.
+        self.torque = np.unique(np.concatenate([
+            np.linspace(0.0, 0.1 * t0, 41), np.linspace(0.1 * t0, max_torque, 60)]))
+        self.wear = np.linspace(0.0, max_wear, int(round(max_wear / 1e-6)) + 1)
+        grid = np.linspace(0.0, 2.0 * np.pi / params.geometry.z_pins, 24, endpoint=False)
+        tt, ww = np.meshgrid(self.torque, self.wear, indexing='ij')
+        psi = np.tile(grid, tt.size)
+        beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
+                             np.repeat(ww.ravel(), grid.size), params)
+        self.beta = beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
+        self.series_stiffness = series_stiffness(params.geometry, params.rating)
+        self.lm_torque = params.rating.lost_motion_torque_fraction * t0
+
+    def beta_mean(self, torque_abs, wear):
+        """
+        Interpolate the mean mesh rotation at ``|T|`` and ``w`` [rad].
+
+        Parameters
+        ----------
+        torque_abs : array_like
+            Torque magnitude [N·m], clipped to the table.
+        wear : array_like
+            Combined wear [m], clipped to the table.
+
+        Returns
+        -------
+        ndarray
+            Mean beta [rad].
+
+        """
+        t = np.clip(np.asarray(torque_abs, dtype=float), self.torque[0], self.torque[-1])
+        w = np.clip(np.asarray(wear, dtype=float), self.wear[0], self.wear[-1])
+        i = np.clip(np.searchsorted(self.torque, t, side='right') - 1, 0, self.torque.size - 2)
+        dw = self.wear[1] - self.wear[0]
+        j = np.clip(((w - self.wear[0]) / dw).astype(int), 0, self.wear.size - 2)
+        ft = (t - self.torque[i]) / (self.torque[i + 1] - self.torque[i])
+        fw = (w - self.wear[j]) / dw
+        b = self.beta
+        return ((1 - ft) * (1 - fw) * b[i, j] + ft * (1 - fw) * b[i + 1, j]
+                + (1 - ft) * fw * b[i, j + 1] + ft * fw * b[i + 1, j + 1])
+
+    def mean_te(self, torque, wear):
+        """
+        Period-mean TE without manufacturing errors, ``-(beta + T/k_s)`` [rad].
+
+        Parameters
+        ----------
+        torque : array_like
+            Signed output torque [N·m].
+        wear : array_like
+            Combined wear [m].
+
+        Returns
+        -------
+        ndarray
+            Mean TE [rad].
+
+        """
+        torque = np.asarray(torque, dtype=float)
+        sign = np.where(torque < 0.0, -1.0, 1.0)
+        return -(sign * self.beta_mean(np.abs(torque), wear) + torque / self.series_stiffness)
+
+    def hysteresis(self, torque_abs, wear):
+        """
+        Hysteresis width ``TE(-|T|) - TE(+|T|)`` [rad] (see :func:`hysteresis`).
+
+        Parameters
+        ----------
+        torque_abs : array_like
+            Torque magnitude [N·m].
+        wear : array_like
+            Combined wear [m].
+
+        Returns
+        -------
+        ndarray
+            Width [rad].
+
+        """
+        torque_abs = np.abs(np.asarray(torque_abs, dtype=float))
+        return 2.0 * (self.beta_mean(torque_abs, wear) + torque_abs / self.series_stiffness)
+
+    def lost_motion(self, wear):
+        """
+        Lost motion at the catalogue test torque [rad] (see :func:`lost_motion`).
+
+        Parameters
+        ----------
+        wear : array_like
+            Combined wear [m].
+
+        Returns
+        -------
+        ndarray
+            Lost motion [rad].
+
+        """
+        return 2.0 * self.beta_mean(self.lm_torque, wear)
+
+    def wear_for_lost_motion(self, lost_motion_rad):
+        """
+        Invert :meth:`lost_motion`: the wear at which lost motion is reached [m].
+
+        Parameters
+        ----------
+        lost_motion_rad : array_like
+            Lost motion [rad].
+
+        Returns
+        -------
+        ndarray
+            Wear [m]; clipped to the table range.
+
+        """
+        lm = self.lost_motion(self.wear)
+        return np.interp(lost_motion_rad, lm, self.wear)
+
+
+@lru_cache(maxsize=16)
+def model_tables(params):
+    """
+    Return the cached :class:`ModelTables` of a parameter set.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters (hashable, frozen).
+
+    Returns
+    -------
+    ModelTables
+        Tables for these parameters.
+
+    """
+    return ModelTables(params)
