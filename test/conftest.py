@@ -76,7 +76,7 @@ os.environ['ROS_DOMAIN_ID'] = str(_reserve_domain_id())
 os.environ['PATH'] = os.pathsep.join(
     [os.path.dirname(sys.executable), os.environ.get('PATH', '')])
 
-# Hypothesis' 200 ms deadline fails at random on a loaded 2-core machine; CI
+# Hypothesis' 200 ms deadline can fail at random on a loaded 2-core machine; CI
 # runs use Hypothesis' own 'ci' profile, which this keeps (and which already has
 # no deadline).
 settings.register_profile('reducer_twin', settings.default, deadline=None)
