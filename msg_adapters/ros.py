@@ -1,0 +1,311 @@
+"""
+Conversions between ROS 2 messages and the twin's core values.
+
+The only module that knows both message fields and core types for the live
+nodes: JointState entries to encoder samples (the forms robot controllers
+publish), labelled ``Float64MultiArray`` layouts, ``DiagnosticArray``
+statuses and stamps. Everything is SI; a field that cannot be used raises
+:class:`~reducer_twin.core.errors.InvalidInput` with the reason.
+"""
+
+import math
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from msg_adapters.layouts import parse_values
+import numpy as np
+from reducer_twin.core.errors import InvalidInput
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+LEVELS = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN,
+          'ERROR': DiagnosticStatus.ERROR, 'STALE': DiagnosticStatus.STALE}
+"""Diagnostic level names to the message's byte values."""
+
+LEVEL_NAMES = {v: k for k, v in LEVELS.items()}
+
+
+def stamp_to_s(stamp):
+    """
+    Convert a ``builtin_interfaces/Time`` to seconds.
+
+    Parameters
+    ----------
+    stamp : builtin_interfaces.msg.Time
+        Stamp.
+
+    Returns
+    -------
+    float
+        Seconds since the epoch of the stamp's clock.
+
+    """
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_to_ns(stamp):
+    """Convert a ``builtin_interfaces/Time`` to integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def s_to_stamp(t):
+    """
+    Convert seconds to a ``builtin_interfaces/Time``.
+
+    Parameters
+    ----------
+    t : float
+        Seconds (non-negative).
+
+    Returns
+    -------
+    builtin_interfaces.msg.Time
+        Stamp rounded to the nanosecond.
+
+    """
+    return ns_to_stamp(int(round(t * 1e9)))
+
+
+def ns_to_stamp(ns):
+    """Convert integer nanoseconds to a ``builtin_interfaces/Time``."""
+    sec, nsec = divmod(int(ns), 1_000_000_000)
+    return Time(sec=sec, nanosec=nsec)
+
+
+def to_multiarray(layout, values):
+    """
+    Wrap values into a labelled ``Float64MultiArray``.
+
+    Parameters
+    ----------
+    layout : msg_adapters.layouts.Layout
+        Layout of the message.
+    values : sequence of float or ndarray
+        One record in field order, or an array (samples, fields) for a batch
+        layout.
+
+    Returns
+    -------
+    std_msgs.msg.Float64MultiArray
+        The message.
+
+    """
+    msg = Float64MultiArray()
+    n_fields = len(layout.fields)
+    if layout.batch:
+        arr = np.asarray(values, dtype=float).reshape(-1, n_fields)
+        msg.layout.dim = [
+            MultiArrayDimension(label='samples', size=arr.shape[0], stride=arr.size),
+            MultiArrayDimension(label=layout.label, size=n_fields, stride=n_fields)]
+        msg.data = arr.ravel().tolist()
+    else:
+        data = [float(v) for v in values]
+        if len(data) != n_fields:
+            raise InvalidInput(f'{layout.name}: expected {n_fields} values, got {len(data)}')
+        msg.layout.dim = [MultiArrayDimension(label=layout.label, size=n_fields,
+                                              stride=n_fields)]
+        msg.data = data
+    return msg
+
+
+def from_multiarray(msg, layout):
+    """
+    Read a labelled ``Float64MultiArray`` back by field name.
+
+    Parameters
+    ----------
+    msg : std_msgs.msg.Float64MultiArray
+        Received message.
+    layout : msg_adapters.layouts.Layout
+        Expected layout.
+
+    Returns
+    -------
+    dict
+        Field name to value (or list of values for a batch).
+
+    """
+    labels = [(d.label, d.size) for d in msg.layout.dim]
+    return parse_values(layout, labels, list(msg.data))
+
+
+def batch_array(msg, layout):
+    """
+    Return a batch ``Float64MultiArray`` as an array (samples, fields).
+
+    Parameters
+    ----------
+    msg : std_msgs.msg.Float64MultiArray
+        Received batch message.
+    layout : msg_adapters.layouts.Layout
+        Expected batch layout.
+
+    Returns
+    -------
+    ndarray
+        Values, one row per sample.
+
+    Raises
+    ------
+    InvalidInput
+        If the layout does not match.
+
+    """
+    dims = msg.layout.dim
+    n_fields = len(layout.fields)
+    if (len(dims) != 2 or dims[1].label != layout.label or dims[1].size != n_fields
+            or len(msg.data) != dims[0].size * n_fields):
+        raise InvalidInput(f'expected a {layout.name!r} batch with fields {layout.label!r}')
+    return np.asarray(msg.data, dtype=float).reshape(dims[0].size, n_fields)
+
+
+def diagnostic_status(name, hardware_id, level, message, values):
+    """
+    Build one ``DiagnosticStatus`` with key/values.
+
+    Parameters
+    ----------
+    name : str
+        Status name, e.g. ``'reducer_twin: joint_1 reducer'``.
+    hardware_id : str
+        Identifier of the reducer.
+    level : str
+        ``'OK'``, ``'WARN'``, ``'ERROR'`` or ``'STALE'``.
+    message : str
+        Short human-readable summary.
+    values : mapping
+        Key to value; floats are formatted with 6 significant digits.
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticStatus
+        The status.
+
+    """
+    status = DiagnosticStatus(level=LEVELS[level], name=name, message=message,
+                              hardware_id=hardware_id)
+    status.values = [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
+    return status
+
+
+def diagnostic_array(stamp_ns, statuses):
+    """
+    Wrap statuses into a ``DiagnosticArray`` stamped at ``stamp_ns``.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        Stamp [ns].
+    statuses : list of DiagnosticStatus
+        Statuses.
+
+    Returns
+    -------
+    diagnostic_msgs.msg.DiagnosticArray
+        The array.
+
+    """
+    arr = DiagnosticArray()
+    arr.header.stamp = ns_to_stamp(stamp_ns)
+    arr.status = list(statuses)
+    return arr
+
+
+def _fmt(value):
+    if isinstance(value, float):
+        return f'{value:.6g}' if math.isfinite(value) else str(value)
+    return str(value)
+
+
+def make_joint_state(stamp_ns, names, position, velocity=None, effort=None, frame_id=''):
+    """
+    Build a ``JointState`` as ros2_control's joint_state_broadcaster does.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        Header stamp [ns].
+    names : sequence of str
+        Joint (interface) names.
+    position, velocity, effort : sequence of float
+        Values per name [rad, rad/s, N·m]; None leaves the field empty.
+    frame_id : str
+        Header frame.
+
+    Returns
+    -------
+    sensor_msgs.msg.JointState
+        The message.
+
+    """
+    msg = JointState()
+    msg.header.stamp = ns_to_stamp(stamp_ns)
+    msg.header.frame_id = frame_id
+    msg.name = list(names)
+    msg.position = [float(x) for x in position]
+    msg.velocity = [] if velocity is None else [float(x) for x in velocity]
+    msg.effort = [] if effort is None else [float(x) for x in effort]
+    return msg
+
+
+class JointStatePicker:
+    """
+    Pick named entries out of ``JointState`` messages.
+
+    The index of each name is cached per name list, so a controller that
+    publishes the same joints every tick costs one dict lookup per message.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Entries to pick, in order.
+
+    """
+
+    def __init__(self, names):
+        self.names = tuple(names)
+        self._cache_key = None
+        self._index = None
+
+    def pick(self, msg):
+        """
+        Return position, velocity and effort of the wanted entries.
+
+        Parameters
+        ----------
+        msg : sensor_msgs.msg.JointState
+            Received message.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(position, velocity, effort)``, one value per wanted name; NaN
+            where a field is empty (ros2_control leaves unavailable
+            interfaces empty or NaN).
+
+        Raises
+        ------
+        InvalidInput
+            If a wanted name is missing or the arrays are inconsistent.
+
+        """
+        names = tuple(msg.name)
+        n = len(names)
+        for field, arr in (('position', msg.position), ('velocity', msg.velocity),
+                           ('effort', msg.effort)):
+            if len(arr) not in (0, n):
+                raise InvalidInput(f'JointState {field} has {len(arr)} values for {n} names')
+        if names != self._cache_key:
+            lookup = {name: k for k, name in enumerate(names)}
+            missing = [name for name in self.names if name not in lookup]
+            if missing:
+                raise InvalidInput(f'JointState lacks {missing}; it has {list(names)[:12]}')
+            self._index = np.array([lookup[name] for name in self.names], dtype=np.intp)
+            self._cache_key = names
+        out = []
+        for arr in (msg.position, msg.velocity, msg.effort):
+            if len(arr):
+                out.append(np.asarray(arr, dtype=float)[self._index])
+            else:
+                out.append(np.full(len(self.names), np.nan))
+        return tuple(out)
