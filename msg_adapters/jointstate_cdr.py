@@ -1,0 +1,625 @@
+"""
+Vectorised CDR encoding and decoding of ``sensor_msgs/msg/JointState``.
+
+A JointState in CDR (XCDR1, plain, as Fast DDS puts it on the wire and rosbag2 stores
+it) is, after the 4-byte encapsulation header ``00 01 00 00`` (little endian) or
+``00 00 00 00`` (big endian)::
+
+    int32 sec, uint32 nanosec              header.stamp
+    uint32 n + n bytes (with NUL)          header.frame_id
+    uint32 count, then per name: uint32 n + n bytes (each aligned to 4)
+    uint32 count, float64[count]           position, velocity, effort
+
+Alignment is counted from the end of the encapsulation header; a float64 array is
+aligned to 8 only when it is not empty. Padding bytes carry no meaning (rclpy's
+``serialize_message`` leaves them uninitialised), so the decoder never looks at them.
+
+A controller publishes the same joints every tick, so the messages of one topic share
+one length and one byte layout except for the stamp and the numbers. Both directions
+exploit that: the encoder writes one template row per message and fills the stamp and
+float columns through strided numpy views; the decoder groups payloads of equal length,
+checks that their structural bytes equal those of a template message, and reads the
+columns of the whole group at once. Messages that do not fit a template take a per-
+message path that handles any layout.
+"""
+
+from dataclasses import dataclass
+import struct
+
+import numpy as np
+
+from reducer_twin.core.errors import InvalidInput
+
+MSGTYPE = 'sensor_msgs/msg/JointState'
+FIELDS = ('position', 'velocity', 'effort')
+
+_NS_PER_S = 1_000_000_000
+_MAX_TEMPLATES_PER_LENGTH = 8
+_INT32_MIN, _INT32_MAX = -2**31, 2**31 - 1
+
+
+@dataclass
+class JointStateBatch:
+    """
+    A batch of N JointState messages, as arrays over messages and joints.
+
+    Attributes
+    ----------
+    stamps_ns : numpy.ndarray
+        int64[N], ``header.stamp`` in ns since the epoch.
+    names : tuple of str
+        The J joint names, the columns of the arrays. A batch decoded from messages
+        with different name sets holds the union, in order of first appearance.
+    position, velocity, effort : numpy.ndarray
+        float64[N, J] in rad (or m), rad/s (or m/s), N m (or N). NaN where a message
+        left the field empty, gave it a length other than its name count, or did not
+        name the joint.
+    frame_id : str
+        ``header.frame_id`` of the first message.
+    log_time_ns : numpy.ndarray or None
+        int64[N] receive times (MCAP ``log_time``) when the batch came from a bag.
+    rejected : tuple
+        ``(index, reason)`` of malformed messages left out (decode with
+        ``errors='skip'``); the index counts in the input batch.
+
+    """
+
+    stamps_ns: np.ndarray
+    names: tuple
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    frame_id: str = ''
+    log_time_ns: object = None
+    rejected: tuple = ()
+
+    def __len__(self):
+        """Return the number of messages N."""
+        return int(self.stamps_ns.shape[0])
+
+    def joint_index(self, name):
+        """
+        Return the column of a joint.
+
+        Parameters
+        ----------
+        name : str
+            Joint name.
+
+        Returns
+        -------
+        int
+            Column index into ``position``, ``velocity`` and ``effort``.
+
+        Raises
+        ------
+        InvalidInput
+            If no message of the batch names the joint.
+
+        """
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise InvalidInput(
+                f'joint {name!r} is not in this JointState batch; it has {list(self.names)}'
+            ) from None
+
+    def take(self, index):
+        """
+        Return the messages selected by an index array or mask, as a new batch.
+
+        Parameters
+        ----------
+        index : array_like
+            Integer indices or a boolean mask over the N messages.
+
+        Returns
+        -------
+        JointStateBatch
+            The selected messages with the same joint columns.
+
+        """
+        log = None if self.log_time_ns is None else self.log_time_ns[index]
+        return JointStateBatch(
+            self.stamps_ns[index], self.names, self.position[index], self.velocity[index],
+            self.effort[index], self.frame_id, log, ())
+
+
+def empty_batch(names=()):
+    """
+    Return a batch of no messages.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Joint names (columns).
+
+    Returns
+    -------
+    JointStateBatch
+        N = 0, J = ``len(names)``.
+
+    """
+    names = tuple(names)
+    shape = (0, len(names))
+    return JointStateBatch(
+        np.zeros(0, np.int64), names, np.zeros(shape), np.zeros(shape), np.zeros(shape), '',
+        np.zeros(0, np.int64))
+
+
+# --------------------------------------------------------------------------- encoding
+
+
+def _align(pos, size):
+    """Align an absolute offset to ``size``, counting from the encapsulation header end."""
+    return 4 + ((pos - 4 + size - 1) // size) * size
+
+
+def _cdr_string(text, what):
+    try:
+        raw = text.encode('utf-8')
+    except (AttributeError, UnicodeEncodeError) as err:
+        raise InvalidInput(f'{what} must be a str, got {text!r}') from err
+    if b'\x00' in raw:
+        raise InvalidInput(f'{what} must not contain NUL characters, got {text!r}')
+    return struct.pack('<I', len(raw) + 1) + raw + b'\x00'
+
+
+def _template(frame_id, names, counts):
+    """Build the bytes of one message and the offsets of its stamp and float fields."""
+    out = bytearray(b'\x00\x01\x00\x00')
+    out += bytes(8)
+    out += _cdr_string(frame_id, 'frame_id')
+    out += bytes(_align(len(out), 4) - len(out))
+    out += struct.pack('<I', len(names))
+    for i, name in enumerate(names):
+        out += bytes(_align(len(out), 4) - len(out))
+        out += _cdr_string(name, f'names[{i}]')
+    offsets = []
+    for count in counts:
+        out += bytes(_align(len(out), 4) - len(out))
+        out += struct.pack('<I', count)
+        if count:
+            out += bytes(_align(len(out), 8) - len(out))
+        offsets.append(len(out))
+        out += bytes(8 * count)
+    return np.frombuffer(bytes(out), np.uint8), offsets
+
+
+def _field_array(values, what, n, n_joints):
+    if values is None:
+        return None
+    try:
+        arr = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise InvalidInput(f'{what} must be numeric [N, J] values: {err}') from err
+    if arr.ndim == 1 and n_joints == 1 and arr.shape[0] == n:
+        arr = arr[:, None]
+    if arr.shape == (n, 0) or arr.size == 0 and arr.shape[0] in (0, n):
+        return None
+    if arr.shape != (n, n_joints):
+        raise InvalidInput(
+            f'{what} must have shape (N, J) = ({n}, {n_joints}), got {arr.shape}')
+    return arr
+
+
+def _column(out, offset, dtype, n_cols=None):
+    """Return a writable strided view of one field across all rows of ``out``."""
+    n, row = out.shape
+    if n_cols is None:
+        return np.ndarray((n,), dtype, buffer=out, offset=offset, strides=(row,))
+    item = np.dtype(dtype).itemsize
+    return np.ndarray((n, n_cols), dtype, buffer=out, offset=offset, strides=(row, item))
+
+
+def encode_joint_states(stamps_ns, names, position, velocity=None, effort=None, frame_id=''):
+    """
+    Serialise N JointState messages that share their joint names into one CDR buffer.
+
+    Parameters
+    ----------
+    stamps_ns : array_like of int
+        int64[N], ``header.stamp`` in ns since the epoch (seconds must fit int32).
+    names : sequence of str
+        The J joint names, shared by all messages.
+    position : array_like or None
+        float64[N, J] in rad or m; None (or zero columns) leaves the field empty.
+    velocity, effort : array_like or None
+        float64[N, J] in rad/s (m/s) and N m (N); None leaves the field empty, as
+        ros2_control does for interfaces it does not have.
+    frame_id : str
+        ``header.frame_id``.
+
+    Returns
+    -------
+    buffer : numpy.ndarray
+        uint8, all messages back to back, each with its encapsulation header.
+    offsets : numpy.ndarray
+        int64[N + 1]; message i is ``buffer[offsets[i]:offsets[i + 1]]``.
+
+    Raises
+    ------
+    InvalidInput
+        On arrays of the wrong shape, stamps outside the int32 seconds range or names
+        that are not strings.
+
+    """
+    stamps = np.asarray(stamps_ns)
+    if stamps.ndim != 1 or not np.issubdtype(stamps.dtype, np.integer):
+        raise InvalidInput(
+            f'stamps_ns must be a 1-D integer array in ns, got dtype {stamps.dtype} '
+            f'and shape {stamps.shape}')
+    if isinstance(names, str):
+        raise InvalidInput(f'names must be a sequence of str, got the str {names!r}')
+    names = tuple(names)
+    n, n_joints = stamps.shape[0], len(names)
+    fields = [_field_array(v, w, n, n_joints)
+              for v, w in zip((position, velocity, effort), FIELDS)]
+    counts = [0 if f is None else n_joints for f in fields]
+    template, offsets = _template(frame_id, names, counts)
+    row = template.shape[0]
+    out = np.empty((n, row), np.uint8)
+    if n == 0:
+        return out.reshape(-1), np.zeros(1, np.int64)
+    sec, nsec = np.divmod(stamps.astype(np.int64), _NS_PER_S)
+    if sec.min() < _INT32_MIN or sec.max() > _INT32_MAX:
+        bad = stamps[(sec < _INT32_MIN) | (sec > _INT32_MAX)][0]
+        raise InvalidInput(
+            f'stamps_ns must lie within the int32 seconds range of builtin_interfaces/Time '
+            f'({_INT32_MIN} .. {_INT32_MAX} s), got {bad} ns')
+    out[:] = template
+    _column(out, 4, '<i4')[...] = sec
+    _column(out, 8, '<u4')[...] = nsec
+    for values, offset in zip(fields, offsets):
+        if values is not None and n_joints:
+            _column(out, offset, '<f8', n_joints)[...] = values
+    return out.reshape(-1), np.arange(n + 1, dtype=np.int64) * row
+
+
+# --------------------------------------------------------------------------- decoding
+
+
+@dataclass(frozen=True)
+class _Layout:
+    """Byte layout of one JointState payload, shared by every message that matches it."""
+
+    length: int
+    byte_order: str
+    frame_id: str
+    names: tuple
+    fields: tuple  # ((offset, count), ...) for position, velocity, effort
+    spans: tuple  # ((start, stop), ...) bytes that must equal the template
+
+
+def _reject(where, offset, problem):
+    return InvalidInput(f'malformed JointState CDR in {where}, byte {offset}: {problem}')
+
+
+def _parse_layout(payload, where):
+    """Parse one payload (bytes) completely; raise InvalidInput on any inconsistency."""
+    size = len(payload)
+    if size < 4:
+        raise _reject(where, 0, f'payload has {size} bytes, expected at least the 4-byte '
+                      'CDR encapsulation header')
+    kind = payload[0:2]
+    if kind == b'\x00\x01':
+        order = '<'
+    elif kind == b'\x00\x00':
+        order = '>'
+    else:
+        raise _reject(where, 0, f'encapsulation header {payload[:4].hex(" ")} is not plain '
+                      'CDR; expected 00 01 00 00 (little endian) or 00 00 00 00 (big endian)')
+    u32 = struct.Struct(order + 'I')
+    spans = [(0, 2)]
+
+    def need(pos, count, what):
+        if pos + count > size:
+            raise _reject(where, pos, f'{what} needs {count} bytes but the payload ends at '
+                          f'byte {size}')
+
+    def read_u32(pos, what):
+        pos = _align(pos, 4)
+        need(pos, 4, what)
+        return u32.unpack_from(payload, pos)[0], pos
+
+    def read_string(pos, what):
+        length, pos = read_u32(pos, f'the length of {what}')
+        if length > size - pos - 4:
+            raise _reject(where, pos, f'{what} has length {length}, which runs past the '
+                          f'payload end at byte {size}')
+        raw = payload[pos + 4:pos + 4 + length]
+        if length and raw[-1:] != b'\x00':
+            raise _reject(where, pos + 3 + length, f'{what} does not end with NUL')
+        try:
+            text = raw[:-1].decode('utf-8') if length else ''
+        except UnicodeDecodeError as err:
+            raise _reject(where, pos + 4, f'{what} is not UTF-8: {err.reason}') from None
+        spans.append((pos, pos + 4 + length))
+        return text, pos + 4 + length
+
+    need(4, 8, 'header.stamp')
+    frame_id, pos = read_string(12, 'header.frame_id')
+    n_names, pos = read_u32(pos, 'the count of name[]')
+    spans.append((pos, pos + 4))
+    pos += 4
+    if n_names > (size - pos) // 5:
+        raise _reject(where, pos - 4, f'name[] count {n_names} needs at least {5 * n_names} '
+                      f'bytes but only {size - pos} remain')
+    names = []
+    for i in range(n_names):
+        name, pos = read_string(pos, f'name[{i}]')
+        names.append(name)
+    fields = []
+    for field in FIELDS:
+        count, pos = read_u32(pos, f'the count of {field}[]')
+        spans.append((pos, pos + 4))
+        pos += 4
+        if count:
+            pos = _align(pos, 8)
+            if count > (size - pos) // 8:
+                raise _reject(where, pos - 4, f'{field}[] count {count} needs {8 * count} '
+                              f'bytes but the payload ends at byte {size}')
+        fields.append((pos, count))
+        pos += 8 * count
+    merged = []
+    for start, stop in spans:
+        if merged and merged[-1][1] == start:
+            merged[-1] = (merged[-1][0], stop)
+        else:
+            merged.append((start, stop))
+    return _Layout(size, order, frame_id, tuple(names), tuple(fields), tuple(merged))
+
+
+def _as_buffer(payloads, offsets, lengths):
+    """Normalise the accepted input forms to (uint8 buffer, starts, lengths)."""
+    if offsets is None:
+        if isinstance(payloads, (bytes, bytearray, memoryview, np.ndarray)):
+            raise InvalidInput('a single buffer needs offsets; pass a list of payloads or '
+                               'decode_joint_states(buffer, offsets, lengths)')
+        try:
+            parts = [bytes(p) for p in payloads]
+        except TypeError as err:
+            raise InvalidInput(f'payloads must be bytes-like objects: {err}') from err
+        lens = np.fromiter((len(p) for p in parts), np.int64, len(parts))
+        starts = np.zeros(len(parts), np.int64)
+        if len(parts) > 1:
+            np.cumsum(lens[:-1], out=starts[1:])
+        return np.frombuffer(b''.join(parts), np.uint8), starts, lens
+    try:
+        buf = np.frombuffer(payloads, np.uint8) if not isinstance(payloads, np.ndarray) \
+            else payloads.reshape(-1).view(np.uint8)
+    except (TypeError, ValueError) as err:
+        raise InvalidInput(f'buffer must be a bytes-like object or uint8 array: {err}') from err
+    starts = np.asarray(offsets, dtype=np.int64).reshape(-1)
+    if lengths is None:
+        if starts.shape[0] == 0:
+            raise InvalidInput('offsets must hold N + 1 boundaries, got an empty array')
+        lens = np.diff(starts)
+        starts = starts[:-1]
+    else:
+        lens = np.asarray(lengths, dtype=np.int64).reshape(-1)
+        if lens.shape != starts.shape:
+            raise InvalidInput(f'offsets and lengths must have the same length, got '
+                               f'{starts.shape[0]} and {lens.shape[0]}')
+    if starts.size:
+        bad = (starts < 0) | (lens < 0) | (starts + lens > buf.shape[0])
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InvalidInput(
+                f'payload {i} spans bytes {starts[i]} .. {starts[i] + lens[i]} of a buffer of '
+                f'{buf.shape[0]} bytes; expected offsets and lengths inside the buffer')
+    return buf, starts, lens
+
+
+def _rows(buf, starts, length):
+    """Return an (n, length) uint8 array of the payloads at ``starts`` (a view if regular)."""
+    n = starts.shape[0]
+    if n == 1 or (n > 1 and length > 0):
+        step = int(starts[1] - starts[0]) if n > 1 else length
+        if step >= length and (n == 1 or np.all(np.diff(starts) == step)):
+            return np.lib.stride_tricks.as_strided(
+                buf[int(starts[0]):], shape=(n, length), strides=(step, 1), writeable=False)
+    if length == 0:
+        return np.zeros((n, 0), np.uint8)
+    return np.lib.stride_tricks.sliding_window_view(buf, length)[starts]
+
+
+def _bytes_column(rows, start, stop):
+    """Return the bytes ``start:stop`` of every row as one opaque (void) value per row."""
+    return rows[:, start:stop].view(f'V{stop - start}')[:, 0]
+
+
+def _matches(rows, template, spans):
+    ok = None
+    for start, stop in spans:
+        same = _bytes_column(rows, start, stop) == _bytes_column(template[None, :], start, stop)
+        ok = same if ok is None else ok & same
+    return np.ones(rows.shape[0], bool) if ok is None else ok
+
+
+def _read_group(rows, layout):
+    """Read stamps and float fields of rows that all follow ``layout``."""
+    order = layout.byte_order
+    stamp = _bytes_column(rows, 4, 12).copy().view(np.uint8).reshape(-1, 8)
+    sec = stamp[:, :4].copy().view(order + 'i4')[:, 0].astype(np.int64)
+    nsec = stamp[:, 4:].copy().view(order + 'u4')[:, 0].astype(np.int64)
+    values = []
+    n_joints = len(layout.names)
+    for offset, count in layout.fields:
+        if count == n_joints and count:
+            raw = _bytes_column(rows, offset, offset + 8 * count).copy()
+            floats = raw.view(order + 'f8').reshape(-1, count)
+            values.append(floats.astype(np.float64, copy=False))
+        else:
+            values.append(None)
+    return sec * _NS_PER_S + nsec, values
+
+
+class _Pieces:
+    """Decoded groups, collected before they are placed into the output arrays."""
+
+    def __init__(self):
+        self.items = []  # (message indices, layout, stamps, [pos, vel, eff])
+        self.rejected = []
+
+    def add(self, index, layout, stamps, values):
+        self.items.append((index, layout, stamps, values))
+
+
+def _decode_length_group(buf, starts, index, length, pieces, errors):
+    remaining = index
+    templates = 0
+    while remaining.size:
+        first = int(remaining[0])
+        start = int(starts[first])
+        payload = buf[start:start + length].tobytes()
+        try:
+            layout = _parse_layout(payload, f'message {first} (buffer byte {start})')
+        except InvalidInput as err:
+            if errors == 'raise':
+                raise
+            pieces.rejected.append((first, str(err)))
+            remaining = remaining[1:]
+            continue
+        templates += 1
+        if templates > _MAX_TEMPLATES_PER_LENGTH:
+            # Irregular traffic: no template repeats enough to pay for a vectorised pass.
+            rows = _rows(buf, starts[remaining[:1]], length)
+            pieces.add(remaining[:1], layout, *_read_group(rows, layout))
+            remaining = remaining[1:]
+            continue
+        rows = _rows(buf, starts[remaining], length)
+        ok = _matches(rows, rows[0], layout.spans)
+        matched = remaining[ok]
+        pieces.add(matched, layout, *_read_group(rows[ok] if not ok.all() else rows, layout))
+        remaining = remaining[~ok]
+
+
+def decode_joint_states(payloads, offsets=None, lengths=None, errors='raise'):
+    """
+    Decode a batch of JointState CDR payloads into arrays.
+
+    Parameters
+    ----------
+    payloads : sequence of bytes-like, or bytes-like / uint8 array
+        Either a list of payloads, or one buffer that holds them all (for instance a
+        decompressed MCAP chunk, which is then read without copying per message).
+    offsets : array_like of int, optional
+        With a single buffer: int64[N] start of each payload (with ``lengths``), or
+        int64[N + 1] boundaries (without ``lengths``, as ``encode_joint_states`` returns).
+    lengths : array_like of int, optional
+        int64[N] payload lengths.
+    errors : {'raise', 'skip'}
+        ``'raise'`` stops at the first malformed payload; ``'skip'`` leaves it out and
+        lists it in ``JointStateBatch.rejected``.
+
+    Returns
+    -------
+    JointStateBatch
+        Messages in input order (without the skipped ones).
+
+    Raises
+    ------
+    InvalidInput
+        On a malformed payload (truncated, a length or count that runs past the payload,
+        an unknown encapsulation, a string that is not NUL-terminated UTF-8) when
+        ``errors='raise'``, or on offsets outside the buffer.
+
+    """
+    if errors not in ('raise', 'skip'):
+        raise InvalidInput(f"errors must be 'raise' or 'skip', got {errors!r}")
+    buf, starts, lens = _as_buffer(payloads, offsets, lengths)
+    n = starts.shape[0]
+    pieces = _Pieces()
+    if n:
+        unique, inverse = np.unique(lens, return_inverse=True)
+        if unique.shape[0] == 1:
+            groups = [(int(unique[0]), np.arange(n))]
+        else:
+            order = np.argsort(inverse, kind='stable')
+            bounds = np.searchsorted(inverse[order], np.arange(unique.shape[0] + 1))
+            groups = [(int(unique[k]), order[bounds[k]:bounds[k + 1]])
+                      for k in range(unique.shape[0])]
+        for length, index in groups:
+            _decode_length_group(buf, starts, index, length, pieces, errors)
+    return _assemble(n, pieces)
+
+
+def _assemble(n, pieces):
+    if not pieces.items:
+        batch = empty_batch()
+        batch.log_time_ns = None
+        batch.rejected = tuple(sorted(pieces.rejected))
+        return batch
+    items = sorted(pieces.items, key=lambda item: int(item[0][0]) if item[0].size else n)
+    first_layout = items[0][1]
+    if len(items) == 1 and not pieces.rejected:
+        index, layout, stamps, values = items[0]
+        shape = (n, len(layout.names))
+        out = [v if v is not None else np.full(shape, np.nan) for v in values]
+        return JointStateBatch(stamps, layout.names, *out, frame_id=layout.frame_id)
+    columns = {}
+    for _, layout, _, _ in items:
+        for name in layout.names:
+            columns.setdefault(name, len(columns))
+    keep = np.ones(n, bool)
+    if pieces.rejected:
+        keep[[i for i, _ in pieces.rejected]] = False
+    row_of = np.cumsum(keep) - 1
+    n_out = int(keep.sum())
+    stamps_out = np.zeros(n_out, np.int64)
+    out = [np.full((n_out, len(columns)), np.nan) for _ in FIELDS]
+    for index, layout, stamps, values in items:
+        rows = row_of[index]
+        stamps_out[rows] = stamps
+        cols = np.array([columns[name] for name in layout.names], np.int64)
+        for target, value in zip(out, values):
+            if value is not None:
+                target[rows[:, None], cols[None, :]] = value
+    return JointStateBatch(stamps_out, tuple(columns), *out, frame_id=first_layout.frame_id,
+                           rejected=tuple(sorted(pieces.rejected)))
+
+
+def concat_batches(batches):
+    """
+    Join batches in the given order, taking the union of their joint names.
+
+    Parameters
+    ----------
+    batches : sequence of JointStateBatch
+        Batches to join.
+
+    Returns
+    -------
+    JointStateBatch
+        All messages; NaN where a batch did not have a joint. ``log_time_ns`` is kept
+        only when every batch has it.
+
+    """
+    batches = [b for b in batches if b is not None]
+    if not batches:
+        return empty_batch()
+    names = {}
+    for batch in batches:
+        for name in batch.names:
+            names.setdefault(name, len(names))
+    names = tuple(names)
+    same = all(batch.names == names for batch in batches)
+    if same:
+        fields = [np.concatenate([getattr(b, f) for b in batches]) for f in FIELDS]
+    else:
+        total = sum(len(b) for b in batches)
+        fields = [np.full((total, len(names)), np.nan) for _ in FIELDS]
+        row = 0
+        for batch in batches:
+            cols = [names.index(name) for name in batch.names]
+            for target, field in zip(fields, FIELDS):
+                target[row:row + len(batch), cols] = getattr(batch, field)
+            row += len(batch)
+    logs = None
+    if all(b.log_time_ns is not None for b in batches):
+        logs = np.concatenate([np.asarray(b.log_time_ns, np.int64) for b in batches])
+    frame_id = next((b.frame_id for b in batches if len(b)), batches[0].frame_id)
+    return JointStateBatch(np.concatenate([b.stamps_ns for b in batches]), names, *fields,
+                           frame_id=frame_id, log_time_ns=logs,
+                           rejected=tuple(r for b in batches for r in b.rejected))
