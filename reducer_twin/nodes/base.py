@@ -1,0 +1,256 @@
+"""
+What every reducer_twin node shares: parameters, QoS, rejection counting, main().
+
+Parameters are declared from the core's validated dataclasses (one source
+of names, defaults, units and ranges): each field becomes a ROS parameter
+``<section>.<name>`` with a descriptor carrying its description, unit and
+range, and a set-parameters callback rejects an invalid value with the
+core's own message while the old value stays.
+"""
+
+from dataclasses import fields, replace
+import sys
+import time
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterType, SetParametersResult
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
+from reducer_twin.core.params import check_value, describe_range
+
+ENCODER_DEPTH = 200
+"""History depth of 1 kHz encoder streams (>= 100: a stalled reader loses old samples)."""
+
+
+def encoder_qos(reliable=True):
+    """
+    Return the QoS of encoder streams (controller topics and paired samples).
+
+    Parameters
+    ----------
+    reliable : bool
+        RELIABLE (default, matches ros2_control's broadcaster) or BEST_EFFORT.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+        KEEP_LAST with depth :data:`ENCODER_DEPTH`, volatile.
+
+    """
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=ENCODER_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.VOLATILE)
+
+
+def stream_qos():
+    """Return the QoS of derived streams (TE batches, features): reliable, depth 100."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def latest_qos():
+    """Return the QoS of estimates: reliable, transient-local, the latest sample kept."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def diagnostics_qos():
+    """Return the QoS of ``/diagnostics``: reliable, depth 10, volatile."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                      reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+def joint_topic(joint, suffix, namespace='reducer_twin'):
+    """Return the topic of a derived value of one joint, ``/reducer_twin/<joint>/<suffix>``."""
+    return f'/{namespace}/{joint}/{suffix}'
+
+
+class SpecParameters:
+    """
+    Declare a validated dataclass as ROS parameters and keep it in sync.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    prefix : str
+        Parameter name prefix (e.g. ``'reducer.geometry'``, ``'sim'``).
+    instance : dataclass
+        Default values (a frozen, validated dataclass of the core).
+    on_change : callable, optional
+        Called with the new instance after an accepted change.
+
+    """
+
+    def __init__(self, node, prefix, instance, on_change=None):
+        self.node = node
+        self.prefix = prefix
+        self.value = instance
+        self.on_change = on_change
+        self._names = {}
+        values = {}
+        for f in fields(instance):
+            meta = f.metadata
+            if 'unit' not in meta:
+                continue
+            name = f'{prefix}.{f.name}'
+            self._names[name] = (f.name, meta)
+            default = getattr(instance, f.name)
+            desc = ParameterDescriptor(
+                name=name,
+                description=f"{meta['doc']} [{meta['unit'] or '-'}]",
+                additional_constraints=f"{describe_range(meta)} {meta['unit']}".strip())
+            if meta['integer']:
+                desc.type = ParameterType.PARAMETER_INTEGER
+                if meta['lo'] is not None and meta['hi'] is not None:
+                    desc.integer_range = [IntegerRange(from_value=int(meta['lo']),
+                                                       to_value=int(meta['hi']), step=1)]
+            else:
+                desc.type = ParameterType.PARAMETER_DOUBLE
+                if (meta['lo'] is not None and meta['hi'] is not None
+                        and not meta['lo_open'] and not meta['hi_open']):
+                    desc.floating_point_range = [FloatingPointRange(
+                        from_value=float(meta['lo']), to_value=float(meta['hi']), step=0.0)]
+            param = node.declare_parameter(name, default, desc)
+            values[f.name] = param.value
+        try:
+            self.value = replace(instance, **values)
+        except InvalidParameter as err:
+            raise InvalidParameter(f'{node.get_name()}: {err}') from err
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def _on_set(self, params):
+        changes = {}
+        for p in params:
+            if p.name not in self._names:
+                continue
+            field_name, meta = self._names[p.name]
+            try:
+                changes[field_name] = check_value(p.name, p.value, meta)
+            except InvalidParameter as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        if not changes:
+            return SetParametersResult(successful=True)
+        try:
+            candidate = replace(self.value, **changes)
+        except InvalidParameter as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        self.value = candidate
+        if self.on_change is not None:
+            self.on_change(candidate)
+        return SetParametersResult(successful=True)
+
+
+class RejectCounter:
+    """
+    Count rejected messages by reason and warn, throttled.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        Node whose logger is used.
+    period_s : float
+        Shortest interval between two warnings [s].
+
+    """
+
+    def __init__(self, node, period_s=5.0):
+        self.node = node
+        self.period_s = period_s
+        self.counts = {}
+        self._last_warn = -1e18
+
+    @property
+    def total(self):
+        """Return the number of rejected messages."""
+        return sum(self.counts.values())
+
+    def reject(self, reason, detail):
+        """
+        Count one rejected message and warn at most once per period.
+
+        Parameters
+        ----------
+        reason : str
+            Short reason key (e.g. ``'bad_layout'``).
+        detail : str
+            What was wrong, for the log.
+
+        """
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        now = time.monotonic()
+        if now - self._last_warn >= self.period_s:
+            self._last_warn = now
+            self.node.get_logger().warning(
+                f'dropped a message ({reason}): {detail} [{self.total} dropped so far: '
+                f'{self.counts}]')
+
+
+def make_executor():
+    """
+    Return the executor the nodes spin in: EventsExecutor, or single-threaded.
+
+    Returns
+    -------
+    rclpy.executors.Executor
+        ``rclpy.experimental.EventsExecutor`` where available (about 4x less
+        CPU per message), else ``SingleThreadedExecutor``.
+
+    """
+    try:
+        from rclpy.experimental import EventsExecutor
+        return EventsExecutor()
+    except (ImportError, AttributeError, RuntimeError):
+        return SingleThreadedExecutor()
+
+
+def run_nodes(factory, args=None):
+    """
+    Run nodes built by ``factory`` until shutdown; the body of every ``main()``.
+
+    Parameters
+    ----------
+    factory : callable
+        Called after ``rclpy.init``; returns a node or a list of nodes.
+    args : list of str, optional
+        Command-line arguments (``--ros-args ...``).
+
+    Returns
+    -------
+    int
+        Exit code: 0 on a clean shutdown, 1 on an invalid parameter.
+
+    """
+    rclpy.init(args=args)
+    nodes = []
+    try:
+        made = factory()
+        nodes = made if isinstance(made, (list, tuple)) else [made]
+        executor = make_executor()
+        for node in nodes:
+            executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ReducerTwinError as err:
+        sys.stderr.write(f'ERROR: {err}\n')
+        return 1
+    finally:
+        for node in nodes:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+__all__ = ['Node', 'SpecParameters', 'RejectCounter', 'encoder_qos', 'stream_qos',
+           'latest_qos', 'diagnostics_qos', 'joint_topic', 'make_executor', 'run_nodes']
