@@ -1319,7 +1319,7 @@ class McapBagReader:
                     self._warn(None, f'the rosbag2 metadata record is not YAML: {err}')
                     return None
                 if isinstance(info, dict):
-                    custom = _custom_data_strings(values['serialized_metadata'])
+                    custom = custom_data_strings(values['serialized_metadata'])
                     if custom is not None:
                         info['custom_data'] = custom
                     return info
@@ -1674,8 +1674,24 @@ def _stop_offset(err, default):
     return int(match.group(1)) if match else default
 
 
-def _custom_data_strings(text):
-    """Read ``custom_data`` with every value as the string written (yaml-cpp style)."""
+def custom_data_strings(text):
+    """
+    Read rosbag2 ``custom_data`` from metadata YAML, every value as the string written.
+
+    yaml-cpp writes a value such as ``1.5`` unquoted; rosbag2 reads it back as a string,
+    and so does this function (a plain YAML load would turn it into a float).
+
+    Parameters
+    ----------
+    text : str
+        A metadata.yaml document or a ``serialized_metadata`` value.
+
+    Returns
+    -------
+    dict of str to str or None
+        None when the text holds no ``custom_data`` mapping.
+
+    """
     try:
         raw = yaml.load(text, Loader=yaml.BaseLoader)
     except yaml.YAMLError:
