@@ -1247,6 +1247,7 @@ class McapBagReader:
         self.has_summary = False
         self._chunks = []
         self._loose = []  # arrays of message record starts outside chunks
+        self._loose_parts = []
         self._counts = {}
         try:
             self._file = open(self.path, 'rb')
@@ -1590,26 +1591,44 @@ class McapBagReader:
         fields = _gather_messages(data, starts - first, data.shape[0])
         return RawBatch(*fields[:4], data, *fields[4:])
 
+    def _add_loose(self, starts):
+        """Collect message records outside chunks into groups of bounded size."""
+        if self._loose_parts:
+            first = int(self._loose_parts[0][0])
+            count = sum(part.shape[0] for part in self._loose_parts)
+            if count < 65536 and int(starts[-1]) - first < 16 * 2**20:
+                self._loose_parts.append(starts)
+                return
+            self._loose.append(np.concatenate(self._loose_parts))
+        self._loose_parts = [starts]
+
+    def _end_loose(self):
+        if self._loose_parts:
+            self._loose.append(np.concatenate(self._loose_parts))
+        self._loose_parts = []
+
     def _scan_loose(self, stop):
         """Find message records outside chunks in the data section of a summarised file."""
-        loose = []
+        self._loose, self._loose_parts = [], []
         arr = np.frombuffer(self._mm, np.uint8)
         try:
             for opcode, starts, _ in _walk(self._mm, 8, stop, arr):
                 if opcode == OP_MESSAGE:
-                    loose.append(starts)
+                    self._add_loose(starts)
                 elif opcode == OP_DATA_END:
                     break
         except _Corrupt as err:
             self._warn(None, f'data section: {err}')
         finally:
             del arr
-        return loose
+        self._end_loose()
+        return self._loose
 
     def _scan(self):
         """Read the data section record by record (no summary, or an unusable one)."""
         self.schemas, self.channels, self._chunks, self._loose = {}, {}, [], []
         self.metadata, self._counts, self.statistics = [], {}, None
+        self._loose_parts = []
         mm, size = self._mm, self.size
         arr = np.frombuffer(mm, np.uint8)
         pos = 8
@@ -1618,11 +1637,7 @@ class McapBagReader:
             for opcode, starts, length in _walk(mm, 8, size, arr):
                 pos = int(starts[0])
                 if opcode == OP_MESSAGE:
-                    self._loose.append(starts)
-                    ids, counts = np.unique(self._loose_batch(starts).channel_id,
-                                            return_counts=True)
-                    for cid, count in zip(ids.tolist(), counts.tolist()):
-                        self._counts[cid] = self._counts.get(cid, 0) + count
+                    self._add_loose(starts)
                     continue
                 cursor = _Cursor(mm, pos + 9, pos + 9 + length,
                                  f'the {RECORD_NAMES.get(opcode, "unknown")} record at byte '
@@ -1648,6 +1663,12 @@ class McapBagReader:
             self._warn(pos, f'reading stopped at byte {_stop_offset(err, pos)} of {size}: {err}')
         finally:
             del arr
+            self._end_loose()
+            for starts in self._loose:
+                ids, counts = np.unique(self._loose_batch(starts).channel_id,
+                                        return_counts=True)
+                for cid, count in zip(ids.tolist(), counts.tolist()):
+                    self._counts[cid] = self._counts.get(cid, 0) + count
         if not stopped:
             self._warn(size, f'the file ends at byte {size} without a data end record '
                        '(a recording that was cut short?)')
