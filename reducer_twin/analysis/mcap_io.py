@@ -1557,6 +1557,10 @@ class McapBagReader:
             try:
                 starts = self._index_starts(chunk, wanted)
                 fields = _gather_messages(data, starts, data.shape[0])
+                if starts.shape[0] > 1 and (np.diff(starts) <= 0).any():
+                    raise _Corrupt('it lists a message twice')
+                if not np.isin(fields[0], list(wanted)).all():
+                    raise _Corrupt('it points to a message of another channel')
                 return RawBatch(*fields[:4], data, *fields[4:])
             except (_Corrupt, struct.error) as err:
                 self._warn(chunk.offset, f'message index of the chunk at byte {chunk.offset} '
