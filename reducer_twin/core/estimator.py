@@ -119,7 +119,7 @@ class EstimatorConfig(_Validated):
     max_consecutive_rejections: int = spec(10, '', 1, 10000,
                                            'rejections in a row before covariance inflation',
                                            integer=True)
-    duty_horizon_s: float = spec(200.0 * HOUR, 's', 0.0, 1e10,
+    duty_horizon_s: float = spec(1000.0 * HOUR, 's', 0.0, 1e10,
                                  'operating-time constant of the recent duty rate', lo_open=True)
 
 
