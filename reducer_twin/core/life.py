@@ -1,0 +1,333 @@
+"""
+Remaining useful life: the predictor of the twin (progpy vocabulary).
+
+The event is the catalogue accuracy limit: lost motion at ±3 % of rated
+torque reaching ``limit`` (default 3 arcmin). With the estimator's joint
+Gaussian on ``x = [w, ln s]`` (:mod:`.estimator`) and the run-in-free Archard
+rate of the recent duty ``ȧ`` [m per operating second], the wear follows
+``S(w(t)) = S(w) + s·ȧ·t`` (run-in map of :mod:`.wear`), so the time of
+event is closed form::
+
+    t = (S(w_lim) - S(w)) / (s·ȧ)        w_lim = LM⁻¹(limit)
+
+It is evaluated for ``n_samples`` draws of ``(w, ln s)`` at once (about a
+millisecond for 2000 samples). Times beyond ``horizon_s`` are censored: a
+percentile beyond the horizon is reported as the horizon with its
+``*_censored`` flag set, never as NaN or infinity.
+
+:func:`catalogue_life` gives the vendor's rated-life formula for the same
+duty, to be shown beside the estimate.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .errors import InvalidInput, InvalidParameter, out_of_range
+from .estimator import lost_motion_curve, run_in_free_wear
+from .transmission_error import model_tables
+from .units import ARCMIN, HOUR
+
+LOST_MOTION_LIMIT = 3.0 * ARCMIN
+"""Default accuracy limit on lost motion [rad] (3 arcmin)."""
+
+DEFAULT_HORIZON_S = 100000.0 * HOUR
+"""Default prediction horizon [s of operation] (100 000 h, about 17 rated lives)."""
+
+
+@dataclass(frozen=True)
+class LifePrediction:
+    """
+    Remaining useful life with its uncertainty, in seconds of operation.
+
+    Attributes
+    ----------
+    p10, p50, p90 : float
+        Percentiles of the time of event [s]; the horizon when censored.
+    p10_censored, p50_censored, p90_censored : bool
+        The percentile lies beyond ``horizon_s``.
+    mean : float
+        Restricted mean ``E[min(t, horizon)]`` [s] (a censored sample has no
+        mean of its own).
+    fraction_censored : float
+        Share of samples that do not reach the limit within the horizon.
+    limit_reached : bool
+        The estimated wear is already at or past the limit (all times 0).
+    event_state : float
+        1 for a new reducer, 0 at the limit (progpy ``event_state``).
+    threshold_met : bool
+        The estimated lost motion is at or above the limit.
+    horizon_s : float
+        Horizon used [s].
+    wear_limit : float
+        Wear at which the limit is reached [m].
+    n_samples : int
+        Number of samples drawn.
+    samples : ndarray or None
+        The sampled times, capped at the horizon [s], when asked for.
+
+    """
+
+    p10: float
+    p50: float
+    p90: float
+    p10_censored: bool
+    p50_censored: bool
+    p90_censored: bool
+    mean: float
+    fraction_censored: float
+    limit_reached: bool
+    event_state: float
+    threshold_met: bool
+    horizon_s: float
+    wear_limit: float
+    n_samples: int
+    samples: np.ndarray = field(default=None, repr=False, compare=False)
+
+
+def _state_arrays(state):
+    """Return ``(x, P)`` of an estimator or of an ``(x, P)`` pair, validated."""
+    if hasattr(state, 'x') and hasattr(state, 'P'):
+        x, P = state.x, state.P
+    else:
+        try:
+            x, P = state
+        except (TypeError, ValueError) as err:
+            raise InvalidInput(
+                f'state must be an estimator or an (x, P) pair, got {type(state).__name__}'
+            ) from err
+    x = np.asarray(x, dtype=float)
+    P = np.asarray(P, dtype=float)
+    if x.shape != (2,) or P.shape != (2, 2):
+        raise InvalidInput(f'state x must have shape (2,) and P (2, 2), got {x.shape}, {P.shape}')
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        raise InvalidInput('state x and P must be finite')
+    return x, P
+
+
+def _covariance_root(P):
+    """Return ``L`` with ``L·Lᵀ = P`` (Cholesky; eigen-decomposition if only semidefinite)."""
+    P = 0.5 * (P + P.T)
+    try:
+        return np.linalg.cholesky(P)
+    except np.linalg.LinAlgError:
+        vals, vecs = np.linalg.eigh(P)
+        if vals.min() < -1e-9 * max(vals.max(), 0.0) - 1e-300:
+            raise InvalidInput(f'state P must be positive semidefinite, eigenvalues {vals}')
+        return vecs * np.sqrt(np.maximum(vals, 0.0))
+
+
+def limit_wear(params, limit=LOST_MOTION_LIMIT):
+    """
+    Wear at which the lost motion reaches ``limit`` [m].
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    limit : float
+        Lost-motion limit [rad]; must lie inside the tabulated range.
+
+    Returns
+    -------
+    float
+        ``w_lim = LM⁻¹(limit)`` [m] (``tables.wear_for_lost_motion``).
+
+    Raises
+    ------
+    InvalidParameter
+        If the limit is not above the new reducer's lost motion or beyond
+        the table.
+
+    """
+    curve = lost_motion_curve(params)
+    lo, hi = float(curve.lost_motion[0]), float(curve.lost_motion[-1])
+    if not (math.isfinite(limit) and lo < limit <= hi):
+        raise InvalidParameter(out_of_range('limit', limit, 'rad', f'in ({lo:.6g}, {hi:.6g}]'))
+    return float(model_tables(params).wear_for_lost_motion(limit))
+
+
+def event_state(wear, params, limit=LOST_MOTION_LIMIT):
+    """
+    Health of the reducer, 1 when new, 0 at the accuracy limit (progpy).
+
+    ``es = 1 - (LM(w) - LM(0))/(limit - LM(0))``, clipped to [0, 1].
+
+    Parameters
+    ----------
+    wear : array_like
+        Combined wear [m].
+    params : ReducerParams
+        Reducer parameters.
+    limit : float
+        Lost-motion limit [rad].
+
+    Returns
+    -------
+    float or ndarray
+        Event state.
+
+    """
+    curve = lost_motion_curve(params)
+    lm_new = curve.lost_motion[0]
+    es = np.clip(1.0 - (curve(wear) - lm_new) / (limit - lm_new), 0.0, 1.0)
+    return float(es) if np.ndim(es) == 0 else es
+
+
+def threshold_met(wear, params, limit=LOST_MOTION_LIMIT):
+    """
+    Tell whether the lost motion at ``wear`` reached the limit.
+
+    Parameters
+    ----------
+    wear : array_like
+        Combined wear [m].
+    params : ReducerParams
+        Reducer parameters.
+    limit : float
+        Lost-motion limit [rad].
+
+    Returns
+    -------
+    bool or ndarray
+        ``LM(w) >= limit``.
+
+    """
+    met = lost_motion_curve(params)(wear) >= limit
+    return bool(met) if np.ndim(met) == 0 else met
+
+
+def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_HORIZON_S,
+                   n_samples=2000, rng=None, duty_rate_rel_std=0.0, keep_samples=False):
+    """
+    Sample the remaining useful life under the recent duty.
+
+    Draws ``(w, ln s) ~ N(x, P)``, clips ``w`` at 0 (a wear below zero is
+    the new reducer), and evaluates ``t = (S(w_lim) - S(w))/(s·ȧ)``. The
+    future duty is the recent one, optionally with a log-normal uncertainty
+    of relative sd ``duty_rate_rel_std`` on its mean rate.
+
+    Parameters
+    ----------
+    state : WearEstimator or tuple
+        The estimator, or its ``(x, P)`` with ``x = [w [m], ln s]``.
+    duty_rate : float
+        Run-in-free Archard rate of the recent duty ȧ [m per operating
+        second] (``Δa/Δe`` over a recent horizon, e.g.
+        ``WearEstimator.duty_rate``); 0 means the reducer does not wear.
+    params : ReducerParams
+        Reducer parameters.
+    limit : float
+        Lost-motion limit [rad] (default 3 arcmin).
+    horizon_s : float
+        Prediction horizon [s of operation]; later events are censored.
+    n_samples : int
+        Number of samples.
+    rng : numpy.random.Generator or int, optional
+        Random source or seed. Default: a fixed seed, so that successive
+        predictions differ by the state only (common random numbers).
+    duty_rate_rel_std : float
+        Uncertainty of the future mean duty rate, sd of ``ln ȧ`` (0: the
+        recent duty continues exactly).
+    keep_samples : bool
+        Return the capped samples in ``LifePrediction.samples``.
+
+    Returns
+    -------
+    LifePrediction
+        Percentiles, restricted mean and censoring [s of operation].
+
+    Raises
+    ------
+    InvalidInput
+        If the state is malformed or ``duty_rate`` negative or not finite.
+    InvalidParameter
+        If ``limit``, ``horizon_s``, ``n_samples`` or ``duty_rate_rel_std``
+        is out of range.
+
+    """
+    x, P = _state_arrays(state)
+    if not (math.isfinite(duty_rate) and duty_rate >= 0.0):
+        raise InvalidInput(out_of_range('duty_rate', duty_rate, 'm/s', 'finite and >= 0'))
+    if not (math.isfinite(horizon_s) and horizon_s > 0.0):
+        raise InvalidParameter(out_of_range('horizon_s', horizon_s, 's', '> 0'))
+    if isinstance(n_samples, bool) or int(n_samples) != n_samples or n_samples < 1:
+        raise InvalidParameter(out_of_range('n_samples', n_samples, '', 'a whole number >= 1'))
+    n_samples = int(n_samples)
+    if not (math.isfinite(duty_rate_rel_std) and duty_rate_rel_std >= 0.0):
+        raise InvalidParameter(out_of_range('duty_rate_rel_std', duty_rate_rel_std, '', '>= 0'))
+    w_lim = limit_wear(params, limit)
+    wear_mean = max(float(x[0]), 0.0)
+    es = event_state(wear_mean, params, limit)
+    met = threshold_met(wear_mean, params, limit)
+    if wear_mean >= w_lim or met:
+        zeros = np.zeros(n_samples) if keep_samples else None
+        return LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
+                              float(horizon_s), w_lim, n_samples, zeros)
+    if not isinstance(rng, np.random.Generator):
+        rng = np.random.default_rng(0 if rng is None else rng)
+    normal = rng.standard_normal((n_samples, 3))
+    draws = x + normal[:, :2] @ _covariance_root(P).T
+    wear = np.maximum(draws[:, 0], 0.0)
+    scale = np.exp(draws[:, 1] + duty_rate_rel_std * normal[:, 2])
+    wp = params.wear
+    remaining = run_in_free_wear(w_lim, wp) - run_in_free_wear(wear, wp)
+    speed = scale * duty_rate
+    with np.errstate(divide='ignore', invalid='ignore'):
+        t = np.where(remaining <= 0.0, 0.0, remaining / speed)
+    t = np.where(np.isnan(t), np.inf, t)
+    censored = t > horizon_s
+    capped = np.minimum(t, horizon_s)
+    p10, p50, p90 = (float(v) for v in np.quantile(capped, [0.1, 0.5, 0.9]))
+    return LifePrediction(
+        p10=p10, p50=p50, p90=p90,
+        p10_censored=p10 >= horizon_s, p50_censored=p50 >= horizon_s,
+        p90_censored=p90 >= horizon_s,
+        mean=float(capped.mean()), fraction_censored=float(censored.mean()),
+        limit_reached=False, event_state=es, threshold_met=met, horizon_s=float(horizon_s),
+        wear_limit=w_lim, n_samples=n_samples, samples=capped if keep_samples else None)
+
+
+def catalogue_life(duty, params):
+    """
+    Rated-life formula of the catalogue for a duty [s of operation].
+
+    ``L = K·(N0/Nm)·(T0/Tm)^(10/3)`` with ``K`` the rated life at rated
+    torque ``T0`` and rated output speed ``N0``, ``Nm`` the mean output
+    speed and ``Tm`` the cubic-mean torque of the duty (physics notes
+    section 1; the exponent is ``rating.life_exponent``).
+
+    Parameters
+    ----------
+    duty : object
+        With ``mean_speed`` Nm [rad/s] (sign ignored) and
+        ``cubic_mean_torque`` Tm [N·m].
+    params : ReducerParams
+        Reducer parameters (``rating``).
+
+    Returns
+    -------
+    float
+        Life L [s]; ``inf`` for a duty without speed or torque.
+
+    Raises
+    ------
+    InvalidInput
+        If a duty value is missing or not finite.
+
+    """
+    r = params.rating
+    nm = getattr(duty, 'mean_speed', None)
+    tm = getattr(duty, 'cubic_mean_torque', None)
+    for name, value, unit in (('mean_speed', nm, 'rad/s'), ('cubic_mean_torque', tm, 'N*m')):
+        try:
+            ok = math.isfinite(float(value))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise InvalidInput(f'duty.{name} must be a finite number {unit}, got {value!r}')
+    nm, tm = abs(float(nm)), abs(float(tm))
+    if nm == 0.0 or tm == 0.0:
+        return math.inf
+    return r.rated_life * (r.rated_output_speed / nm) * (r.rated_torque / tm) ** r.life_exponent
