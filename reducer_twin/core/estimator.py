@@ -73,7 +73,6 @@ import os
 from pathlib import Path
 import tempfile
 
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 import numpy as np
 
 from .errors import InvalidInput, StateFileError
@@ -351,6 +350,8 @@ class WearEstimator:
     """
 
     def __init__(self, params, config=None):
+        # Imported here: filterpy pulls in scipy.stats (~1 s), which life.py does not need.
+        from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
         self.params = params
         self.config = config or EstimatorConfig()
         self._h = lost_motion_curve(params)
