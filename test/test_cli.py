@@ -1,0 +1,175 @@
+"""The reducer-twin command: JSON output, and errors that read ERROR: without a traceback."""
+
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import pytest
+from reducer_twin.cli import main
+
+T0 = 784.0   # rated torque [N*m], paper Table 3
+
+
+def _console_script():
+    return Path(sys.executable).parent / 'reducer-twin'
+
+
+def _run_script(*args):
+    """Run the installed console script (costs about a second: used for a few rows only)."""
+    return subprocess.run([str(_console_script()), *args], capture_output=True, text=True,
+                          timeout=120)
+
+
+def _run_in_process(argv, capsys):
+    """Run ``main(argv)``; usage errors exit through SystemExit. Return (code, out, err)."""
+    try:
+        code = main(argv)
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def _model_json(capsys, *extra):
+    code, out, err = _run_in_process(['model', '--json', *extra], capsys)
+    assert code == 0, err
+    return json.loads(out)
+
+
+def _error_lines(stderr):
+    return [line for line in stderr.splitlines() if line.startswith('ERROR:')]
+
+
+def test_paper_json_from_the_installed_script_has_the_three_tables():
+    result = _run_script('paper', '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert {'table2', 'table4', 'table5'} <= set(data)
+    assert len(data['table2']) == 6
+    for row in data['table2']:
+        assert {'hours', 'paper_mm', 'model_mm', 'rel_error'} <= set(row)
+        assert abs(row['rel_error']) < 0.01
+    assert data['table2'][0]['paper_mm'] == pytest.approx(0.004732318, rel=1e-12)  # Table 2
+    t4 = data['table4']
+    assert t4['ratio'] == 81.0                                      # paper Table 4
+    assert t4['output_speed_deg_s'] == pytest.approx(90.0, rel=1e-12)
+    assert t4['planet_speed_deg_s'] == pytest.approx(3645.0, rel=1e-12)
+    assert [row['hours'] for row in data['table5']] == [1000.0 * k for k in range(1, 7)]
+    assert 'Traceback' not in result.stderr
+
+
+def test_model_json_from_the_installed_script_has_sane_values():
+    result = _run_script('model', '--wear-um', '20', '--torque-nm', str(T0), '--json')
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    # Physics notes 4: between 2.75 (18.06 um) and 3.08 arcmin (21.99 um).
+    assert 2.75 < data['lost_motion_arcmin'] < 3.08
+    assert data['mean_te_arcmin'] < 0.0                  # the loaded output lags
+    assert 0.0 < data['te_ripple_arcsec'] < 0.3          # physics notes 4
+    assert 2 <= data['loaded_pins'] <= 2 * 21            # both discs, loaded flanks only
+    # Above the no-clearance classical 4*(T/2)/(Zp*r_eff) = 440 N, below the +/+ new 1240 N.
+    assert 440.0 < data['max_pin_force_n'] < 1240.0
+    assert 0.3e9 < data['max_contact_pressure_pa'] < 1.2e9   # below 1.06 GPa of a new mesh
+    assert data['wear_um'] == 20.0 and data['torque_nm'] == T0
+
+
+def test_lost_motion_grows_0_7_to_0_95_arcmin_from_20_to_30_um(capsys):
+    lm20 = _model_json(capsys, '--wear-um', '20', '--torque-nm', '784')['lost_motion_arcmin']
+    lm30 = _model_json(capsys, '--wear-um', '30', '--torque-nm', '784')['lost_motion_arcmin']
+    # Slope between 0.077 arcmin/um (2/r_eff, large wear) and a little more (physics notes 4).
+    assert 0.70 <= lm30 - lm20 <= 0.95
+
+
+def test_model_reads_a_params_file_and_set_overrides(capsys, repo_root):
+    config = str(repo_root / 'config' / 'rv80e.yaml')
+    base = _model_json(capsys, '--wear-um', '5', '--torque-nm', '100')
+    from_file = _model_json(capsys, '--wear-um', '5', '--torque-nm', '100', '--params', config)
+    assert from_file == base
+    soft = _model_json(capsys, '--wear-um', '5', '--torque-nm', '100', '--params', config,
+                       '--set', 'rating.contact_stiffness=2e8')
+    assert soft['max_pin_force_n'] != base['max_pin_force_n']
+
+
+def test_model_and_paper_print_tables_without_json(capsys):
+    code, out, err = _run_in_process(['model', '--wear-um', '3', '--torque-nm', '50'], capsys)
+    assert code == 0, err
+    assert 'lost_motion_arcmin' in out
+    code, out, err = _run_in_process(['paper'], capsys)
+    assert code == 0, err
+    assert 'Table 2' in out and 'Table 4' in out and 'Table 5' in out
+
+
+# Usage errors: argparse rejects the command line, exit 2.
+USAGE_ERRORS = [
+    ('missing --torque-nm', ['model', '--wear-um', '20'], '--torque-nm'),
+    ('non-numeric value', ['model', '--wear-um', 'abc', '--torque-nm', '1'], 'abc'),
+    ('unknown subcommand', ['frobnicate'], 'frobnicate'),
+    ('unknown flag', ['model', '--wear-um', '1', '--torque-nm', '1', '--bogus'], '--bogus'),
+    ('no subcommand', [], 'required'),
+]
+
+# Invalid values: the command line parses, the value is out of range, exit 1.
+VALUE_ERRORS = [
+    ('negative wear', ['model', '--wear-um', '-5', '--torque-nm', '100'],
+     ['--wear-um', '-5', 'um', '[0, 500]']),
+    ('NaN torque', ['model', '--wear-um', '5', '--torque-nm', 'nan'], ['--torque-nm', 'nan']),
+    ('torque beyond 5x rated', ['model', '--wear-um', '5', '--torque-nm', '4000'],
+     ['--torque-nm', '4000', 'N*m', '3920']),
+    ('negative speed', ['model', '--wear-um', '5', '--torque-nm', '1', '--speed-rpm', '-3'],
+     ['--speed-rpm', '-3', 'rpm']),
+    ('--set out of range', ['model', '--wear-um', '5', '--torque-nm', '1',
+                            '--set', 'geometry.pin_radius=-0.001'],
+     ['geometry.pin_radius', '-0.001', ' m']),
+    ('--set without =', ['model', '--wear-um', '5', '--torque-nm', '1',
+                         '--set', 'geometry.pin_radius'], ['SECTION.NAME=VALUE']),
+    ('--set not a number', ['paper', '--set', 'geometry.pin_radius=big'],
+     ['geometry.pin_radius', 'big']),
+    ('--set unknown name', ['paper', '--set', 'geometry.pin_diameter=0.01'],
+     ['geometry.pin_diameter']),
+    ('--params missing file', ['model', '--wear-um', '5', '--torque-nm', '1',
+                               '--params', '/nonexistent/rv.yaml'], ['/nonexistent/rv.yaml']),
+]
+
+
+@pytest.mark.parametrize('argv, fragment', [row[1:] for row in USAGE_ERRORS],
+                         ids=[row[0] for row in USAGE_ERRORS])
+def test_usage_errors_exit_2_with_one_error_line(capsys, argv, fragment):
+    code, out, err = _run_in_process(argv, capsys)
+    assert code == 2
+    lines = _error_lines(err)
+    assert len(lines) == 1 and fragment in lines[0], err
+    assert 'Traceback' not in err + out
+
+
+@pytest.mark.parametrize('argv, fragments', [row[1:] for row in VALUE_ERRORS],
+                         ids=[row[0] for row in VALUE_ERRORS])
+def test_invalid_values_exit_1_naming_the_quantity(capsys, argv, fragments):
+    code, out, err = _run_in_process(argv, capsys)
+    assert code == 1
+    lines = _error_lines(err)
+    assert len(lines) == 1, err
+    for fragment in fragments:
+        assert fragment in lines[0], f'{fragment!r} missing from {lines[0]!r}'
+    assert 'Traceback' not in err + out
+    assert out == ''
+
+
+def test_the_installed_script_returns_exit_1_on_an_invalid_value_without_a_traceback():
+    # In-process rows above cover the messages; this one checks that main()'s return value
+    # reaches the shell through the console script.
+    result = _run_script('model', '--wear-um', '5', '--torque-nm', '4000')
+    assert result.returncode == 1
+    assert _error_lines(result.stderr), result.stderr
+    assert 'Traceback' not in result.stderr + result.stdout
+
+
+@pytest.mark.xfail(strict=True, raises=TypeError, reason=(
+    'core bug: ReducerParams.from_yaml does not check that the value under the reducer key '
+    'is a mapping; the TypeError escapes main() as a traceback instead of ERROR: ... exit 1'))
+def test_a_params_file_with_a_non_mapping_reducer_key_is_an_invalid_value(capsys, tmp_path):
+    path = tmp_path / 'bad.yaml'
+    path.write_text('reducer: [1, 2]\n', encoding='utf-8')
+    code, _, err = _run_in_process(['model', '--wear-um', '5', '--torque-nm', '1',
+                                    '--params', str(path)], capsys)
+    assert code == 1 and _error_lines(err)
