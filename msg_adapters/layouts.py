@@ -60,9 +60,10 @@ TE_FEATURES = Layout('te_features', (
 """Per-window TE features and duty of one joint (paper Table 5 style)."""
 
 WEAR_ESTIMATE = Layout('wear', (
-    'stamp_s', 'wear_m', 'wear_std_m', 'rate_scale', 'rate_scale_std', 'lost_motion_rad',
-    'exposure_s', 'updates', 'rejected'))
-"""Kalman estimate of the combined wear of one reducer."""
+    'stamp_s', 'wear_m', 'wear_std_m', 'rate_scale', 'rate_scale_std', 'log_rate_scale',
+    'var_wear_m2', 'cov_wear_log_rate_m', 'var_log_rate', 'duty_rate_m_per_s',
+    'lost_motion_rad', 'lost_motion_obs_rad', 'exposure_s', 'updates', 'rejected'))
+"""Kalman estimate of one reducer: state ``[w, ln s]``, its covariance and the duty rate."""
 
 REMAINING_LIFE = Layout('remaining_life', (
     'stamp_s', 'p10_s', 'p50_s', 'p90_s', 'mean_s', 'p10_censored', 'p50_censored',

@@ -1,0 +1,310 @@
+"""
+The twin's processing stages, shared by the live nodes and the bag analysis.
+
+* :class:`EstimatorStage` steps the Kalman filter with each window's
+  features and persists its state (the ``wear_estimator`` node);
+* :class:`LifeStage` turns an estimate into remaining life and a health
+  level (the ``life_publisher`` node).
+
+Stages exchange plain records keyed like the topic layouts of
+:mod:`msg_adapters.layouts` (unit-suffixed names, SI), so a live recording
+and an offline analysis carry the same values.
+"""
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+from .errors import InvalidInput, StateFileError
+from .life import catalogue_life, DEFAULT_HORIZON_S, LOST_MOTION_LIMIT, remaining_life
+from .units import HOUR
+
+DUTY_FIELDS = ('duration_s', 'exposure_s', 'archard_increment', 'mean_abs_torque',
+               'mean_abs_speed', 'cubic_mean_torque', 'mean_speed', 'max_abs_torque')
+"""Attributes of a window's duty summary."""
+
+_DUTY_KEYS = {'duration_s': 'duration_s', 'exposure_s': 'exposure_s',
+              'archard_increment': 'archard_increment_m', 'mean_abs_torque': 'mean_abs_torque_nm',
+              'mean_abs_speed': 'mean_abs_speed_rad_s', 'cubic_mean_torque': 'cubic_mean_torque_nm',
+              'mean_speed': 'mean_speed_rad_s', 'max_abs_torque': 'max_abs_torque_nm'}
+
+CLOCK_RESET_S = 60.0
+"""A window ending this far before the last one means the clock was reset, not a replay."""
+
+
+def features_from_record(record):
+    """
+    Rebuild a window-features object from a ``te_features`` record.
+
+    Parameters
+    ----------
+    record : mapping
+        Field name to value, as in the ``te_features`` layout.
+
+    Returns
+    -------
+    types.SimpleNamespace
+        With ``t_start``, ``t_end``, ``lost_motion``, ``lost_motion_std``,
+        ``wear_fit``, ``wear_fit_std`` and ``duty`` (a namespace with the
+        duty fields), what the estimator reads.
+
+    """
+    duty = SimpleNamespace(**{k: float(record[v]) for k, v in _DUTY_KEYS.items()})
+    return SimpleNamespace(
+        t_start=float(record['window_start_s']), t_end=float(record['window_end_s']),
+        lost_motion=float(record['lost_motion_rad']),
+        lost_motion_std=float(record['lost_motion_std_rad']),
+        wear_fit=float(record['wear_fit_m']), wear_fit_std=float(record['wear_fit_std_m']),
+        duty=duty)
+
+
+def duty_to_record(duty):
+    """
+    Return the duty fields of a ``te_features`` record.
+
+    Parameters
+    ----------
+    duty : object
+        Duty summary with the attributes of :data:`DUTY_FIELDS`.
+
+    Returns
+    -------
+    dict
+        Layout field name to value.
+
+    """
+    return {v: float(getattr(duty, k)) for k, v in _DUTY_KEYS.items()}
+
+
+class EstimatorStage:
+    """
+    Kalman wear estimation with persistence, one reducer.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    config : EstimatorConfig, optional
+        Filter tuning.
+    state_path : str or Path, optional
+        State file: restored on start (falling back to its ``.bak`` copy),
+        written atomically after every window.
+    log : callable, optional
+        Called with one line of text for notable events (restore, reset).
+
+    Raises
+    ------
+    StateFileError
+        If a state file exists but neither it nor its backup can be used.
+
+    """
+
+    def __init__(self, params, config=None, state_path=None, log=None):
+        from .estimator import backup_path, load_with_fallback, WearEstimator
+        self.params = params
+        self.state_path = Path(state_path) if state_path else None
+        self.log = log or (lambda text: None)
+        self.last_observation = float('nan')
+        self.skipped_replays = 0
+        self.restored_from = None
+        if self.state_path and (self.state_path.exists() or backup_path(self.state_path).exists()):
+            loaded = load_with_fallback(self.state_path, params, config)
+            self.estimator = loaded.estimator
+            self.restored_from = str(loaded.path)
+            note = f' (primary unusable: {loaded.primary_error})' if loaded.used_backup else ''
+            self.log(f'restored estimator state from {loaded.path}{note}: wear '
+                     f'{self.estimator.wear * 1e6:.3f} um after '
+                     f'{self.estimator.exposure_s / HOUR:.1f} h')
+        else:
+            self.estimator = WearEstimator(params, config)
+            if self.state_path:
+                self.log(f'no estimator state at {self.state_path}: starting from a new reducer')
+
+    def process(self, features):
+        """
+        Step the filter with one window and persist the state.
+
+        A window that ends at or before the last one stepped is a replay
+        (e.g. a restarted node received it again) and is skipped, unless it
+        lies more than :data:`CLOCK_RESET_S` back (the clock was reset).
+
+        Parameters
+        ----------
+        features : object
+            Window features (see :func:`features_from_record`).
+
+        Returns
+        -------
+        str
+            Update status: ``accepted``, ``rejected``, ``recovered``,
+            ``skipped`` or ``replay``.
+
+        """
+        last = self.estimator.t_end
+        if last is not None and last - CLOCK_RESET_S < features.t_end <= last:
+            self.skipped_replays += 1
+            return 'replay'
+        result = self.estimator.step(features)
+        self.last_observation = float(features.lost_motion)
+        if self.state_path:
+            self.estimator.save(self.state_path)
+        return result.status
+
+    def reset(self, reason):
+        """
+        Record a maintenance event (reducer replaced) and restart the filter.
+
+        Parameters
+        ----------
+        reason : str
+            Why, for the event log in the state.
+
+        """
+        self.estimator.reset(reason)
+        if self.state_path:
+            self.estimator.save(self.state_path)
+        self.log(f'estimator reset: {reason}')
+
+    def record(self, stamp_s):
+        """
+        Return the current estimate as a ``wear`` record.
+
+        Parameters
+        ----------
+        stamp_s : float
+            Stamp of the record [s].
+
+        Returns
+        -------
+        dict
+            Layout field name to value (SI).
+
+        """
+        est = self.estimator
+        x, P = est.x, est.P
+        from .transmission_error import model_tables
+        return {
+            'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
+            'rate_scale': est.rate_scale, 'rate_scale_std': est.rate_scale_std,
+            'log_rate_scale': float(x[1]), 'var_wear_m2': float(P[0, 0]),
+            'cov_wear_log_rate_m': float(P[0, 1]), 'var_log_rate': float(P[1, 1]),
+            'duty_rate_m_per_s': est.duty_rate,
+            'lost_motion_rad': float(model_tables(self.params).lost_motion(max(est.wear, 0.0))),
+            'lost_motion_obs_rad': self.last_observation,
+            'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected}
+
+
+def state_from_record(record):
+    """
+    Rebuild ``(x, P)`` from a ``wear`` record.
+
+    Parameters
+    ----------
+    record : mapping
+        Wear record.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``x = [w, ln s]`` and its 2x2 covariance.
+
+    Raises
+    ------
+    InvalidInput
+        If any value is not finite.
+
+    """
+    x = np.array([record['wear_m'], record['log_rate_scale']], dtype=float)
+    c = float(record['cov_wear_log_rate_m'])
+    P = np.array([[record['var_wear_m2'], c], [c, record['var_log_rate']]], dtype=float)
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
+        raise InvalidInput(f'wear record holds non-finite state: x={x.tolist()}, '
+                           f'P={P.tolist()}')
+    return x, P
+
+
+class LifeStage:
+    """
+    Remaining life, catalogue life and health level of one reducer.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    limit : float
+        Accuracy limit on lost motion [rad] (default 3 arcmin).
+    warn_s, error_s : float
+        Health turns WARN when the P10 remaining life falls to ``warn_s``
+        operating seconds, ERROR at ``error_s`` or when the limit is reached.
+    horizon_s : float
+        Prediction horizon [s of operation]; beyond it a percentile is censored.
+    n_samples : int
+        Samples of the state distribution.
+    duty_rate_rel_std : float
+        Relative uncertainty of the future duty's wear rate.
+
+    """
+
+    def __init__(self, params, limit=LOST_MOTION_LIMIT, warn_s=1000.0 * HOUR,
+                 error_s=200.0 * HOUR, horizon_s=DEFAULT_HORIZON_S, n_samples=2000,
+                 duty_rate_rel_std=0.1):
+        if not error_s <= warn_s:
+            raise InvalidInput(f'error threshold {error_s} s must not exceed warn threshold '
+                               f'{warn_s} s')
+        self.params = params
+        self.limit = limit
+        self.warn_s = warn_s
+        self.error_s = error_s
+        self.horizon_s = horizon_s
+        self.n_samples = n_samples
+        self.duty_rate_rel_std = duty_rate_rel_std
+        self.duty = None
+
+    def observe_duty(self, duty):
+        """Keep the latest duty summary for the catalogue life."""
+        self.duty = duty
+
+    def process(self, wear_record):
+        """
+        Predict remaining life from a ``wear`` record.
+
+        Parameters
+        ----------
+        wear_record : mapping
+            Output of :meth:`EstimatorStage.record`.
+
+        Returns
+        -------
+        tuple
+            ``(record, level, message)``: the ``remaining_life`` record, the
+            level ``'OK'``/``'WARN'``/``'ERROR'`` and a one-line message.
+
+        """
+        x, P = state_from_record(wear_record)
+        rate = float(wear_record['duty_rate_m_per_s'])
+        rng = np.random.default_rng(0)
+        pred = remaining_life((x, P), rate, self.params, limit=self.limit,
+                              horizon_s=self.horizon_s, n_samples=self.n_samples, rng=rng,
+                              duty_rate_rel_std=self.duty_rate_rel_std)
+        cat = catalogue_life(self.duty, self.params) if self.duty is not None else float('nan')
+        record = {
+            'stamp_s': wear_record['stamp_s'], 'p10_s': pred.p10, 'p50_s': pred.p50,
+            'p90_s': pred.p90, 'mean_s': pred.mean, 'p10_censored': float(pred.p10_censored),
+            'p50_censored': float(pred.p50_censored), 'p90_censored': float(pred.p90_censored),
+            'censored_fraction': pred.fraction_censored, 'horizon_s': pred.horizon_s,
+            'event_state': pred.event_state, 'threshold_met': float(pred.threshold_met),
+            'catalogue_life_s': cat, 'lost_motion_rad': wear_record['lost_motion_rad'],
+            'lost_motion_limit_rad': self.limit}
+        if pred.threshold_met or pred.limit_reached or pred.p10 <= self.error_s:
+            level = 'ERROR'
+        elif pred.p10 <= self.warn_s:
+            level = 'WARN'
+        else:
+            level = 'OK'
+        p10 = 'beyond horizon' if pred.p10_censored else f'{pred.p10 / HOUR:.0f} h'
+        message = (f'remaining life P10 {p10}, P50 {pred.p50 / HOUR:.0f} h'
+                   + (' (censored)' if pred.p50_censored else ''))
+        if pred.limit_reached:
+            message = 'lost motion beyond the accuracy limit: reducer worn out'
+        return record, level, message
