@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import InvalidInput, StateFileError
+from .errors import InvalidInput
 from .life import catalogue_life, DEFAULT_HORIZON_S, LOST_MOTION_LIMIT, remaining_life
 from .units import HOUR
 
@@ -24,10 +24,11 @@ DUTY_FIELDS = ('duration_s', 'exposure_s', 'archard_increment', 'mean_abs_torque
                'mean_abs_speed', 'cubic_mean_torque', 'mean_speed', 'max_abs_torque')
 """Attributes of a window's duty summary."""
 
-_DUTY_KEYS = {'duration_s': 'duration_s', 'exposure_s': 'exposure_s',
-              'archard_increment': 'archard_increment_m', 'mean_abs_torque': 'mean_abs_torque_nm',
-              'mean_abs_speed': 'mean_abs_speed_rad_s', 'cubic_mean_torque': 'cubic_mean_torque_nm',
-              'mean_speed': 'mean_speed_rad_s', 'max_abs_torque': 'max_abs_torque_nm'}
+_DUTY_KEYS = {
+    'duration_s': 'duration_s', 'exposure_s': 'exposure_s',
+    'archard_increment': 'archard_increment_m', 'mean_abs_torque': 'mean_abs_torque_nm',
+    'mean_abs_speed': 'mean_abs_speed_rad_s', 'cubic_mean_torque': 'cubic_mean_torque_nm',
+    'mean_speed': 'mean_speed_rad_s', 'max_abs_torque': 'max_abs_torque_nm'}
 
 CLOCK_RESET_S = 60.0
 """A window ending this far before the last one means the clock was reset, not a replay."""
