@@ -203,13 +203,76 @@ def _field_array(values, what, n, n_joints):
     return arr
 
 
-def _column(out, offset, dtype, n_cols=None):
-    """Return a writable strided view of one field across all rows of ``out``."""
-    n, row = out.shape
-    if n_cols is None:
-        return np.ndarray((n,), dtype, buffer=out, offset=offset, strides=(row,))
-    item = np.dtype(dtype).itemsize
-    return np.ndarray((n, n_cols), dtype, buffer=out, offset=offset, strides=(row, item))
+def fill_columns(rows, columns):
+    """
+    Write per-message fields into rows of serialised messages, in place.
+
+    Parameters
+    ----------
+    rows : numpy.ndarray
+        uint8[N, R] (any row stride, last axis contiguous) holding N message templates.
+    columns : sequence of tuple
+        ``(offset, dtype, values)``: values of shape [N] or [N, k] written at byte
+        ``offset`` of every row with numpy dtype ``dtype`` (e.g. ``'<f8'``).
+
+    """
+    for offset, dtype, values in columns:
+        values = np.asarray(values)
+        width = np.dtype(dtype).itemsize * (values.shape[1] if values.ndim == 2 else 1)
+        view = rows[:, offset:offset + width].view(dtype)
+        view[...] = values if values.ndim == 2 else values[:, None]
+
+
+def joint_state_columns(stamps_ns, names, position, velocity=None, effort=None, frame_id=''):
+    """
+    Describe N JointState messages that share their names as a template and columns.
+
+    This is the form in which a writer can build messages in place (see
+    ``McapBagWriter.write_template_batch``): every message is the template with the
+    columns written into it.
+
+    Parameters
+    ----------
+    stamps_ns, names, position, velocity, effort, frame_id
+        As for :func:`encode_joint_states`.
+
+    Returns
+    -------
+    template : numpy.ndarray
+        uint8[L], one serialised message with zero stamp and values.
+    columns : list of tuple
+        ``(offset, dtype, values)`` for header.stamp sec and nanosec and for each
+        non-empty float field.
+
+    Raises
+    ------
+    InvalidInput
+        As for :func:`encode_joint_states`.
+
+    """
+    stamps = np.asarray(stamps_ns)
+    if stamps.ndim != 1 or not np.issubdtype(stamps.dtype, np.integer):
+        raise InvalidInput(
+            f'stamps_ns must be a 1-D integer array in ns, got dtype {stamps.dtype} '
+            f'and shape {stamps.shape}')
+    if isinstance(names, str):
+        raise InvalidInput(f'names must be a sequence of str, got the str {names!r}')
+    names = tuple(names)
+    n, n_joints = stamps.shape[0], len(names)
+    fields = [_field_array(v, w, n, n_joints)
+              for v, w in zip((position, velocity, effort), FIELDS)]
+    counts = [0 if f is None else n_joints for f in fields]
+    template, offsets = _template(frame_id, names, counts)
+    sec, nsec = np.divmod(stamps.astype(np.int64), _NS_PER_S)
+    if n and (sec.min() < _INT32_MIN or sec.max() > _INT32_MAX):
+        bad = stamps[(sec < _INT32_MIN) | (sec > _INT32_MAX)][0]
+        raise InvalidInput(
+            f'stamps_ns must lie within the int32 seconds range of builtin_interfaces/Time '
+            f'({_INT32_MIN} .. {_INT32_MAX} s), got {bad} ns')
+    columns = [(4, '<i4', sec), (8, '<u4', nsec)]
+    columns += [(offset, '<f8', values) for values, offset in zip(fields, offsets)
+                if values is not None and n_joints]
+    return template, columns
 
 
 def encode_joint_states(stamps_ns, names, position, velocity=None, effort=None, frame_id=''):
@@ -244,35 +307,14 @@ def encode_joint_states(stamps_ns, names, position, velocity=None, effort=None, 
         that are not strings.
 
     """
-    stamps = np.asarray(stamps_ns)
-    if stamps.ndim != 1 or not np.issubdtype(stamps.dtype, np.integer):
-        raise InvalidInput(
-            f'stamps_ns must be a 1-D integer array in ns, got dtype {stamps.dtype} '
-            f'and shape {stamps.shape}')
-    if isinstance(names, str):
-        raise InvalidInput(f'names must be a sequence of str, got the str {names!r}')
-    names = tuple(names)
-    n, n_joints = stamps.shape[0], len(names)
-    fields = [_field_array(v, w, n, n_joints)
-              for v, w in zip((position, velocity, effort), FIELDS)]
-    counts = [0 if f is None else n_joints for f in fields]
-    template, offsets = _template(frame_id, names, counts)
+    template, columns = joint_state_columns(stamps_ns, names, position, velocity, effort,
+                                            frame_id)
+    n = columns[0][2].shape[0]
     row = template.shape[0]
     out = np.empty((n, row), np.uint8)
-    if n == 0:
-        return out.reshape(-1), np.zeros(1, np.int64)
-    sec, nsec = np.divmod(stamps.astype(np.int64), _NS_PER_S)
-    if sec.min() < _INT32_MIN or sec.max() > _INT32_MAX:
-        bad = stamps[(sec < _INT32_MIN) | (sec > _INT32_MAX)][0]
-        raise InvalidInput(
-            f'stamps_ns must lie within the int32 seconds range of builtin_interfaces/Time '
-            f'({_INT32_MIN} .. {_INT32_MAX} s), got {bad} ns')
-    out[:] = template
-    _column(out, 4, '<i4')[...] = sec
-    _column(out, 8, '<u4')[...] = nsec
-    for values, offset in zip(fields, offsets):
-        if values is not None and n_joints:
-            _column(out, offset, '<f8', n_joints)[...] = values
+    if n:
+        out.view(f'V{row}')[:, 0] = template.view(f'V{row}')[0]
+        fill_columns(out, columns)
     return out.reshape(-1), np.arange(n + 1, dtype=np.int64) * row
 
 

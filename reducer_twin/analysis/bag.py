@@ -23,7 +23,7 @@ import sqlite3
 from typing import NamedTuple
 
 from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states, empty_batch
-from msg_adapters.jointstate_cdr import encode_joint_states, MSGTYPE as JOINT_STATE
+from msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
 import numpy as np
 from reducer_twin.analysis.mcap_io import (
     bag_metadata, custom_data_strings, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, MAGIC,
@@ -685,33 +685,32 @@ class BagDirWriter:
         """
         self._writer.write_batch(channel_id, log_times_ns, buffer, offsets, publish_times_ns)
 
-    def write_joint_states(self, channel_id, batch, log_times_ns=None, block=65536):
+    def write_joint_states(self, channel_id, batch, log_times_ns=None):
         """
-        Encode and write a JointStateBatch, a block of messages at a time.
+        Encode and write a JointStateBatch, building the messages in the chunk buffers.
 
         Parameters
         ----------
         channel_id : int
             From ``add_topic`` (a ``sensor_msgs/msg/JointState`` topic).
         batch : JointStateBatch
-            Messages; NaN-only velocity/effort columns are written as empty fields.
+            Messages; all-NaN velocity/effort columns are written as empty fields.
         log_times_ns : array_like of int, optional
             Receive times; default ``batch.log_time_ns`` or else the header stamps.
-        block : int
-            Messages encoded per step (bounds the memory used).
+
+        Raises
+        ------
+        InvalidInput
+            On arrays of the wrong shape or stamps outside the int32 seconds range.
 
         """
         logs = log_times_ns if log_times_ns is not None else batch.log_time_ns
         logs = np.asarray(batch.stamps_ns if logs is None else logs, np.int64)
-        fields = [None if np.isnan(values).all() else values
+        fields = [None if values.size and np.isnan(values).all() else values
                   for values in (batch.position, batch.velocity, batch.effort)]
-        for start in range(0, len(batch), block):
-            part = slice(start, start + block)
-            buffer, offsets = encode_joint_states(
-                batch.stamps_ns[part], batch.names, *[None if f is None else f[part]
-                                                      for f in fields],
-                frame_id=batch.frame_id)
-            self._writer.write_batch(channel_id, logs[part], buffer, offsets)
+        template, columns = joint_state_columns(batch.stamps_ns, batch.names, *fields,
+                                                frame_id=batch.frame_id)
+        self._writer.write_template_batch(channel_id, logs, template, columns)
 
     def close(self):
         """
