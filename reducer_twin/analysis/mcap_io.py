@@ -1543,7 +1543,7 @@ class McapBagReader:
                 offset, rec_len = cursor.take('<QQ')
                 metadata_at.append((offset, rec_len))
         if self.statistics is None:
-            raise _Corrupt('the summary has no statistics record')
+            raise _Corrupt('')  # valid, but message counts need a scan: scan quietly
         self._chunks = sorted(chunks, key=lambda c: c.offset)
         for offset, rec_len in metadata_at:
             self._read_metadata_record(offset, rec_len)

@@ -2,6 +2,7 @@
 
 from pathlib import Path
 import shutil
+import sqlite3
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -326,3 +327,39 @@ def test_a_copied_real_bag_with_a_cut_file_still_lists_its_topics(tmp_path):
         assert set(bag.topics) == set(REAL_TOPICS['wbag-split'])
         assert sum(len(raw) for _, raw in bag.iter_raw()) < 6074
         assert any('wbag_4.mcap' in str(w) for w in bag.warnings)
+
+
+def test_a_sqlite3_jointstate_bag_of_an_older_distribution_reads_like_mcap(tmp_path):
+    batch = _batch(500)
+    buffer, offsets = encode_joint_states(batch.stamps_ns, batch.names, batch.position)
+    root = tmp_path / 'humble'
+    root.mkdir()
+    qos = ('- history: 3\n  depth: 0\n  reliability: 2\n  durability: 2\n  deadline:\n'
+           '    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n'
+           '    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n'
+           '    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false')
+    with sqlite3.connect(root / 'humble_0.db3') as db:
+        db.execute('CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT '
+                   'NOT NULL, serialization_format TEXT NOT NULL, offered_qos_profiles TEXT '
+                   'NOT NULL)')
+        db.execute('CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, '
+                   'timestamp INTEGER NOT NULL, data BLOB NOT NULL)')
+        db.execute('INSERT INTO topics VALUES (1, ?, ?, ?, ?)',
+                   ('/joint_states', JOINT_STATE, 'cdr', qos))
+        db.executemany('INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?, ?)',
+                       [(int(batch.stamps_ns[i]), buffer[offsets[i]:offsets[i + 1]].tobytes())
+                        for i in range(499, -1, -1)])
+    info = {'version': 5, 'storage_identifier': 'sqlite3', 'relative_file_paths':
+            ['humble/humble_0.db3'], 'duration': {'nanoseconds': 499_000_000},
+            'starting_time': {'nanoseconds_since_epoch': T0}, 'message_count': 500,
+            'topics_with_message_count': [{'topic_metadata': {
+                'name': '/joint_states', 'type': JOINT_STATE, 'serialization_format': 'cdr',
+                'offered_qos_profiles': qos}, 'message_count': 500}],
+            'compression_format': '', 'compression_mode': '', 'files': []}
+    (root / 'metadata.yaml').write_text(yaml.safe_dump({'rosbag2_bagfile_information': info}))
+    with open_bag(root) as bag:
+        assert bag.storage == 'sqlite3' and not bag.warnings
+        assert bag.topic_details['/joint_states'].qos[0].reliability == 'best_effort'
+        got = bag.read_joint_states()['/joint_states']
+    np.testing.assert_array_equal(got.stamps_ns, batch.stamps_ns)
+    np.testing.assert_array_equal(got.position, batch.position)

@@ -329,3 +329,36 @@ def test_writer_refuses_bad_arguments(tmp_path):
     with pytest.raises(BagError, match='definition'):
         with McapBagWriter(tmp_path / 'c.mcap') as writer:
             writer.add_topic('/y', 'no_such_msgs/msg/Thing')
+
+
+SCHEMA_TYPES = ['sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray',
+                'diagnostic_msgs/msg/DiagnosticArray', 'std_msgs/msg/String',
+                'builtin_interfaces/msg/Time']
+
+
+@pytest.mark.parametrize('msgtype', SCHEMA_TYPES)
+def test_schemas_and_type_hashes_come_from_the_installed_ros_packages(msgtype):
+    text = ros_schemas.message_definition(msgtype)
+    own = ros_schemas.interface_file(msgtype, '.msg').read_text()
+    assert text.startswith(own)
+    for block in text.split('\n' + '=' * 80 + '\n')[1:]:
+        assert block.startswith('MSG: ') and block.split('\n', 1)[0].count('/') == 1
+    digest = ros_schemas.type_hash(msgtype)
+    assert digest.startswith('RIHS01_') and len(digest) == 7 + 64
+    int(digest[7:], 16)
+
+
+def test_the_jointstate_schema_lists_header_then_time_as_rosbag2_does():
+    text = ros_schemas.message_definition(JOINT_STATE)
+    separator = '\n' + '=' * 80 + '\n'
+    assert [b.split('\n', 1)[0] for b in text.split(separator)[1:]] == [
+        'MSG: std_msgs/Header', 'MSG: builtin_interfaces/Time']
+    assert ros_schemas.type_hash('sensor_msgs/JointState') == ros_schemas.type_hash(JOINT_STATE)
+
+
+def test_a_type_that_is_not_installed_raises_bag_error_naming_what_was_searched():
+    with pytest.raises(BagError, match=r'share/no_such_msgs/msg/Thing.msg under the searched '
+                                       r'prefixes \['):
+        ros_schemas.message_definition('no_such_msgs/msg/Thing')
+    with pytest.raises(BagError, match='not understood'):
+        ros_schemas.type_hash('JointState')
