@@ -164,9 +164,6 @@ def test_the_installed_script_returns_exit_1_on_an_invalid_value_without_a_trace
     assert 'Traceback' not in result.stderr + result.stdout
 
 
-@pytest.mark.xfail(strict=True, raises=TypeError, reason=(
-    'core bug: ReducerParams.from_yaml does not check that the value under the reducer key '
-    'is a mapping; the TypeError escapes main() as a traceback instead of ERROR: ... exit 1'))
 def test_a_params_file_with_a_non_mapping_reducer_key_is_an_invalid_value(capsys, tmp_path):
     path = tmp_path / 'bad.yaml'
     path.write_text('reducer: [1, 2]\n', encoding='utf-8')

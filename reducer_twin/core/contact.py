@@ -17,6 +17,10 @@ import numpy as np
 from .geometry import equivalent_radius, flank_phases, lever_arms_cs, normal_clearance_cs
 
 
+LOADED_FORCE = 1e-6
+"""A contact force above this counts as loaded [N]; below is solver rounding (~1e-12 N)."""
+
+
 @dataclass(frozen=True)
 class LoadedMesh:
     """
@@ -41,8 +45,8 @@ class LoadedMesh:
 
     @property
     def loaded_pins(self):
-        """Count the contacts that carry load, per sample."""
-        return np.count_nonzero(self.forces > 0.0, axis=1)
+        """Count the contacts that carry load (above 1 µN, not rounding), per sample."""
+        return np.count_nonzero(self.forces > LOADED_FORCE, axis=1)
 
     @property
     def max_force(self):

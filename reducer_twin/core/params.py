@@ -101,12 +101,15 @@ def check_value(name, value, meta):
 
     """
     allowed = describe_range(meta)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise InvalidParameter(out_of_range(name, value, meta['unit'], 'a number ' + allowed))
-    if not math.isfinite(value):
+    if isinstance(value, bool):
+        raise InvalidParameter(out_of_range(name, value, meta['unit'], 'a number ' + allowed))
+    try:
+        as_float = float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise InvalidParameter(out_of_range(name, value, meta['unit'], 'a number ' + allowed))
+    if not isinstance(value, (int, float)):
+        value = as_float
+    if not math.isfinite(as_float):
         raise InvalidParameter(out_of_range(name, value, meta['unit'], allowed))
     if meta['integer']:
         if value != int(value):
@@ -404,6 +407,9 @@ class ReducerParams:
             raise InvalidParameter(
                 f'{path}: expected a mapping of sections, got {type(data).__name__}')
         data = data.get('reducer', data)
+        if not isinstance(data, dict):
+            raise InvalidParameter(
+                f"{path}: 'reducer' must be a mapping of sections, got {type(data).__name__}")
         params = cls().with_overrides(data)
         return params.with_overrides(overrides) if overrides else params
 

@@ -344,16 +344,14 @@ class ModelTables:
         self.params = params
         t0 = params.rating.rated_torque
         max_torque = 3.0 * t0 if max_torque is None else max_torque
-        # Dense at low torque where the contacts engage one after another.
+        # Dense where the contacts engage one after another: low torque, low wear.
         self.torque = np.unique(np.concatenate([
-            np.linspace(0.0, 0.1 * t0, 41), np.linspace(0.1 * t0, max_torque, 60)]))
-        self.wear = np.linspace(0.0, max_wear, int(round(max_wear / 1e-6)) + 1)
-        grid = np.linspace(0.0, 2.0 * np.pi / params.geometry.z_pins, 24, endpoint=False)
-        tt, ww = np.meshgrid(self.torque, self.wear, indexing='ij')
-        psi = np.tile(grid, tt.size)
-        beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
-                             np.repeat(ww.ravel(), grid.size), params)
-        self.beta = beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
+            np.geomspace(1e-3 * t0, 0.02 * t0, 40), np.linspace(0.0, 0.1 * t0, 121),
+            np.linspace(0.1 * t0, max_torque, 60)]))
+        self.wear = np.unique(np.concatenate([
+            np.linspace(0.0, 6e-6, 61), np.linspace(6e-6, max_wear, int(round(
+                (max_wear - 6e-6) / 1e-6)) + 1)]))
+        self.beta = _cached_table(params, self.torque, self.wear)
         self.series_stiffness = series_stiffness(params.geometry, params.rating)
         self.lm_torque = params.rating.lost_motion_torque_fraction * t0
 
@@ -377,10 +375,9 @@ class ModelTables:
         t = np.clip(np.asarray(torque_abs, dtype=float), self.torque[0], self.torque[-1])
         w = np.clip(np.asarray(wear, dtype=float), self.wear[0], self.wear[-1])
         i = np.clip(np.searchsorted(self.torque, t, side='right') - 1, 0, self.torque.size - 2)
-        dw = self.wear[1] - self.wear[0]
-        j = np.clip(((w - self.wear[0]) / dw).astype(int), 0, self.wear.size - 2)
+        j = np.clip(np.searchsorted(self.wear, w, side='right') - 1, 0, self.wear.size - 2)
         ft = (t - self.torque[i]) / (self.torque[i + 1] - self.torque[i])
-        fw = (w - self.wear[j]) / dw
+        fw = (w - self.wear[j]) / (self.wear[j + 1] - self.wear[j])
         b = self.beta
         return ((1 - ft) * (1 - fw) * b[i, j] + ft * (1 - fw) * b[i + 1, j]
                 + (1 - ft) * fw * b[i, j + 1] + ft * fw * b[i + 1, j + 1])
@@ -460,6 +457,62 @@ class ModelTables:
         """
         lm = self.lost_motion(self.wear)
         return np.interp(lost_motion_rad, lm, self.wear)
+
+
+def _cached_table(params, torque, wear):
+    """
+    Compute the period-mean rotation on a grid, cached on disk per parameter set.
+
+    The table takes a few seconds to build; every process (nodes, CLI,
+    tests) of the same parameters and grid reuses the file in
+    ``$XDG_CACHE_HOME/reducer_twin`` (``~/.cache``). A missing, unreadable
+    or mismatched file is simply rebuilt.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    torque, wear : ndarray
+        Grid nodes [N·m], [m].
+
+    Returns
+    -------
+    ndarray, shape (len(torque), len(wear))
+        Mean beta [rad].
+
+    """
+    import hashlib
+    import os
+    from pathlib import Path
+    key = hashlib.sha256(repr((params, _PHASE_SAMPLES, torque.tobytes(), wear.tobytes(),
+                               TABLE_VERSION)).encode()).hexdigest()[:24]
+    root = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'reducer_twin'
+    path = root / f'mesh-table-{key}.npy'
+    try:
+        beta = np.load(path, allow_pickle=False)
+        if beta.shape == (torque.size, wear.size) and np.all(np.isfinite(beta)):
+            return beta
+    except (OSError, ValueError):
+        pass
+    grid = _phase_grid(params.geometry)
+    tt, ww = np.meshgrid(torque, wear, indexing='ij')
+    psi = np.tile(grid, tt.size)
+    beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
+                         np.repeat(ww.ravel(), grid.size), params)
+    beta = beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f'{path.name}.{os.getpid()}.tmp')
+        with open(tmp, 'wb') as fh:
+            np.save(fh, beta, allow_pickle=False)
+        os.replace(tmp, path)
+    except OSError:
+        pass
+    return beta
+
+
+TABLE_VERSION = 2
+"""Bump when the table's content changes for the same parameters."""
 
 
 @lru_cache(maxsize=16)

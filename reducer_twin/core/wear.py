@@ -281,6 +281,10 @@ def _run_in_free_equivalent(wear, params, n=4096):
     if wear <= 0.0:
         return 0.0
     grid_w, grid_s = _run_in_map(params.wear)
+    if wear > grid_w[-1]:
+        # Beyond the run-in the roughness is settled: ds/dw = 1/g is constant.
+        g_end = run_in_factor(grid_w[-1], params.wear) ** params.wear.roughness_exponent
+        return float(grid_s[-1] + (wear - grid_w[-1]) / g_end)
     return float(np.interp(wear, grid_w, grid_s))
 
 

@@ -84,10 +84,6 @@ def test_zero_torque_gives_zero_forces():
     np.testing.assert_allclose(mesh.forces, 0.0, atol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'core bug (minor): LoadedMesh.loaded_pins counts forces > 0.0, so contacts left with '
-    'rounding-level forces (~1e-12 N) at the first threshold count as loaded: 1-2 loaded '
-    'pins at zero torque, and the CLI reports loaded_pins > 0 at --torque-nm 0'))
 def test_zero_torque_leaves_no_pin_loaded():
     mesh = contact.solve_mesh(_one_period(8), 0.0, PARAMS, 10e-6)
     assert np.all(mesh.loaded_pins == 0)

@@ -149,18 +149,12 @@ def test_invalid_parameter_is_a_value_error():
         ReducerParams().with_overrides({'geometry.pin_radius': -1.0})
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'core bug: params.check_value converts a bool with float(), so True is accepted as 1 '
-    'wherever 1 is in range (here wear.slide_coefficient, geometry.n_discs)'))
 @pytest.mark.parametrize('name', ['wear.slide_coefficient', 'geometry.n_discs'])
 def test_a_bool_is_rejected_even_where_one_is_in_range(name):
     with pytest.raises(InvalidParameter, match=name):
         ReducerParams().with_overrides({name: True})
 
 
-@pytest.mark.xfail(strict=True, raises=OverflowError, reason=(
-    'core bug: params.check_value calls math.isfinite on an int too large for a float and '
-    'lets OverflowError escape (the CLI then prints a traceback for such a YAML value)'))
 def test_a_huge_integer_is_rejected_as_out_of_range():
     with pytest.raises(InvalidParameter, match='geometry.z_pins'):
         ReducerParams().with_overrides({'geometry.z_pins': 10 ** 400})
@@ -189,10 +183,6 @@ def test_bad_yaml_files_are_rejected(tmp_path, text, fragments):
         assert fragment in str(info.value)
 
 
-@pytest.mark.xfail(strict=True, raises=TypeError, reason=(
-    'core bug: ReducerParams.from_yaml checks that the document is a mapping but not that '
-    'the value under its reducer key is; dict() of a list/None/int raises TypeError, and the '
-    'CLI shows a traceback'))
 @pytest.mark.parametrize('text', ['reducer: [1, 2]\n', 'reducer:\n', 'reducer: 5\n'],
                          ids=['list', 'null', 'scalar'])
 def test_a_reducer_key_that_is_not_a_mapping_is_rejected(tmp_path, text):

@@ -96,16 +96,11 @@ def tables():
 @given(torque=st.floats(-3.0 * T0, 3.0 * T0), wear=st.floats(4 * UM, 150 * UM))
 def test_model_tables_agree_with_the_exact_mean_te(tables, torque, wear):
     # Domain w >= 4 um: below it, at low torque, the bilinear table is off by more
-    # (see the xfail below).
+    # (covered separately below with a fixed seed).
     exact = te.mean_te(wear, torque, PARAMS)
     assert abs(float(tables.mean_te(torque, wear)) - exact) < 0.1 * ARCSEC
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'core accuracy bug: ModelTables interpolates beta_mean bilinearly on 1.96 N*m x 1 um '
-    'nodes, but beta is strongly curved at low torque and low wear (contacts engage one '
-    'by one): errors reach 0.35 arcsec above 20 N*m and several arcsec below 1 N*m for '
-    'w < 4 um (its commit claims 0.04 arcsec; the issue asks 0.1)'))
 def test_model_tables_agree_with_the_exact_mean_te_for_a_new_reducer_at_low_torque(tables):
     rng = np.random.default_rng(11)
     torque = rng.uniform(0.0, 0.1 * T0, 200)

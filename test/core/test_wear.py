@@ -144,10 +144,6 @@ def test_rate_scale_and_aging_multiply_the_first_step():
     assert scaled == pytest.approx(2.0 * base, rel=1e-6)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'core bug: wear._run_in_free_equivalent inverts the run-in map with np.interp, which '
-    'clamps beyond its grid (20 run-in depths = 375 um), so integrate_wear resets any wear0 '
-    'above 375.2 um to 375.2 um: wear decreases (the CLI accepts up to 500 um)'))
 @pytest.mark.parametrize('wear0', [380e-6, 500e-6])
 def test_integration_from_a_large_initial_wear_never_loses_wear(wear0):
     w = wear.integrate_wear([0.0, HOUR], T0, N0, PARAMS, wear0=wear0)
