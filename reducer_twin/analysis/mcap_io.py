@@ -32,6 +32,7 @@ import re
 import struct
 import zlib
 
+from msg_adapters import ros_schemas
 import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
 import yaml
@@ -544,7 +545,6 @@ class McapBagWriter:
         if name in self._topics:
             raise BagError(f'topic {name!r} was already added to {self.path}')
         if schema_text is None or type_hash is None:
-            from msg_adapters import ros_schemas
             schema_text = ros_schemas.message_definition(msgtype) if schema_text is None \
                 else schema_text
             type_hash = ros_schemas.type_hash(msgtype) if type_hash is None else type_hash
