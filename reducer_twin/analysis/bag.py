@@ -98,8 +98,13 @@ class _Sqlite3File:
     def __init__(self, path):
         self.path = Path(path)
         self.warnings = []
+        # immutable=1 reads files in read-only directories without lock files; a bag
+        # recorded in WAL mode and not checkpointed keeps messages in its -wal file,
+        # which only a normal read-only connection sees.
+        wal = Path(f'{self.path}-wal')
+        options = 'mode=ro' if wal.is_file() and wal.stat().st_size else 'mode=ro&immutable=1'
         try:
-            self._db = sqlite3.connect(f'file:{self.path}?mode=ro&immutable=1', uri=True)
+            self._db = sqlite3.connect(f'file:{self.path}?{options}', uri=True)
             cursor = self._db.execute('SELECT * FROM topics')
             columns = [c[0] for c in cursor.description]
             self._topics = [dict(zip(columns, row)) for row in cursor.fetchall()]
@@ -346,10 +351,15 @@ class Bag:
                     details[name] = TopicDetails(name, topic.msgtype, topic.count,
                                                  topic.serialization_format, qos,
                                                  topic.type_hash)
-        if not self.info and self._files:
+        if self.info:
+            # metadata.yaml describes the whole bag: hold the files against it.
+            for entry in self.info.get('topics_with_message_count') or []:
+                self._compare_topic(entry, details)
+        elif self._files:
+            # Without metadata.yaml, the rosbag2 record inside the (last) MCAP file still
+            # carries custom_data; its counts may describe a whole split bag, so they are
+            # not compared with this file's.
             self.info = self._files[-1].rosbag2_metadata() or {}
-        for entry in self.info.get('topics_with_message_count') or []:
-            self._compare_topic(entry, details)
         self.topic_details = details
         self.topics = {name: TopicSummary(d.msgtype, d.count) for name, d in details.items()}
         custom = self.info.get('custom_data') if isinstance(self.info, dict) else None
