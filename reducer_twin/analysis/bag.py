@@ -216,14 +216,17 @@ class Bag:
         self.info = info or {}
         self.warnings = []
         self._files = []
-        try:
-            for file in files:
-                handle = _McapFile(file, validate_crc) if storage == 'mcap' \
-                    else _Sqlite3File(file)
-                self._files.append(handle)
-        except BagError:
-            self.close()
-            raise
+        errors = []
+        for file in files:
+            try:
+                self._files.append(_McapFile(file, validate_crc) if storage == 'mcap'
+                                   else _Sqlite3File(file))
+            except BagError as err:
+                errors.append(err)
+        if errors and not self._files:
+            raise errors[0]
+        for err in errors:
+            self._warn(f'{err}; skipping that file')
         self.files = [f.path for f in self._files]
         self._collect()
 
@@ -541,7 +544,18 @@ def open_bag(path, validate_crc=True):
                                         f'the {len(files)} storage file(s) found'))
     else:
         files = [path]
-    kinds = {_sniff(f) for f in files}
+    kinds, readable, errors = set(), [], []
+    for file in files:
+        try:
+            kinds.add(_sniff(file))
+            readable.append(file)
+        except BagError as err:
+            errors.append(err)
+    if not readable:
+        raise errors[0]
+    for err in errors:  # a split bag with one damaged file: read the others
+        warnings.append(ReadWarning(str(path), None, f'{err}; skipping that file'))
+    files = readable
     if len(kinds) > 1:
         raise BagError(f'{path} mixes MCAP and sqlite3 files; expected one storage format')
     storage = kinds.pop()

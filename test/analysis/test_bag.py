@@ -363,3 +363,13 @@ def test_a_sqlite3_jointstate_bag_of_an_older_distribution_reads_like_mcap(tmp_p
         got = bag.read_joint_states()['/joint_states']
     np.testing.assert_array_equal(got.stamps_ns, batch.stamps_ns)
     np.testing.assert_array_equal(got.position, batch.position)
+
+
+def test_a_split_bag_with_one_unreadable_file_reads_the_others_with_a_warning(tmp_path):
+    bag_dir = _split_bag(tmp_path / 'split')
+    (bag_dir / 'split_0.mcap').write_bytes(b'\x00' * 64)
+    with open_bag(bag_dir) as bag:
+        assert [f.name for f in bag.files] == ['split_1.mcap']
+        assert any('split_0.mcap is neither MCAP nor sqlite3' in str(w) for w in bag.warnings)
+        np.testing.assert_array_equal(bag.read_joint_states()['/joint_states'].stamps_ns,
+                                      _batch(100, 100).stamps_ns)
