@@ -62,17 +62,17 @@ class IngestConfig(_Validated):
 @dataclass
 class CleanStream:
     """
-    Accepted samples of one stream.
+    Accepted samples of one stream, or of several streams sharing stamps.
 
     Attributes
     ----------
-    t_ns : ndarray of int64
+    t_ns : ndarray of int64, shape (N,)
         Stamps [ns].
-    position : ndarray
-        Unwrapped positions [rad].
-    velocity, effort : ndarray
+    position : ndarray, shape (N,) or (N, K)
+        Unwrapped positions [rad]; NaN where a column's sample was dropped.
+    velocity, effort : ndarray, same shape as ``position``
         Velocity [rad/s] and effort [N·m] (NaN where not reported).
-    segment : ndarray of int64
+    segment : ndarray of int64, shape (N,)
         Segment number of each sample (a gap or clock jump starts a new one).
 
     """
@@ -84,23 +84,50 @@ class CleanStream:
     segment: np.ndarray
 
     @classmethod
-    def empty(cls):
-        """Return a stream with no samples."""
-        z = np.zeros(0)
-        return cls(np.zeros(0, np.int64), z, z.copy(), z.copy(), np.zeros(0, np.int64))
+    def empty(cls, columns=None):
+        """Return a stream with no samples (``columns`` given: 2-D arrays)."""
+        shape = (0,) if columns is None else (0, columns)
+        return cls(np.zeros(0, np.int64), np.zeros(shape), np.zeros(shape), np.zeros(shape),
+                   np.zeros(0, np.int64))
 
     def __len__(self):
         return self.t_ns.size
 
+    def column(self, k):
+        """
+        Return column ``k`` as a 1-D stream without its dropped samples.
+
+        Parameters
+        ----------
+        k : int
+            Column index.
+
+        Returns
+        -------
+        CleanStream
+            The column's valid samples.
+
+        """
+        if self.position.ndim == 1:
+            return self
+        ok = np.isfinite(self.position[:, k])
+        return CleanStream(self.t_ns[ok], self.position[ok, k], self.velocity[ok, k],
+                           self.effort[ok, k], self.segment[ok])
+
 
 class StreamCleaner:
     """
-    Apply the ingestion rules to one angle stream, chunk by chunk.
+    Apply the ingestion rules to angle streams, chunk by chunk.
+
+    Several streams that share their stamps (all joints of one JointState
+    message) are cleaned together as the columns of 2-D arrays: stamp rules
+    act on rows, value rules (non-finite, wrap, spike) on each column, and
+    a dropped value becomes NaN in its column only.
 
     Parameters
     ----------
-    spike_rad : float
-        Deviation from the neighbours' mean that marks a spike [rad].
+    spike_rad : float or array_like
+        Deviation from the neighbours that marks a spike [rad], per column.
     config : IngestConfig
         Thresholds.
 
@@ -108,7 +135,7 @@ class StreamCleaner:
 
     def __init__(self, spike_rad, config=None):
         self.config = config or IngestConfig()
-        self.spike_rad = spike_rad
+        self.spike_rad = np.asarray(spike_rad, dtype=float)
         self.counts = dict.fromkeys(REASONS, 0)
         self.accepted = 0
         self.missing = 0
@@ -118,10 +145,11 @@ class StreamCleaner:
         self._last_t = None
         self._max_t = None
         self._segment = 0
-        self._unwrap = 0.0
-        self._raw_last = None
-        self._held = None   # (t, pos, vel, eff) waiting for its right neighbour
-        self._prev = None   # last released (t, pos)
+        self._unwrap = None     # per-column unwrap offset [rad]
+        self._raw_last = None   # per-column last finite raw value
+        self._held = None       # last row, waiting for its right neighbour
+        self._prev = None       # (t, positions) of the last released row
+        self._ndim = None
 
     def process(self, t_ns, position, velocity=None, effort=None):
         """
@@ -129,39 +157,45 @@ class StreamCleaner:
 
         Parameters
         ----------
-        t_ns : array_like of int
+        t_ns : array_like of int, shape (N,)
             Stamps [ns] in arrival order.
-        position : array_like
+        position : array_like, shape (N,) or (N, K)
             Positions [rad], wrapped or multi-turn.
         velocity, effort : array_like, optional
-            Velocity [rad/s] and effort [N·m]; NaN allowed.
+            Velocity [rad/s] and effort [N·m] of the same shape; NaN allowed.
 
         Returns
         -------
         CleanStream
-            Accepted samples (the last one may be held back one call for the
+            Accepted samples, same dimensionality as ``position`` (the last
+            row is held back until the next call or :meth:`flush` for the
             spike test).
 
         Raises
         ------
         InvalidInput
-            If the arrays differ in length.
+            If the arrays do not match in shape.
 
         """
         t = np.asarray(t_ns, dtype=np.int64).ravel()
-        pos = np.asarray(position, dtype=float).ravel()
+        pos = np.asarray(position, dtype=float)
         n = t.size
-        vel = _optional(velocity, n, 'velocity')
-        eff = _optional(effort, n, 'effort')
-        if pos.size != n:
-            raise InvalidInput(f'position has {pos.size} values for {n} stamps')
+        one_d = pos.ndim == 1
+        if self._ndim is None:
+            self._ndim = pos.ndim
+        pos = pos.reshape(n, -1) if pos.size == n * max(1, pos.size // max(n, 1)) else pos
+        if pos.ndim != 2 or pos.shape[0] != n:
+            raise InvalidInput(f'position has shape {np.shape(position)} for {n} stamps')
+        vel = _optional(velocity, pos.shape, 'velocity')
+        eff = _optional(effort, pos.shape, 'effort')
         self._count_missing(t)
-        keep = np.isfinite(pos)
-        self.counts['non_finite'] += int(n - np.count_nonzero(keep))
-        t, pos, vel, eff = t[keep], pos[keep], vel[keep], eff[keep]
+        finite = np.isfinite(pos)
+        self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
+        pos = np.where(finite, pos, np.nan)
         t, pos, vel, eff, seg = self._order(t, pos, vel, eff)
-        pos = self._unwrap_positions(pos, seg)
-        return self._despike(t, pos, vel, eff, seg)
+        pos = self._unwrap_positions(pos)
+        out = self._despike(t, pos, vel, eff, seg)
+        return _squeeze(out) if one_d else out
 
     def _count_missing(self, t):
         """Count samples missing from the stream (stamp holes at the nominal period)."""
@@ -181,7 +215,7 @@ class StreamCleaner:
 
     def flush(self):
         """
-        Release the sample held back for the spike test.
+        Release the row held back for the spike test.
 
         Returns
         -------
@@ -194,8 +228,9 @@ class StreamCleaner:
         t, p, v, e, s = self._held
         self._held = None
         self.accepted += 1
-        return CleanStream(np.array([t], np.int64), np.array([p]), np.array([v]),
-                           np.array([e]), np.array([s], np.int64))
+        out = CleanStream(np.array([t], np.int64), p[None, :], v[None, :], e[None, :],
+                          np.array([s], np.int64))
+        return _squeeze(out) if self._ndim == 1 else out
 
     def _order(self, t, pos, vel, eff):
         """Drop duplicate/out-of-order stamps, split segments at gaps and clock jumps."""
@@ -206,7 +241,7 @@ class StreamCleaner:
         keep = np.ones(n, dtype=bool)
         seg = np.empty(n, dtype=np.int64)
         last, max_t, segment = self._last_t, self._max_t, self._segment
-        # Vectorised fast path: strictly increasing stamps, no gap, no jump.
+        # Vectorised fast path: strictly increasing stamps, no clock jump.
         if n and (last is None or t[0] > max_t) and np.all(np.diff(t) > 0):
             d = np.diff(t, prepend=t[0] if last is None else last)
             breaks = d > gap_ns
@@ -214,9 +249,8 @@ class StreamCleaner:
                 breaks[0] = False
             self.counts['gap'] += int(np.count_nonzero(breaks))
             seg[:] = segment + np.cumsum(breaks)
-            if n:
-                self._last_t = self._max_t = int(t[-1])
-                self._segment = int(seg[-1])
+            self._last_t = self._max_t = int(t[-1])
+            self._segment = int(seg[-1])
             return t, pos, vel, eff, seg
         for k in range(n):
             tk = int(t[k])
@@ -242,74 +276,90 @@ class StreamCleaner:
         self._last_t, self._max_t, self._segment = last, max_t, segment
         return t[keep], pos[keep], vel[keep], eff[keep], seg[keep]
 
-    def _unwrap_positions(self, pos, seg):
-        """Unwrap jumps of about 2·pi between neighbours (within and across calls)."""
-        if pos.size == 0:
+    def _unwrap_positions(self, pos):
+        """Unwrap jumps of about 2·pi between finite neighbours (within and across calls)."""
+        n, k = pos.shape
+        if self._unwrap is None:
+            self._unwrap = np.zeros(k)
+            self._raw_last = np.full(k, np.nan)
+        if n == 0:
             return pos
-        prev = pos[0] if self._raw_last is None else self._raw_last
-        d = np.diff(pos, prepend=prev)
+        finite = np.isfinite(pos)
+        # Forward-fill each column so a dropped value does not hide a wrap.
+        rows = np.where(finite, np.arange(n)[:, None], -1)
+        rows = np.maximum.accumulate(rows, axis=0)
+        filled = np.where(rows >= 0, pos[np.maximum(rows, 0), np.arange(k)], self._raw_last)
+        prev = np.where(np.isfinite(self._raw_last), self._raw_last, filled[0])
+        d = np.diff(filled, axis=0, prepend=prev[None, :])
+        d = np.where(np.isfinite(d), d, 0.0)
         turns = np.round(d / (2.0 * math.pi))
         # A real move of pi in one sample is impossible at any robot speed; a jump of
         # about a whole turn is an encoder wrapping.
         wrapped = (np.abs(d) > math.pi) & (np.abs(d - turns * 2.0 * math.pi) < 0.5)
         self.counts['wrap'] += int(np.count_nonzero(wrapped))
-        offset = self._unwrap - np.cumsum(np.where(wrapped, turns, 0.0)) * 2.0 * math.pi
-        self._raw_last = float(pos[-1])
-        self._unwrap = float(offset[-1])
+        offset = self._unwrap - np.cumsum(np.where(wrapped, turns, 0.0), axis=0) * 2.0 * math.pi
+        self._raw_last = np.where(np.isfinite(filled[-1]), filled[-1], self._raw_last)
+        self._unwrap = offset[-1].copy()
         return pos + offset
 
     def _despike(self, t, pos, vel, eff, seg):
-        """Drop single samples off both neighbours; hold the newest back one call."""
+        """Drop single values off both neighbours; hold the newest row back one call."""
         if self._held is not None:
             h = self._held
             t = np.concatenate([[h[0]], t])
-            pos = np.concatenate([[h[1]], pos])
-            vel = np.concatenate([[h[2]], vel])
-            eff = np.concatenate([[h[3]], eff])
+            pos = np.concatenate([h[1][None, :], pos])
+            vel = np.concatenate([h[2][None, :], vel])
+            eff = np.concatenate([h[3][None, :], eff])
             seg = np.concatenate([[h[4]], seg])
             self._held = None
         n = t.size
         if n == 0:
-            return CleanStream.empty()
-        keep = np.ones(n, dtype=bool)
+            return CleanStream.empty(pos.shape[1])
         if n >= 2:
             left_t = np.empty(n, np.int64)
-            left_p = np.empty(n)
+            left_p = np.empty_like(pos)
             left_t[1:], left_p[1:] = t[:-1], pos[:-1]
             if self._prev is not None:
                 left_t[0], left_p[0] = self._prev
             else:
-                left_t[0], left_p[0] = t[0], pos[0]
-            right_t, right_p = t[1:], pos[1:]
-            # Deviation from the straight line through both neighbours.
-            mid = t[:-1]
-            span = (right_t - left_t[:-1]).astype(float)
-            frac = np.where(span > 0, (mid - left_t[:-1]) / np.where(span > 0, span, 1.0), 0.5)
+                left_t[0], left_p[0] = t[0], np.nan
+            span = (t[1:] - left_t[:-1]).astype(float)
+            frac = np.where(span > 0, (t[:-1] - left_t[:-1]) / np.where(span > 0, span, 1.0),
+                            0.5)[:, None]
+            right_p = pos[1:]
             line = left_p[:-1] + frac * (right_p - left_p[:-1])
-            dev = np.abs(pos[:-1] - line)
-            same_seg = (seg[:-1] == seg[1:])
-            neighbours_agree = np.abs(right_p - left_p[:-1]) < self.spike_rad
-            spike = (dev > self.spike_rad) & same_seg & neighbours_agree
-            if self._prev is None:
-                spike[0] = False
-            keep[:-1] = ~spike
-            self.counts['spike'] += int(np.count_nonzero(spike))
-        self._held = (int(t[-1]), float(pos[-1]), float(vel[-1]), float(eff[-1]), int(seg[-1]))
-        keep[-1] = False
-        idx = np.flatnonzero(keep)
-        if idx.size:
-            self._prev = (int(t[idx[-1]]), float(pos[idx[-1]]))
-        self.accepted += idx.size
-        return CleanStream(t[idx], pos[idx], vel[idx], eff[idx], seg[idx])
+            with np.errstate(invalid='ignore'):
+                dev = np.abs(pos[:-1] - line)
+                agree = np.abs(right_p - left_p[:-1]) < self.spike_rad
+                spike = (dev > self.spike_rad) & agree & (seg[:-1] == seg[1:])[:, None]
+            if spike.any():
+                self.counts['spike'] += int(np.count_nonzero(spike))
+                pos = pos.copy()
+                pos[:-1][spike] = np.nan
+        self._held = (int(t[-1]), pos[-1].copy(), vel[-1].copy(), eff[-1].copy(), int(seg[-1]))
+        rel = slice(0, n - 1)
+        out = CleanStream(t[rel], pos[rel], vel[rel], eff[rel], seg[rel])
+        if n >= 2:
+            self._prev = (int(t[n - 2]), np.where(np.isfinite(pos[n - 2]), pos[n - 2],
+                                                  self._prev[1] if self._prev else np.nan))
+        self.accepted += n - 1
+        return out
 
 
-def _optional(values, n, name):
+def _squeeze(stream):
+    """Turn a one-column stream back into 1-D arrays, dropping its NaN rows."""
+    ok = np.isfinite(stream.position[:, 0])
+    return CleanStream(stream.t_ns[ok], stream.position[ok, 0], stream.velocity[ok, 0],
+                       stream.effort[ok, 0], stream.segment[ok])
+
+
+def _optional(values, shape, name):
     if values is None:
-        return np.full(n, np.nan)
-    arr = np.asarray(values, dtype=float).ravel()
-    if arr.size != n:
-        raise InvalidInput(f'{name} has {arr.size} values for {n} stamps')
-    return arr
+        return np.full(shape, np.nan)
+    arr = np.asarray(values, dtype=float)
+    if arr.size != int(np.prod(shape)):
+        raise InvalidInput(f'{name} has {arr.size} values for positions of shape {shape}')
+    return arr.reshape(shape)
 
 
 @dataclass

@@ -11,13 +11,15 @@ Stages exchange plain records keyed like the topic layouts of
 and an offline analysis carry the same values.
 """
 
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import InvalidInput
+from .errors import InvalidInput, InvalidParameter
 from .life import catalogue_life, DEFAULT_HORIZON_S, LOST_MOTION_LIMIT, remaining_life
+from .params import _Validated, spec
 from .units import HOUR
 
 DUTY_FIELDS = ('duration_s', 'exposure_s', 'archard_increment', 'mean_abs_torque',
@@ -75,7 +77,9 @@ def duty_to_record(duty):
         Layout field name to value.
 
     """
-    return {v: float(getattr(duty, k)) for k, v in _DUTY_KEYS.items()}
+    # The mean output speed Nm of the catalogue formula is the mean of |speed|.
+    return {v: float(getattr(duty, k, None) if hasattr(duty, k) else duty.mean_abs_speed)
+            for k, v in _DUTY_KEYS.items()}
 
 
 class EstimatorStage:
@@ -225,41 +229,57 @@ def state_from_record(record):
     return x, P
 
 
+@dataclass(frozen=True)
+class LifeConfig(_Validated):
+    """Accuracy limit, health thresholds and sampling of the remaining-life prediction."""
+
+    _prefix = 'life'
+    lost_motion_limit: float = spec(LOST_MOTION_LIMIT, 'rad', 0.0, 0.1,
+                                    'accuracy limit on lost motion (3 arcmin)', lo_open=True)
+    warn_s: float = spec(1000.0 * HOUR, 's', 0.0, 1e10,
+                         'WARN when the P10 remaining life falls to this (1000 h)')
+    error_s: float = spec(200.0 * HOUR, 's', 0.0, 1e10,
+                          'ERROR when the P10 remaining life falls to this (200 h)')
+    horizon_s: float = spec(DEFAULT_HORIZON_S, 's', 0.0, 1e12,
+                            'prediction horizon; beyond it a percentile is censored',
+                            lo_open=True)
+    n_samples: int = spec(2000, '', 100, 1_000_000, 'samples of the state distribution',
+                          integer=True)
+    duty_rate_rel_std: float = spec(0.1, '', 0.0, 5.0,
+                                    'relative uncertainty of the future duty wear rate')
+
+    def _check(self):
+        if self.error_s > self.warn_s:
+            raise InvalidParameter(f'life.error_s ({self.error_s:g} s) must not exceed '
+                                   f'life.warn_s ({self.warn_s:g} s)')
+
+
 class LifeStage:
     """
     Remaining life, catalogue life and health level of one reducer.
+
+    Health is WARN when the P10 remaining life falls to ``warn_s`` operating
+    seconds, ERROR at ``error_s`` or when the limit is reached.
 
     Parameters
     ----------
     params : ReducerParams
         Reducer parameters.
-    limit : float
-        Accuracy limit on lost motion [rad] (default 3 arcmin).
-    warn_s, error_s : float
-        Health turns WARN when the P10 remaining life falls to ``warn_s``
-        operating seconds, ERROR at ``error_s`` or when the limit is reached.
-    horizon_s : float
-        Prediction horizon [s of operation]; beyond it a percentile is censored.
-    n_samples : int
-        Samples of the state distribution.
-    duty_rate_rel_std : float
-        Relative uncertainty of the future duty's wear rate.
+    config : LifeConfig, optional
+        Limit, thresholds and sampling.
 
     """
 
-    def __init__(self, params, limit=LOST_MOTION_LIMIT, warn_s=1000.0 * HOUR,
-                 error_s=200.0 * HOUR, horizon_s=DEFAULT_HORIZON_S, n_samples=2000,
-                 duty_rate_rel_std=0.1):
-        if not error_s <= warn_s:
-            raise InvalidInput(f'error threshold {error_s} s must not exceed warn threshold '
-                               f'{warn_s} s')
+    def __init__(self, params, config=None):
+        config = config or LifeConfig()
         self.params = params
-        self.limit = limit
-        self.warn_s = warn_s
-        self.error_s = error_s
-        self.horizon_s = horizon_s
-        self.n_samples = n_samples
-        self.duty_rate_rel_std = duty_rate_rel_std
+        self.config = config
+        self.limit = config.lost_motion_limit
+        self.warn_s = config.warn_s
+        self.error_s = config.error_s
+        self.horizon_s = config.horizon_s
+        self.n_samples = config.n_samples
+        self.duty_rate_rel_std = config.duty_rate_rel_std
         self.duty = None
 
     def observe_duty(self, duty):

@@ -32,29 +32,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
 
-class _JointStreams:
-    """Cleaners, pairer and pending output of one joint."""
+class _JointOutput:
+    """Pairing state, pending rows and publisher of one joint."""
 
-    def __init__(self, name, config, motor_scale, ratio):
+    def __init__(self, name, config, motor_scale):
         self.name = name
-        self.link = StreamCleaner(config.link_spike_rad, config)
-        self.motor = StreamCleaner(config.motor_spike_rad, config)
         self.pairer = Pairer(config, motor_scale)
         self.motor_scale = motor_scale
-        self.pending = []
-        self.pending_since = None
         self.published = 0
         self.publisher = None
-
-    def counts(self):
-        out = {}
-        for side, cleaner in (('link', self.link), ('motor', self.motor)):
-            for reason, count in cleaner.counts.items():
-                out[f'{side}_{reason}'] = count
-            out[f'{side}_missing'] = cleaner.missing
-        out['unpaired'] = self.pairer.unpaired
-        out['published'] = self.published
-        return out
 
 
 class EncoderIngest(Node):
@@ -80,12 +66,23 @@ class EncoderIngest(Node):
         scale = ratio if p['motor_angles'] == 'output' else 1.0
         self.batch_ns = int(p['batch_period_s'] * 1e9)
         self.split = bool(p['motor_topic'])
-        self.streams = {}
+        cfg = self.ingest_params.value
+        n = len(self.joints)
+        if self.split:
+            self.link = StreamCleaner(np.full(n, cfg.link_spike_rad), cfg)
+            self.motor = StreamCleaner(np.full(n, cfg.motor_spike_rad), cfg)
+        else:
+            # Columns: link_1, motor_1, link_2, motor_2, ...
+            self.link = StreamCleaner(np.tile([cfg.link_spike_rad, cfg.motor_spike_rad], n), cfg)
+            self.motor = None
+        self.outputs = {}
         for joint in self.joints:
-            s = _JointStreams(joint, self.ingest_params.value, scale, ratio)
-            s.publisher = self.create_publisher(
+            out = _JointOutput(joint, cfg, scale)
+            out.publisher = self.create_publisher(
                 Float64MultiArray, joint_topic(joint, 'encoder_pairs'), encoder_qos())
-            self.streams[joint] = s
+            self.outputs[joint] = out
+        self._raw = {'link': [], 'motor': []}
+        self._raw_since = None
         qos = encoder_qos(p['reliable'])
         if self.split:
             self._link_pick = JointStatePicker(self.joints)
@@ -129,74 +126,96 @@ class EncoderIngest(Node):
         return out
 
     def _on_link(self, msg):
-        try:
-            pos, vel, eff = self._link_pick.pick(msg)
-            t = stamp_to_ns(msg.header.stamp)
-        except InvalidInput as err:
-            self.rejects.reject('bad_joint_state', str(err))
-            return
-        tt = np.array([t], dtype=np.int64)
-        for k, joint in enumerate(self.joints):
-            s = self.streams[joint]
-            if self.split:
-                s.pairer.add_link(s.link.process(tt, pos[k:k + 1], vel[k:k + 1], eff[k:k + 1]))
-                self._emit(s, s.pairer.pop(), t)
-            else:
-                link = s.link.process(tt, pos[2 * k:2 * k + 1], vel[2 * k:2 * k + 1],
-                                      eff[2 * k:2 * k + 1])
-                motor = s.motor.process(tt, pos[2 * k + 1:2 * k + 2])
-                pairs, unpaired = pair_same_stamps(link, motor, s.motor_scale)
-                s.pairer.unpaired += unpaired
-                self._emit(s, pairs, t)
+        self._buffer('link', self._link_pick, msg)
 
     def _on_motor(self, msg):
+        self._buffer('motor', self._motor_pick, msg)
+
+    def _buffer(self, side, picker, msg):
         try:
-            pos, _, _ = self._motor_pick.pick(msg)
+            pos, vel, eff = picker.pick(msg)
             t = stamp_to_ns(msg.header.stamp)
         except InvalidInput as err:
             self.rejects.reject('bad_joint_state', str(err))
             return
-        tt = np.array([t], dtype=np.int64)
-        for k, joint in enumerate(self.joints):
-            s = self.streams[joint]
-            s.pairer.add_motor(s.motor.process(tt, pos[k:k + 1]))
-            self._emit(s, s.pairer.pop(), t)
+        self._raw[side].append((t, pos, vel, eff))
+        if self._raw_since is None:
+            self._raw_since = t
+        elif t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
+            self._process()
 
-    def _emit(self, s, pairs, now_ns):
-        if len(pairs):
-            if not s.pending:
-                s.pending_since = int(pairs.t_ns[0])
-            s.pending.append(pairs.as_rows())
-        if s.pending and now_ns - s.pending_since >= self.batch_ns - 1:
-            self._publish(s)
+    def _process(self):
+        """Clean the buffered rows of all joints at once, pair and publish per joint."""
+        self._raw_since = None
+        link, self._raw['link'] = self._raw['link'], []
+        motor, self._raw['motor'] = self._raw['motor'], []
+        clean_link = _clean(self.link, link)
+        if self.split:
+            clean_motor = _clean(self.motor, motor)
+            for k, out in enumerate(self.outputs.values()):
+                if clean_link is not None:
+                    out.pairer.add_link(clean_link.column(k))
+                if clean_motor is not None:
+                    out.pairer.add_motor(clean_motor.column(k))
+                self._publish(out, out.pairer.pop())
+        elif clean_link is not None:
+            for k, out in enumerate(self.outputs.values()):
+                pairs, unpaired = pair_same_stamps(clean_link.column(2 * k),
+                                                   clean_link.column(2 * k + 1),
+                                                   out.motor_scale)
+                out.pairer.unpaired += unpaired
+                self._publish(out, pairs)
 
-    def _publish(self, s):
-        rows = np.concatenate(s.pending)
-        s.pending = []
-        s.published += rows.shape[0]
-        s.publisher.publish(to_multiarray(PAIRED_SAMPLES, rows))
+    def _publish(self, out, pairs):
+        if len(pairs) == 0:
+            return
+        out.published += len(pairs)
+        out.publisher.publish(to_multiarray(PAIRED_SAMPLES, pairs.as_rows()))
 
     def _flush_stale(self):
+        if self._raw_since is None:
+            return
         now = self.get_clock().now().nanoseconds
-        for s in self.streams.values():
-            if s.pending and now - s.pending_since > 4 * self.batch_ns:
-                self._publish(s)
+        if now - self._raw_since > 4 * self.batch_ns:
+            self._process()
+
+    def counts(self):
+        """Return per-joint counts of every ingestion rule (for diagnostics and tests)."""
+        result = {}
+        for k, (joint, out) in enumerate(self.outputs.items()):
+            c = {}
+            sides = (('link', self.link), ('motor', self.motor)) if self.split else (
+                ('stream', self.link),)
+            for side, cleaner in sides:
+                for reason, count in cleaner.counts.items():
+                    c[f'{side}_{reason}'] = count
+                c[f'{side}_missing'] = cleaner.missing
+            c['unpaired'] = out.pairer.unpaired
+            c['published'] = out.published
+            result[joint] = c
+        return result
 
     def _publish_diagnostics(self):
         statuses = []
-        for joint, s in self.streams.items():
-            counts = s.counts()
-            bad = sum(v for k, v in counts.items() if k not in ('published', 'link_wrap'))
-            level = 'OK' if bad == 0 else 'WARN'
+        for joint, counts in self.counts().items():
+            bad = sum(v for k, v in counts.items()
+                      if k != 'published' and not k.endswith('_wrap'))
             counts['rejected_messages'] = self.rejects.total
             statuses.append(diagnostic_status(
-                f'reducer_twin: {joint} encoder ingest', joint, level,
+                f'reducer_twin: {joint} encoder ingest', joint, 'OK' if bad == 0 else 'WARN',
                 'streams clean' if bad == 0 else f'{bad} samples dropped or repaired', counts))
         self.diag_pub.publish(diagnostic_array(self.get_clock().now().nanoseconds, statuses))
 
-    def stats(self):
-        """Return per-joint counts (for tests and the demo)."""
-        return {joint: s.counts() for joint, s in self.streams.items()}
+
+def _clean(cleaner, rows):
+    """Run buffered ``(t, pos, vel, eff)`` rows through a cleaner; None if there are none."""
+    if not rows:
+        return None
+    t = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
+    pos = np.stack([r[1] for r in rows])
+    vel = np.stack([r[2] for r in rows])
+    eff = np.stack([r[3] for r in rows])
+    return cleaner.process(t, pos, vel, eff)
 
 
 def main(args=None):

@@ -1,0 +1,180 @@
+"""
+joint_simulator: robot joints with RV-80E reducers, published like a robot controller.
+
+Stands in for the robot: N joints simulated by the core
+(:class:`reducer_twin.core.simulator.JointSimulator`), published at
+``sim.rate_hz`` as ros2_control's joint_state_broadcaster would, either
+one ``/joint_states`` carrying ``<joint>`` and ``<joint>_motor``
+(``layout: combined``) or link and motor sides on ``/joint_states`` and
+``/motor_states`` (``layout: split``). Stamps come from the simulated
+sample times, not from timer ticks: a late tick publishes the samples it
+owes, none is skipped. The hidden truth (wear, lost motion, true remaining
+life) goes to ``/reducer_twin/<joint>/ground_truth``.
+"""
+
+from dataclasses import fields
+
+from msg_adapters.layouts import GROUND_TRUTH, record_values
+from msg_adapters.ros import make_joint_state, to_multiarray
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor
+from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.simulator import JointSimulator, SimConfig
+from reducer_twin.core.units import ARCMIN
+from reducer_twin.nodes.base import encoder_qos, joint_topic, latest_qos, Node
+from reducer_twin.nodes.base import run_nodes, SpecParameters
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+BLOCK_S = 0.1
+"""Samples are generated this far ahead, vectorised."""
+
+
+class JointSimulatorNode(Node):
+    """
+    Publish simulated joint states and the simulator's ground truth.
+
+    Parameters
+    ----------
+    node_name : str
+        ROS node name.
+    params : ReducerParams, optional
+        Reducer parameters of every joint.
+    **kwargs
+        Passed to :class:`rclpy.node.Node`.
+
+    """
+
+    def __init__(self, node_name='joint_simulator', params=None, **kwargs):
+        super().__init__(node_name, **kwargs)
+        plain = self._declare_plain()
+        self.sim_params = SpecParameters(self, 'sim', SimConfig())
+        base = self.sim_params.value
+        self.params = params or ReducerParams()
+        scales = list(plain['wear_rate_scales'])
+        self.sims = []
+        for k, name in enumerate(plain['joints']):
+            overrides = {'name': name, 'seed': base.seed + k, 'profile': plain['profile'],
+                         'load': plain['load']}
+            if scales:
+                if len(scales) != len(plain['joints']):
+                    raise InvalidParameter(
+                        f'wear_rate_scales must have one value per joint '
+                        f'({len(plain["joints"])}), got {len(scales)}')
+                overrides['wear_rate_scale'] = float(scales[k])
+            cfg = SimConfig(**{**{f.name: getattr(base, f.name) for f in fields(base)},
+                               **overrides})
+            self.sims.append(JointSimulator(self.params, cfg))
+        self.rate_hz = base.rate_hz
+        self.split = plain['layout'] == 'split'
+        self.names = [s.config.name for s in self.sims]
+        qos = encoder_qos()
+        self.pub = self.create_publisher(JointState, plain['link_topic'], qos)
+        self.motor_pub = (self.create_publisher(JointState, plain['motor_topic'], qos)
+                          if self.split else None)
+        self.truth_pubs = [self.create_publisher(Float64MultiArray,
+                                                 joint_topic(n, 'ground_truth'), latest_qos())
+                           for n in self.names]
+        self.start_ns = self.get_clock().now().nanoseconds
+        self.sent = 0
+        self._block = None
+        self._block_start = 0
+        self.max_catch_up = int(plain['max_catch_up'])
+        self.create_timer(1.0 / self.rate_hz, self._tick)
+        self.create_timer(plain['truth_period_s'], self._publish_truth)
+        self.get_logger().info(
+            f'simulating {len(self.sims)} joint(s) {self.names} at {self.rate_hz:g} Hz, '
+            f'aging factor {base.aging_factor:g}, profile {plain["profile"]}')
+
+    def _declare_plain(self):
+        specs = {
+            'joints': (['joint_1'], 'names of the simulated joints'),
+            'profile': ('robot', "'robot' (moves, dwells, reversals) or 'paper' (90 deg/s)"),
+            'load': ('gravity', "'gravity' (gravity + inertia) or 'constant'"),
+            'wear_rate_scales': ([0.0], 'hidden Archard-rate multiplier per joint; [0.0] or '
+                                        'empty: sim.wear_rate_scale for all'),
+            'layout': ('combined', "'combined' (/joint_states with <joint>_motor) or 'split'"),
+            'link_topic': ('/joint_states', 'topic of the (link-side) joint states'),
+            'motor_topic': ('/motor_states', "topic of the motor side with layout 'split'"),
+            'truth_period_s': (0.1, 'period of the ground-truth topics [s]'),
+            'max_catch_up': (50, 'most samples published in one late timer tick'),
+        }
+        out = {}
+        for name, (default, doc) in specs.items():
+            out[name] = self.declare_parameter(
+                name, default, ParameterDescriptor(description=doc, read_only=True)).value
+        if list(out['wear_rate_scales']) == [0.0]:
+            out['wear_rate_scales'] = []
+        if out['layout'] not in ('combined', 'split'):
+            raise InvalidParameter(f"layout must be 'combined' or 'split', got {out['layout']!r}")
+        if not out['joints'] or len(set(out['joints'])) != len(out['joints']):
+            raise InvalidParameter(f"joints must be distinct names, got {out['joints']!r}")
+        return out
+
+    def _next_block(self):
+        n = max(1, int(round(BLOCK_S * self.rate_hz)))
+        batches = [s.step(n) for s in self.sims]
+        t = batches[0].t
+        if self.split:
+            link = np.stack([b.link_angle for b in batches], axis=1)
+            motor = np.stack([b.motor_angle for b in batches], axis=1)
+            vel = np.stack([b.link_velocity for b in batches], axis=1)
+            eff = np.stack([b.effort for b in batches], axis=1)
+            self._block = (t, link, vel, eff, motor)
+        else:
+            pos = np.empty((n, 2 * len(batches)))
+            vel = np.full((n, 2 * len(batches)), np.nan)
+            eff = np.full((n, 2 * len(batches)), np.nan)
+            for k, b in enumerate(batches):
+                pos[:, 2 * k], pos[:, 2 * k + 1] = b.link_angle, b.motor_angle
+                vel[:, 2 * k], eff[:, 2 * k] = b.link_velocity, b.effort
+            self._block = (t, pos, vel, eff, None)
+        self._block_start = self.sent
+        self._names = (self.names if self.split
+                       else [x for n in self.names for x in (n, n + '_motor')])
+
+    def _tick(self):
+        now = self.get_clock().now().nanoseconds
+        due = int((now - self.start_ns) * 1e-9 * self.rate_hz) + 1
+        budget = self.max_catch_up
+        while self.sent < due and budget > 0:
+            if self._block is None or self.sent - self._block_start >= len(self._block[0]):
+                self._next_block()
+            t, pos, vel, eff, motor = self._block
+            i = self.sent - self._block_start
+            stamp = self.start_ns + int(round(t[i] * 1e9))
+            self.pub.publish(make_joint_state(stamp, self._names, pos[i], vel[i], eff[i]))
+            if self.split:
+                self.motor_pub.publish(make_joint_state(stamp, self.names, motor[i]))
+            self.sent += 1
+            budget -= 1
+
+    def _publish_truth(self):
+        stamp_s = self.get_clock().now().nanoseconds * 1e-9
+        for sim, pub in zip(self.sims, self.truth_pubs):
+            tr = sim.truth()
+            rec = {'stamp_s': stamp_s, 'wear_m': tr.wear, 'lost_motion_rad': tr.lost_motion,
+                   'exposure_s': tr.exposure_s, 'wear_rate_scale': tr.wear_rate_scale,
+                   'aging_factor': sim.config.aging_factor, 'limit_time_s': tr.limit_time_s,
+                   'true_rul_s': sim.true_rul_s()}
+            pub.publish(to_multiarray(GROUND_TRUTH, record_values(GROUND_TRUTH, rec)))
+
+    def truth(self):
+        """Return ``{joint: SimTruth}`` (for the demo and tests)."""
+        return {s.config.name: s.truth() for s in self.sims}
+
+    def describe(self):
+        """Return a one-line summary of the simulated joints."""
+        parts = [f'{n}: LM {s.truth().lost_motion / ARCMIN:.2f} arcmin'
+                 for n, s in zip(self.names, self.sims)]
+        return '; '.join(parts)
+
+
+def main(args=None):
+    """Run the joint_simulator node."""
+    return run_nodes(JointSimulatorNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,220 @@
+"""
+te_monitor: transmission error and per-window health features of one joint.
+
+Subscribes to ``/reducer_twin/<joint>/encoder_pairs`` (clean, aligned
+motor/link samples from ``encoder_ingest``). TE is computed on arrival,
+``theta_link - theta_motor/i`` (ingest has already unwrapped and aligned the
+streams), and published in batches on ``/reducer_twin/<joint>/te``. Every
+``analysis_period_s`` the accumulated samples go through the core's
+:func:`~reducer_twin.core.te_extraction.compute_te` and
+:class:`~reducer_twin.core.te_extraction.WindowAnalyzer`; each completed
+window is published on ``/reducer_twin/<joint>/te_features`` (paper Table 5
+figures, lost motion, order amplitudes, duty).
+
+The node also measures how long samples take from their stamp to their TE
+(``latency_stats()``, and the ``latency_p99_ms`` diagnostic).
+"""
+
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
+from msg_adapters.ros import batch_array, diagnostic_array, diagnostic_status, to_multiarray
+import numpy as np
+from rcl_interfaces.msg import ParameterDescriptor
+from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import duty_to_record
+from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.units import rad_to_arcmin
+from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
+from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos
+from std_msgs.msg import Float64MultiArray
+
+LATENCY_KEEP = 200_000
+"""Latency samples kept for the statistics (a ring)."""
+
+
+def features_record(f, params):
+    """
+    Flatten window features into a ``te_features`` record.
+
+    Parameters
+    ----------
+    f : WindowFeatures
+        Output of the window analysis.
+    params : ReducerParams
+        Reducer parameters (for the order numbers).
+
+    Returns
+    -------
+    dict
+        Layout field name to value (SI).
+
+    """
+    g = params.geometry
+    orders = f.orders
+    rec = {
+        'window_start_s': f.t_start, 'window_end_s': f.t_end, 'samples': f.samples,
+        'te_max_rad': f.te_max, 'te_min_rad': f.te_min, 'te_pp_rad': f.te_pp,
+        'te_mean_rad': f.te_mean, 'loaded_mean_te_rad': f.loaded_mean_te,
+        'lost_motion_rad': f.lost_motion, 'lost_motion_std_rad': f.lost_motion_std,
+        'wear_fit_m': f.wear_fit, 'wear_fit_std_m': f.wear_fit_std,
+        'order1_rad': orders.get(1, np.nan), 'order2_rad': orders.get(2, np.nan),
+        'order_zc_rad': orders.get(g.z_cycloid, np.nan),
+        'order_zp_rad': orders.get(g.z_pins, np.nan), 'time_offset_s': f.time_offset_s}
+    rec.update(duty_to_record(f.duty))
+    return rec
+
+
+class TEMonitor(Node):
+    """
+    Compute TE and window features of one joint.
+
+    Parameters
+    ----------
+    node_name : str
+        ROS node name.
+    params : ReducerParams, optional
+        Reducer parameters.
+    **kwargs
+        Passed to :class:`rclpy.node.Node`.
+
+    """
+
+    def __init__(self, node_name='te_monitor', params=None, **kwargs):
+        super().__init__(node_name, **kwargs)
+        p = self._declare_plain()
+        self.params = params or ReducerParams()
+        self.joint = p['joint']
+        self.ratio = total_ratio(self.params.geometry)
+        self.analyzer = WindowAnalyzer(self.params, window=p['window'], window_s=p['window_s'],
+                                       aging_factor=p['aging_factor'])
+        self.max_gap_s = p['max_gap_s']
+        self.rejects = RejectCounter(self)
+        self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
+                                            stream_qos())
+        self.feat_pub = self.create_publisher(
+            Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos())
+        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+        self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
+                                 self._on_pairs, encoder_qos())
+        self.create_timer(p['analysis_period_s'], self._analyze)
+        self.create_timer(p['te_publish_period_s'], self._publish_te)
+        self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
+        self._pending = []
+        self._te_rows = []
+        self._latency = np.zeros(LATENCY_KEEP)
+        self._latency_n = 0
+        self.samples = 0
+        self.windows = 0
+        self.last_features = None
+
+    def _declare_plain(self):
+        specs = {
+            'joint': ('joint_1', 'joint whose encoder pairs are monitored'),
+            'aging_factor': (1.0, 'seconds of wear exposure per second of stream (1: real '
+                                  'robot)'),
+            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)"),
+            'window_s': (2.0, 'window length in stream time [s]'),
+            'max_gap_s': (0.05, 'largest stamp gap bridged inside a window [s]'),
+            'analysis_period_s': (0.1, 'period of the window analysis [s]'),
+            'te_publish_period_s': (0.02, 'period of the TE batches [s]'),
+            'diagnostics_period_s': (1.0, 'period of /diagnostics [s]'),
+        }
+        out = {}
+        for name, (default, doc) in specs.items():
+            out[name] = self.declare_parameter(
+                name, default, ParameterDescriptor(description=doc, read_only=True)).value
+        for name in ('window_s', 'max_gap_s', 'analysis_period_s', 'te_publish_period_s',
+                     'diagnostics_period_s'):
+            if not 0.0 < out[name] <= 3600.0:
+                raise InvalidParameter(f'{name} must be in (0, 3600] s, got {out[name]!r}')
+        if not 0.0 <= out['aging_factor'] <= 1e9:
+            raise InvalidParameter(
+                f"aging_factor must be in [0, 1e9], got {out['aging_factor']!r}")
+        return out
+
+    def _on_pairs(self, msg):
+        try:
+            rows = batch_array(msg, PAIRED_SAMPLES)
+        except InvalidInput as err:
+            self.rejects.reject('bad_layout', str(err))
+            return
+        if rows.shape[0] == 0:
+            return
+        te = rows[:, 2] - rows[:, 1] / self.ratio
+        now = time.time()
+        lat = now - rows[:, 0]
+        k = self._latency_n % LATENCY_KEEP
+        m = min(lat.size, LATENCY_KEEP - k)
+        self._latency[k:k + m] = lat[:m]
+        self._latency_n += lat.size
+        self._pending.append(rows)
+        self._te_rows.append(np.column_stack([rows[:, 0], rows[:, 2], te, rows[:, 3]]))
+        self.samples += rows.shape[0]
+
+    def _publish_te(self):
+        if not self._te_rows:
+            return
+        rows, self._te_rows = np.concatenate(self._te_rows), []
+        self.te_pub.publish(to_multiarray(TE_BATCH, rows))
+
+    def _analyze(self):
+        if not self._pending:
+            return
+        rows, self._pending = np.concatenate(self._pending), []
+        try:
+            stream = compute_te(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2], self.ratio,
+                                max_gap_s=self.max_gap_s)
+            windows = self.analyzer.update(stream, rows[:, 3], rows[:, 4])
+        except InvalidInput as err:
+            self.rejects.reject('bad_samples', str(err))
+            return
+        for f in windows:
+            self.windows += 1
+            self.last_features = f
+            rec = features_record(f, self.params)
+            self.feat_pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
+
+    def latency_stats(self):
+        """
+        Return stamp-to-TE latency statistics [s].
+
+        Returns
+        -------
+        dict
+            ``count``, ``p50``, ``p99``, ``max`` over the kept samples.
+
+        """
+        n = min(self._latency_n, LATENCY_KEEP)
+        if n == 0:
+            return {'count': 0, 'p50': float('nan'), 'p99': float('nan'), 'max': float('nan')}
+        lat = self._latency[:n]
+        return {'count': self._latency_n, 'p50': float(np.percentile(lat, 50)),
+                'p99': float(np.percentile(lat, 99)), 'max': float(lat.max())}
+
+    def _publish_diagnostics(self):
+        lat = self.latency_stats()
+        f = self.last_features
+        values = {'samples': self.samples, 'windows': self.windows,
+                  'rejected_messages': self.rejects.total,
+                  'latency_p99_ms': lat['p99'] * 1e3}
+        if f is not None:
+            values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
+                           'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
+        level = 'OK' if self.rejects.total == 0 else 'WARN'
+        self.diag_pub.publish(diagnostic_array(
+            self.get_clock().now().nanoseconds,
+            [diagnostic_status(f'reducer_twin: {self.joint} transmission error', self.joint,
+                               level, f'{self.windows} windows analysed', values)]))
+
+
+def main(args=None):
+    """Run the te_monitor node."""
+    return run_nodes(TEMonitor, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
