@@ -1,0 +1,908 @@
+"""
+Transmission error and health indicators from a motor/link encoder pair.
+
+This is what runs on real robot data. :func:`compute_te` turns two encoder
+streams into ``TE = theta_link - theta_motor/i`` [rad] (unwrapping, time
+alignment, gaps); :class:`WindowAnalyzer` cuts the TE stream into windows and
+reports, per window, the paper's Table 5 figures, the manufacturing-error
+orders, the encoder time offset, the duty the reducer saw, and the lost
+motion observed at torque reversals (physics notes section 4), which is the
+observation of the wear estimator.
+
+Lost motion model (physics notes sections 3-4): the loaded mesh makes
+``TE = -(sign(T)·beta(|T|, w) + T/k_s)``, so at equal ``|T|`` the TE under a
+negative torque minus the TE under a positive torque is the hysteresis
+``H(|T|, w) = 2·(beta + |T|/k_s)``, which grows with the wear ``w``. On top
+the encoders see the manufacturing harmonics (functions of the output angle),
+``omega·delta`` from a time offset ``delta`` between the encoders, and an
+unknown constant offset. One linear least-squares fit removes the harmonics
+and the time offset jointly with a straight line in ``|T|`` per torque bin
+and torque sign; ``H`` at each bin follows from the two lines, and the wear
+that explains all bins through
+:meth:`.transmission_error.ModelTables.hysteresis` gives the lost motion.
+"""
+
+from dataclasses import dataclass, field
+import math
+
+import numpy as np
+
+from .errors import InvalidInput, InvalidParameter, out_of_range
+from .transmission_error import model_tables
+from .wear import wear_rate
+
+TWO_PI = 2.0 * math.pi
+
+_SIGMA_FLOOR = 2.5e-7
+"""Floor on the standard error of a bin's TE line [rad] (about 0.05 arcsec)."""
+
+_MIN_IDENTIFIABILITY = 1e-3
+"""
+Smallest fraction of a regressor's energy left after the other regressors.
+
+Below it, a harmonic or the time offset cannot be told apart from the torque
+dependence (e.g. the 1x order when gravity makes ``T`` proportional to
+``cos(theta)`` at constant speed) and is reported as NaN.
+"""
+
+
+@dataclass(frozen=True)
+class TEStream:
+    """
+    TE at the link stamps; arrays index-aligned with the link input (length N).
+
+    Attributes
+    ----------
+    t : ndarray
+        Link stamps [s] as given.
+    te : ndarray
+        TE ``theta_link - theta_motor/i`` [rad], NaN where not valid. Its
+        constant is reduced into ``(-pi/i, pi/i]`` at the first valid
+        sample, since the turn counts of wrapped encoders are unknown.
+    output_angle : ndarray
+        Unwrapped link angle [rad], NaN where not valid (defined up to whole
+        turns when the input was wrapped).
+    valid : ndarray of bool
+        Samples with a usable TE.
+    max_gap_s : float
+        Largest stamp spacing interpolated or unwrapped across [s].
+    motor_nonfinite, motor_unordered : int
+        Motor samples dropped for a NaN/inf stamp or angle, and for a stamp
+        not later than every earlier one.
+    link_nonfinite, link_unordered : int
+        The same for link samples.
+    link_uncovered : int
+        Valid link samples outside the motor stream's span or inside a motor
+        gap (never interpolated across).
+    turn_corrections : int
+        Gaps across which a turn count of a wrapped stream was restored.
+
+    """
+
+    t: np.ndarray
+    te: np.ndarray
+    output_angle: np.ndarray
+    valid: np.ndarray
+    max_gap_s: float
+    motor_nonfinite: int = 0
+    motor_unordered: int = 0
+    link_nonfinite: int = 0
+    link_unordered: int = 0
+    link_uncovered: int = 0
+    turn_corrections: int = 0
+
+    def __len__(self):
+        """Return the number of link samples."""
+        return self.t.shape[0]
+
+    @property
+    def dropped(self):
+        """Count the link samples without a TE."""
+        return int(self.valid.size - np.count_nonzero(self.valid))
+
+
+def _as_stream(t, angle, name):
+    """Check one stamp/angle pair: 1-D float arrays of equal length."""
+    try:
+        t = np.asarray(t, dtype=float)
+        angle = np.asarray(angle, dtype=float)
+    except (TypeError, ValueError) as err:
+        raise InvalidInput(f'{name} stamps and angles must be numeric arrays: {err}') from err
+    if t.ndim != 1 or angle.ndim != 1:
+        raise InvalidInput(f'{name} stamps and angles must be 1-D, got shapes '
+                           f'{t.shape} and {angle.shape}')
+    if t.shape != angle.shape:
+        raise InvalidInput(f'{name} stamps and angles must have the same length, got '
+                           f'{t.size} stamps and {angle.size} angles')
+    return t, angle
+
+
+def _usable(t, angle):
+    """Mask of finite samples whose stamp is later than every earlier stamp."""
+    finite = np.isfinite(t) & np.isfinite(angle)
+    tf = np.where(finite, t, -np.inf)
+    previous = np.concatenate([[-np.inf], np.maximum.accumulate(tf)[:-1]]) if t.size else tf
+    ordered = tf > previous
+    keep = finite & ordered
+    return keep, int(np.count_nonzero(~finite)), int(np.count_nonzero(finite & ~ordered))
+
+
+def _unwrap(t, angle, max_gap):
+    """
+    Unwrap within runs of samples closer than ``max_gap``; never across a gap.
+
+    Whole turns are counted as integers, so an already unwrapped stream
+    comes back bit-identical. Returns the angle and the run index per sample.
+    """
+    if angle.size < 2:
+        return angle.copy(), np.zeros(angle.size, dtype=np.int64)
+    gap = np.diff(t) > max_gap
+    jumps = np.where(gap, 0.0, np.round(np.diff(angle) / TWO_PI)).astype(np.int64)
+    turns = np.concatenate([[0], np.cumsum(jumps)])
+    run = np.concatenate([[0], np.cumsum(gap)])
+    return angle - TWO_PI * turns, run
+
+
+def _turns(delta, ratio):
+    """Split a TE jump into whole link turns and whole motor turns (integers)."""
+    link_turns = np.round(delta / TWO_PI)
+    motor_turns = np.round((delta - TWO_PI * link_turns) * ratio / TWO_PI)
+    return link_turns.astype(np.int64), motor_turns.astype(np.int64)
+
+
+def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
+               link_time_offset_s=0.0):
+    """
+    Compute the transmission error from motor and link encoder streams.
+
+    ``TE(t) = theta_link(t) - theta_motor(t + delta)/i`` [rad], the motor
+    angle interpolated linearly at each link stamp shifted by ``delta``.
+    Angles may be multi-turn or wrapped (to ``[-pi, pi)``, ``[0, 2·pi)`` or
+    any 2·pi range); each stream is unwrapped within runs of samples closer
+    than ``max_gap_s`` (it must turn less than half a turn between such
+    samples). Across a gap nothing is unwrapped or interpolated: the turn
+    counts are restored by keeping the TE continuous, which holds because
+    the true TE changes by far less than half a motor turn referred to the
+    output (2.2 deg for i = 81).
+
+    Linear interpolation errs by at most ``alpha·dt²/8`` [rad] at output
+    acceleration ``alpha`` for motor spacing ``dt`` (0.2 arcsec at
+    8 rad/s² and 1 kHz; zero when the streams share stamps).
+
+    Parameters
+    ----------
+    t_motor, motor_angle : array_like, shape (M,)
+        Motor stamps [s] and angles [rad] (input side).
+    t_link, link_angle : array_like, shape (N,)
+        Link stamps [s] and angles [rad] (output side).
+    ratio : float
+        Reduction ratio ``i`` (input turns per output turn), non-zero.
+    max_gap_s : float
+        Largest stamp spacing [s] that is interpolated or unwrapped across.
+    link_time_offset_s : float
+        The link sample stamped ``t`` was taken at ``t + delta`` [s]; the
+        motor angle is read there (0: take stamps as exact).
+
+    Returns
+    -------
+    TEStream
+        TE and the unwrapped output angle at the link stamps.
+
+    Raises
+    ------
+    InvalidInput
+        If an array is not 1-D numeric or stamps and angles differ in length.
+    InvalidParameter
+        If ``ratio``, ``max_gap_s`` or ``link_time_offset_s`` is out of range.
+
+    Notes
+    -----
+    Samples with a NaN/inf stamp or angle, and samples whose stamp is not
+    later than every earlier stamp of their stream (duplicates, reordering)
+    are dropped and counted, not raised on: one bad message must not stop a
+    stream.
+
+    """
+    tm, am = _as_stream(t_motor, motor_angle, 'motor')
+    tl, al = _as_stream(t_link, link_angle, 'link')
+    ratio = _finite('ratio', ratio, '', 'finite and non-zero', lambda v: v != 0.0)
+    max_gap_s = _finite('max_gap_s', max_gap_s, 's', '> 0', lambda v: v > 0.0)
+    offset = _finite('link_time_offset_s', link_time_offset_s, 's', 'finite', lambda v: True)
+
+    keep_m, m_nonfinite, m_unordered = _usable(tm, am)
+    keep_l, l_nonfinite, l_unordered = _usable(tl, al)
+    tm, am = tm[keep_m], am[keep_m]
+    idx_l = np.flatnonzero(keep_l)
+    tq = tl[idx_l] + offset
+    am, run_m = _unwrap(tm, am, max_gap_s)
+    al_u, run_l = _unwrap(tl[idx_l], al[idx_l], max_gap_s)
+
+    te = np.full(tl.size, np.nan)
+    out = np.full(tl.size, np.nan)
+    valid = np.zeros(tl.size, dtype=bool)
+    if tm.size == 0 or idx_l.size == 0:
+        return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
+                        l_nonfinite, l_unordered, idx_l.size, 0)
+    if tm.size == 1:
+        i0 = np.zeros(tq.size, dtype=np.int64)
+        i1 = i0
+        on0 = on1 = tq == tm[0]
+        bridged = np.zeros(tq.size, dtype=bool)
+    else:
+        i0 = np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, tm.size - 2)
+        i1 = i0 + 1
+        on0, on1 = tq == tm[i0], tq == tm[i1]
+        bridged = (tm[i1] - tm[i0] <= max_gap_s) & (tq >= tm[0]) & (tq <= tm[-1])
+    ok = bridged | on0 | on1
+    with np.errstate(divide='ignore', invalid='ignore'):
+        frac = np.where(on0 | on1, 0.0, (tq - tm[i0]) / (tm[i1] - tm[i0]))
+    motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
+    run_at = np.where(on1 & ~on0, run_m[i1], run_m[i0])
+    raw = al_u - motor_at / ratio
+
+    sel = np.flatnonzero(ok)
+    raw_ok, corrections = raw[sel], 0
+    link_turns = np.zeros(sel.size, dtype=np.int64)
+    motor_turns = np.zeros(sel.size, dtype=np.int64)
+    if sel.size:
+        # A new run of either stream may start with unknown whole turns: keep TE continuous.
+        new_run = np.concatenate([[False], (np.diff(run_l[sel]) != 0)
+                                  | (np.diff(run_at[sel]) != 0)])
+        delta = np.concatenate([[raw_ok[0]], np.diff(raw_ok)])
+        lt, mt = _turns(delta, ratio)
+        lt[1:] *= new_run[1:]
+        mt[1:] *= new_run[1:]
+        corrections = int(np.count_nonzero((lt[1:] != 0) | (mt[1:] != 0)))
+        link_turns = np.cumsum(lt)
+        motor_turns = np.cumsum(mt)
+        # The first sample only fixes the TE's constant; the output angle keeps its turns.
+        gap_link_turns = link_turns - lt[0]
+        rows = idx_l[sel]
+        te[rows] = raw_ok - TWO_PI * link_turns - TWO_PI * motor_turns / ratio
+        out[rows] = al_u[sel] - TWO_PI * gap_link_turns
+        valid[rows] = True
+    return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
+                    l_nonfinite, l_unordered, int(idx_l.size - sel.size), corrections)
+
+
+def _finite(name, value, unit, allowed, test):
+    """Return ``value`` as a float if finite and ``test(value)``, else raise."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InvalidParameter(out_of_range(name, value, unit, allowed)) from None
+    if isinstance(value, bool) or not math.isfinite(v) or not test(v):
+        raise InvalidParameter(out_of_range(name, value, unit, allowed))
+    return v
+
+
+@dataclass(frozen=True)
+class DutySummary:
+    """
+    What the reducer went through in one window (run-in-free wear exposure).
+
+    Attributes
+    ----------
+    duration_s : float
+        Stream time covered by the window's samples [s] (gaps excluded).
+    exposure_s : float
+        Operating seconds of wear exposure, ``duration_s·aging_factor`` [s].
+    archard_increment : float
+        ``aging·∫ wear_rate(T, omega, 0) dt`` [m]: Archard wear at rate
+        scale 1 without run-in (the estimator applies both itself).
+    mean_abs_torque : float
+        Time mean of ``|T|`` [N·m].
+    mean_abs_speed : float
+        Time mean of ``|omega|`` [rad/s]: the mean speed ``Nm`` of the
+        catalogue life formula.
+    cubic_mean_torque : float
+        ``Tm = (∫|omega|·|T|^(10/3) dt / ∫|omega| dt)^(3/10)`` [N·m], the
+        catalogue's equivalent torque (exponent ``rating.life_exponent``);
+        NaN when the joint did not move.
+    max_abs_torque : float
+        Largest ``|T|`` [N·m].
+
+    """
+
+    duration_s: float
+    exposure_s: float
+    archard_increment: float
+    mean_abs_torque: float
+    mean_abs_speed: float
+    cubic_mean_torque: float
+    max_abs_torque: float
+
+    @property
+    def mean_speed(self):
+        """Mean speed ``Nm`` of the catalogue life formula, ``mean_abs_speed`` [rad/s]."""
+        return self.mean_abs_speed
+
+
+@dataclass(frozen=True)
+class WindowFeatures:
+    """
+    Features of one window of the TE stream.
+
+    Attributes
+    ----------
+    t_start, t_end : float
+        Stamps of the first and last sample [s].
+    samples : int
+        Samples used.
+    end_reason : str
+        Why the window ended: ``'revolution'``, ``'duration'``, ``'motion'``
+        (continuous turning stopped after ``window_s``), ``'max'``,
+        ``'gap'`` or ``'flush'``.
+    te_max, te_min, te_pp, te_mean : float
+        Maximum, minimum, peak-to-peak and mean TE [rad] (paper Table 5
+        format; raw, including the encoders' constant offset).
+    loaded_mean_te : float
+        Mean TE over samples with ``T > 10 %`` of rated torque [rad], after
+        removing the fitted harmonics and time-offset term; NaN if none.
+    orders : dict
+        Order per output revolution -> amplitude [rad] of the TE harmonic,
+        fitted against the output angle; NaN where not identifiable.
+    time_offset_s : float
+        Fitted time offset of the link encoder behind its stamps [s]
+        (coefficient of ``omega`` in the TE); NaN at constant speed.
+    lost_motion, lost_motion_std : float
+        Lost motion at the catalogue test torque for the fitted wear, and
+        its standard error [rad]; NaN without usable torque reversals.
+    wear_fit, wear_fit_std : float
+        Combined wear that explains the observed hysteresis, and its
+        standard error [m]; NaN like ``lost_motion``.
+    compliance_fit : float
+        Compliance correction fitted with the wear [rad/(N·m)] (see
+        :meth:`WindowAnalyzer._fit_wear`); NaN like ``lost_motion``.
+    hysteresis_torque : ndarray
+        Torque of each usable bin [N·m]: mean ``|T|`` of its samples.
+    hysteresis : ndarray
+        Observed width ``TE(-|T|) - TE(+|T|)`` at those torques [rad].
+    hysteresis_std : ndarray
+        Standard errors of ``hysteresis`` [rad].
+    duty : DutySummary
+        Load and speed history of the window.
+
+    """
+
+    t_start: float
+    t_end: float
+    samples: int
+    end_reason: str
+    te_max: float
+    te_min: float
+    te_pp: float
+    te_mean: float
+    loaded_mean_te: float
+    orders: dict
+    time_offset_s: float
+    lost_motion: float
+    lost_motion_std: float
+    wear_fit: float
+    wear_fit_std: float
+    compliance_fit: float
+    hysteresis_torque: np.ndarray = field(repr=False)
+    hysteresis: np.ndarray = field(repr=False)
+    hysteresis_std: np.ndarray = field(repr=False)
+    duty: DutySummary = None
+
+
+WINDOW_MODES = ('auto', 'revolution', 'duration')
+"""How windows are cut (see :class:`WindowAnalyzer`)."""
+
+
+class WindowAnalyzer:
+    """
+    Streaming analysis of a TE stream in windows.
+
+    Windows never span a gap of the stream. ``window='duration'`` cuts
+    every ``window_s`` of stream; ``'revolution'`` after each output
+    revolution of net travel (or ``max_window_s``); ``'auto'`` (default)
+    after one revolution while the joint turns continuously in one
+    direction, otherwise after ``window_s`` (a window that turned
+    continuously past ``window_s`` ends when continuous motion stops).
+
+    Manufacturing orders and the time offset are hardware constants: their
+    normal equations (after eliminating the per-bin torque lines) are pooled
+    over recent windows with an exponential memory of ``memory_windows``
+    windows, so that windows that cover part of a revolution still separate
+    them from the torque dependence.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters (rated torque, model tables, wear rate).
+    window : str
+        ``'auto'``, ``'revolution'`` or ``'duration'``.
+    window_s : float
+        Window length in stream time [s].
+    max_window_s : float
+        Longest window [s].
+    aging_factor : float
+        Seconds of wear exposure per second of stream (1 for a real robot).
+    orders : sequence of int, optional
+        Harmonic orders per output revolution (default 1, 2, Zc, Zp).
+    torque_bins : int
+        Number of log-spaced ``|T|`` bins.
+    bin_range : tuple of float
+        Lowest and highest bin edge as fractions of rated torque.
+    min_bin_samples : int
+        Samples needed under each torque sign for a bin to count.
+    min_bins : int
+        Usable bins needed for a lost-motion value.
+    memory_windows : float
+        Memory of the pooled harmonic fit in windows (0: this window only).
+    min_speed : float
+        Slowest output speed counted as turning [rad/s].
+
+    Raises
+    ------
+    InvalidParameter
+        If a setting is out of range.
+
+    """
+
+    def __init__(self, params, window='auto', window_s=2.0, max_window_s=20.0, aging_factor=1.0,
+                 orders=None, torque_bins=16, bin_range=(0.02, 1.5), min_bin_samples=20,
+                 min_bins=2, memory_windows=10.0, min_speed=0.01, compliance_prior=0.3):
+        if window not in WINDOW_MODES:
+            raise InvalidParameter(out_of_range(
+                'window', window, '', 'one of ' + ', '.join(repr(m) for m in WINDOW_MODES)))
+        self.window = window
+        self.window_s = _finite('window_s', window_s, 's', '> 0', lambda v: v > 0.0)
+        self.max_window_s = _finite('max_window_s', max_window_s, 's', f'>= window_s = {window_s}',
+                                    lambda v: v >= self.window_s)
+        self.aging_factor = _finite('aging_factor', aging_factor, '', '>= 0', lambda v: v >= 0.0)
+        self.memory_windows = _finite('memory_windows', memory_windows, 'windows', '>= 0',
+                                      lambda v: v >= 0.0)
+        self.min_speed = _finite('min_speed', min_speed, 'rad/s', '>= 0', lambda v: v >= 0.0)
+        self.compliance_prior = _finite('compliance_prior', compliance_prior, '', '> 0',
+                                        lambda v: v > 0.0)
+        self.torque_bins = _whole('torque_bins', torque_bins, 1, 200)
+        self.min_bin_samples = _whole('min_bin_samples', min_bin_samples, 3, 10 ** 9)
+        self.min_bins = _whole('min_bins', min_bins, 1, 200)
+        try:
+            lo, hi = (float(v) for v in bin_range)
+        except (TypeError, ValueError):
+            raise InvalidParameter(out_of_range('bin_range', bin_range, '',
+                                                '(low, high) fractions of rated torque')) from None
+        if not (0.0 < lo < hi and math.isfinite(hi)):
+            raise InvalidParameter(out_of_range('bin_range', bin_range, '', '0 < low < high'))
+        g = params.geometry
+        self.orders = tuple(int(k) for k in (orders or (1, 2, g.z_cycloid, g.z_pins)))
+        if not self.orders or min(self.orders) < 1:
+            raise InvalidParameter(out_of_range('orders', orders, '', 'whole numbers >= 1'))
+        self.params = params
+        self.tables = model_tables(params)
+        self.rated_torque = params.rating.rated_torque
+        self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
+        self.centres = np.sqrt(self.edges[1:] * self.edges[:-1])
+        n_par = 2 * len(self.orders) + 1
+        self._memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
+        self._pool_n = np.zeros((n_par, n_par))
+        self._pool_r = np.zeros(n_par)
+        self._pool_raw = np.zeros(n_par)
+        self._buf = {name: np.empty(0) for name in _BUFFER}
+        self._last_t = None
+        self.ignored_samples = 0
+
+    def update(self, stream, effort, velocity):
+        """
+        Feed the next chunk of the stream; return the windows it completes.
+
+        Parameters
+        ----------
+        stream : TEStream
+            Next chunk of TE (later than every earlier chunk).
+        effort : array_like, shape (N,)
+            Output torque at the same stamps [N·m].
+        velocity : array_like, shape (N,)
+            Output (link) velocity at the same stamps [rad/s].
+
+        Returns
+        -------
+        list of WindowFeatures
+            Completed windows, oldest first.
+
+        Raises
+        ------
+        InvalidInput
+            If effort or velocity does not match the stream's length.
+
+        """
+        effort = np.asarray(effort, dtype=float)
+        velocity = np.asarray(velocity, dtype=float)
+        if effort.shape != stream.t.shape or velocity.shape != stream.t.shape:
+            raise InvalidInput(
+                f'effort and velocity must match the {stream.t.size} TE samples, got '
+                f'shapes {effort.shape} and {velocity.shape}')
+        use = stream.valid & np.isfinite(effort) & np.isfinite(velocity)
+        if self._last_t is not None:
+            use &= stream.t > self._last_t
+        self.ignored_samples += int(np.count_nonzero(stream.valid & ~use))
+        t = stream.t[use]
+        if t.size:
+            previous = np.concatenate([[np.nan if self._last_t is None else self._last_t],
+                                       t[:-1]])
+            step = t - previous
+            gap = step > stream.max_gap_s
+            dt = np.where(step <= stream.max_gap_s, step, 0.0)
+            self._last_t = float(t[-1])
+            new = {'t': t, 'te': stream.te[use], 'theta': stream.output_angle[use],
+                   'torque': effort[use], 'speed': velocity[use], 'dt': dt,
+                   'gap': gap.astype(float)}
+            self._buf = {k: np.concatenate([self._buf[k], new[k]]) for k in _BUFFER}
+        return self._emit(final=False)
+
+    def flush(self):
+        """
+        Close the current partial window.
+
+        Returns
+        -------
+        list of WindowFeatures
+            The partial window, if it holds samples.
+
+        """
+        return self._emit(final=True)
+
+    # -- windows ----------------------------------------------------------------------------
+
+    def _emit(self, final):
+        cuts = self._cut(final)
+        if not cuts:
+            return []
+        end = cuts[-1][1]
+        part = {k: v[:end] for k, v in self._buf.items()}
+        self._buf = {k: v[end:] for k, v in self._buf.items()}
+        return self._analyze(part, cuts)
+
+    def _cut(self, final):
+        """Return ``[(start, end, reason)]`` of the windows complete in the buffer."""
+        t, theta, speed = self._buf['t'], self._buf['theta'], self._buf['speed']
+        n = t.size
+        gaps = np.flatnonzero(self._buf['gap'])
+        cuts, s = [], 0
+        while s < n:
+            g = gaps[np.searchsorted(gaps, s, side='right')] if gaps.size and gaps[-1] > s else n
+            x = min(int(np.searchsorted(t, t[s] + self.max_window_s)), g)
+            d = int(np.searchsorted(t, t[s] + self.window_s))
+            cand = [(g, 'gap'), (x, 'max')]
+            if self.window == 'duration':
+                cand.append((d, 'duration'))
+            else:
+                turned = np.abs(theta[s:x] - theta[s]) >= TWO_PI
+                r = s + int(np.argmax(turned)) if turned.any() else n
+                cand.append((r, 'revolution'))
+                if self.window == 'auto':
+                    moving = np.abs(speed[s:x]) >= self.min_speed
+                    moving &= np.sign(speed[s:x]) == np.sign(speed[s])
+                    c = s + int(np.argmin(moving)) if not moving.all() else n
+                    cand.append((d, 'duration') if c <= d else (c, 'motion'))
+            end, reason = min(cand, key=lambda item: item[0])
+            if end >= n:
+                if not final:
+                    break
+                end, reason = n, 'flush'
+            cuts.append((s, end, reason))
+            s = end
+        return cuts
+
+    # -- analysis ---------------------------------------------------------------------------
+
+    def _analyze(self, buf, cuts):
+        """Compute the features of the windows ``cuts`` of ``buf`` (vectorised over windows)."""
+        starts = np.array([c[0] for c in cuts])
+        ends = np.array([c[1] for c in cuts])
+        n_win = starts.size
+        t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
+        win = np.repeat(np.arange(n_win), ends - starts)
+        te_mean = np.add.reduceat(y, starts) / (ends - starts)
+        z = self._regressors(buf['theta'], speed, y - te_mean[win])
+        x = z[:-1]
+        stats = self._group_stats(z, torque, win, starts, ends)
+        beta, ident, noise = self._fit_harmonics(stats, n_win)
+        hyst = self._hysteresis(stats, beta, noise)
+        # Mean TE under load, harmonics and time-offset term removed.
+        loaded = np.flatnonzero(torque > 0.1 * self.rated_torque)
+        fitted = np.zeros(loaded.size)
+        for row, coef in zip(x, beta.T):
+            fitted += row[loaded] * coef[win[loaded]]
+        resid = y[loaded] - fitted
+        with np.errstate(invalid='ignore', divide='ignore'):
+            loaded_mean = (np.bincount(win[loaded], resid, n_win)
+                           / np.bincount(win[loaded], minlength=n_win))
+        duty = self._duty(torque, speed, dt, starts)
+        te_max = np.maximum.reduceat(y, starts)
+        te_min = np.minimum.reduceat(y, starts)
+        n_ord = len(self.orders)
+        amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
+        amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
+        offset = np.where(ident[:, -1], beta[:, -1], np.nan)
+        out = []
+        for k in range(n_win):
+            torque_b, h_b, sig_b = hyst[k]
+            fit = (self._fit_wear(torque_b, h_b, sig_b) if torque_b.size >= self.min_bins
+                   else (np.nan,) * 5)
+            out.append(WindowFeatures(
+                t_start=float(t[starts[k]]), t_end=float(t[ends[k] - 1]),
+                samples=int(ends[k] - starts[k]), end_reason=cuts[k][2],
+                te_max=float(te_max[k]), te_min=float(te_min[k]),
+                te_pp=float(te_max[k] - te_min[k]), te_mean=float(te_mean[k]),
+                loaded_mean_te=float(loaded_mean[k]),
+                orders=dict(zip(self.orders, amp[k].tolist())),
+                time_offset_s=float(offset[k]),
+                wear_fit=fit[0], wear_fit_std=fit[1], lost_motion=fit[2],
+                lost_motion_std=fit[3], compliance_fit=fit[4],
+                hysteresis_torque=torque_b, hysteresis=h_b, hysteresis_std=sig_b,
+                duty=duty[k]))
+        return out
+
+    def _regressors(self, theta, speed, y):
+        """
+        Stack ``sin(k·theta), cos(k·theta)`` per order, ``omega`` (time offset), then ``y``.
+
+        An order one above, or twice, an order already computed comes from
+        the angle-addition formulas instead of new sines and cosines.
+        """
+        n_ord = len(self.orders)
+        z = np.empty((2 * n_ord + 2, theta.size))
+        phi = theta - TWO_PI * np.round(theta / TWO_PI)
+        done = {}
+        for j, order in enumerate(self.orders):
+            s_k, c_k = z[2 * j], z[2 * j + 1]
+            if order - 1 in done and 1 in done:
+                (s_a, c_a), (s_1, c_1) = done[order - 1], done[1]
+                np.add(s_a * c_1, c_a * s_1, out=s_k)
+                np.subtract(c_a * c_1, s_a * s_1, out=c_k)
+            elif order % 2 == 0 and order // 2 in done:
+                s_h, c_h = done[order // 2]
+                np.multiply(2.0 * s_h, c_h, out=s_k)
+                np.multiply(c_h - s_h, c_h + s_h, out=c_k)
+            else:
+                phase = order * phi
+                np.sin(phase, out=s_k)
+                np.cos(phase, out=c_k)
+            done[order] = (s_k, c_k)
+        z[-2] = speed
+        z[-1] = y
+        return z
+
+    def _group_stats(self, z, torque, win, starts, ends):
+        """
+        Sum the regressors per group ``(window, |T| bin, torque sign)`` and per window.
+
+        Each group gets a straight line in ``u = |T| - bin centre``; its
+        projection is eliminated from the normal equations algebraically
+        (``Z^T Z - Σ_g S_g^T M_g^-1 S_g``), so no residual array is formed.
+        Samples outside the bins take no part.
+        """
+        n_win = starts.size
+        n_groups = n_win * 2 * self.torque_bins
+        size = np.abs(torque)
+        b = np.searchsorted(self.edges, size, side='right') - 1
+        outside = (b < 0) | (b >= self.torque_bins)
+        b = np.clip(b, 0, self.torque_bins - 1)
+        gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
+        u = size - self.centres[b]
+        count = np.bincount(gid, minlength=n_groups + 1)[:-1].astype(float)
+        s0 = np.stack([np.bincount(gid, row, n_groups + 1)[:-1] for row in z], axis=1)
+        s1 = np.stack([np.bincount(gid, u * row, n_groups + 1)[:-1] for row in z], axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            u_mean = np.where(count > 0, np.bincount(gid, u, n_groups + 1)[:-1] / count, 0.0)
+            s_uu = np.bincount(gid, u * u, n_groups + 1)[:-1] - count * u_mean ** 2
+            sloped = (count >= 3) & (s_uu > 1e-12 * count * self.centres.max() ** 2)
+            s1c = s1 - u_mean[:, None] * s0
+            proj0 = np.where(count[:, None] > 0, s0 / np.sqrt(count)[:, None], 0.0)
+            proj1 = np.where(sloped[:, None], s1c / np.sqrt(np.where(sloped, s_uu, 1.0))[:, None],
+                             0.0)
+        n_par = z.shape[0]
+        shape = (n_win, 2 * self.torque_bins, n_par)
+        proj0, proj1 = proj0.reshape(shape), proj1.reshape(shape)
+        correction = (np.matmul(proj0.transpose(0, 2, 1), proj0)
+                      + np.matmul(proj1.transpose(0, 2, 1), proj1))
+        # Second moments per window, less those of the samples outside the bins.
+        out_idx = np.flatnonzero(outside)
+        z_out = z[:, out_idx]
+        out_bounds = np.searchsorted(out_idx, np.concatenate([starts, ends[-1:]]))
+        moments = np.empty((n_win, n_par, n_par))
+        for k in range(n_win):
+            zk = z[:, starts[k]:ends[k]]
+            moments[k] = zk @ zk.T
+            if out_bounds[k + 1] > out_bounds[k]:
+                zo = z_out[:, out_bounds[k]:out_bounds[k + 1]]
+                moments[k] -= zo @ zo.T
+        group_params = (count > 0).astype(float) + sloped
+        inside = (ends - starts) - np.diff(out_bounds)
+        return {
+            'reduced': moments - correction,
+            'energy': np.einsum('wii->wi', moments)[:, :-1],
+            'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
+            'count': count, 'u_mean': u_mean, 's_uu': s_uu, 'sloped': sloped,
+            's0': s0, 's1c': s1c,
+        }
+
+    def _fit_harmonics(self, stats, n_win):
+        """
+        Pooled least squares of the harmonics and time offset.
+
+        Returns
+        -------
+        tuple of ndarray
+            Coefficients per window (0 where not identifiable), the
+            identifiable mask, and the residual TE variance per window [rad²].
+
+        """
+        reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
+        n_par = energy.shape[1]
+        beta = np.zeros((n_win, n_par))
+        ident = np.zeros((n_win, n_par), dtype=bool)
+        noise = np.full(n_win, np.nan)
+        for k in range(n_win):
+            normal, rhs = reduced[k, :-1, :-1], reduced[k, :-1, -1]
+            self._pool_n = self._memory * self._pool_n + normal
+            self._pool_r = self._memory * self._pool_r + rhs
+            self._pool_raw = self._memory * self._pool_raw + energy[k]
+            beta[k], ident[k] = _solve_identifiable(self._pool_n, self._pool_r, self._pool_raw)
+            b = beta[k]
+            rss = reduced[k, -1, -1] - 2.0 * b @ rhs + b @ normal @ b
+            free = dof[k] - np.count_nonzero(ident[k])
+            if free > 0:
+                noise[k] = max(rss, 0.0) / free
+        return beta, ident, noise
+
+    def _hysteresis(self, stats, beta, noise):
+        """Observed hysteresis per usable bin of each window: ``(|T|, H, std)`` arrays."""
+        n_win, n_par = beta.shape
+        b_group = np.repeat(beta, 2 * self.torque_bins, axis=0)
+        s0, s1c = stats['s0'], stats['s1c']
+        count, u_mean, s_uu, sloped = (stats[k] for k in ('count', 'u_mean', 's_uu', 'sloped'))
+        with np.errstate(invalid='ignore', divide='ignore'):
+            level = (s0[:, -1] - np.einsum('gi,gi->g', s0[:, :-1], b_group)) / count
+            slope = np.where(sloped, (s1c[:, -1] - np.einsum('gi,gi->g', s1c[:, :-1], b_group))
+                             / np.where(sloped, s_uu, 1.0), 0.0)
+        shape = (n_win, self.torque_bins, 2)
+        count, u_mean, s_uu, sloped, level, slope = (
+            a.reshape(shape) for a in (count, u_mean, s_uu, sloped, level, slope))
+        usable = (count >= self.min_bin_samples).all(axis=2)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            u_eval = (count * u_mean).sum(axis=2) / count.sum(axis=2)
+            lever = u_eval[..., None] - u_mean
+            at_eval = level + slope * lever
+            spread = np.where(sloped, lever ** 2 / np.where(sloped, s_uu, 1.0), 0.0)
+            var = noise[:, None] * (1.0 / count + spread).sum(axis=2)
+        width = at_eval[..., 1] - at_eval[..., 0]
+        std = np.maximum(np.sqrt(var), _SIGMA_FLOOR)
+        usable &= np.isfinite(width) & np.isfinite(std)
+        torque_eval = u_eval + self.centres
+        return [(torque_eval[k, usable[k]], width[k, usable[k]], std[k, usable[k]])
+                for k in range(n_win)]
+
+    def _duty(self, torque, speed, dt, starts):
+        """Duty summaries per window."""
+        size, rate = np.abs(torque), np.abs(speed)
+        exponent = self.params.rating.life_exponent
+        archard = wear_rate(size, rate, 0.0, self.params)
+        rows = np.stack([dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt])
+        sums = np.add.reduceat(rows, starts, axis=1).T
+        peak = np.maximum.reduceat(size, starts)
+        out = []
+        for (dur, s_t, s_w, s_cube, s_wear), top in zip(sums.tolist(), peak.tolist()):
+            out.append(DutySummary(
+                duration_s=dur, exposure_s=dur * self.aging_factor,
+                archard_increment=s_wear * self.aging_factor,
+                mean_abs_torque=s_t / dur if dur > 0 else math.nan,
+                mean_abs_speed=s_w / dur if dur > 0 else math.nan,
+                cubic_mean_torque=(s_cube / s_w) ** (1.0 / exponent) if s_w > 0 else math.nan,
+                max_abs_torque=top))
+        return out
+
+    def _hysteresis_table(self, torque_b):
+        """Model hysteresis at ``|T|_b`` on every wear node of the table, shape (m, nodes)."""
+        tab = self.tables
+        t = np.clip(torque_b, tab.torque[0], tab.torque[-1])
+        i = np.clip(np.searchsorted(tab.torque, t, side='right') - 1, 0, tab.torque.size - 2)
+        f = ((t - tab.torque[i]) / (tab.torque[i + 1] - tab.torque[i]))[:, None]
+        beta = (1.0 - f) * tab.beta[i] + f * tab.beta[i + 1]
+        return 2.0 * (beta + (torque_b / tab.series_stiffness)[:, None])
+
+    def _fit_wear(self, torque_b, h_b, sig_b):
+        """
+        Weighted least-squares wear that explains the observed hysteresis.
+
+        Model: ``H_b = H(|T|_b, w) + 2·|T|_b·c`` with the table hysteresis
+        :meth:`.transmission_error.ModelTables.hysteresis` and a compliance
+        correction ``c`` [rad/(N·m)] with a Gaussian prior of
+        ``compliance_prior/k_s``. ``c`` absorbs a stiffness that differs from
+        the catalogue and the part of an unidentified 1x harmonic that is odd
+        in torque (under gravity ``cos(theta)`` follows ``T``); wear is
+        measured by the level of ``H``, not its slope. The table is bilinear,
+        so the model is linear in ``(w, c)`` between wear nodes: the weighted
+        sum of squares is minimised exactly on every interval at once.
+
+        Returns
+        -------
+        tuple of float
+            ``(wear [m], wear std [m], lost motion [rad], lost motion std [rad],
+            compliance correction [rad/(N·m)])``.
+
+        """
+        grid = self.tables.wear
+        step = np.diff(grid)
+        model = self._hysteresis_table(torque_b)
+        weight = 1.0 / sig_b[:, None] ** 2
+        slope = np.diff(model, axis=1) / step
+        lever = 2.0 * torque_b[:, None]
+        miss = h_b[:, None] - model[:, :-1]
+        prior = (self.compliance_prior / self.tables.series_stiffness) ** -2
+        a11 = (weight * slope ** 2).sum(axis=0)
+        a12 = (weight * slope * lever).sum(axis=0)
+        a22 = float((weight * lever ** 2).sum()) + prior
+        b1 = (weight * slope * miss).sum(axis=0)
+        b2 = (weight * lever * miss).sum(axis=0)
+        det = a11 * a22 - a12 ** 2
+        with np.errstate(invalid='ignore', divide='ignore'):
+            move = np.where(det > 0.0, (a22 * b1 - a12 * b2) / det, 0.0)
+        move = np.clip(move, 0.0, step)
+        comp = (b2 - a12 * move) / a22
+        chi2 = (weight * (miss - slope * move - lever * comp) ** 2).sum(axis=0) + prior * comp ** 2
+        best = int(np.argmin(chi2))
+        wear = float(grid[best] + move[best])
+        m = h_b.size
+        scale = max(1.0, chi2[best] / (m - 1)) if m > 1 else 1.0
+        wear_var = scale * a22 / det[best] if det[best] > 0.0 else math.inf
+        wear_std = math.sqrt(wear_var)
+        lost = float(self.tables.lost_motion(wear))
+        half = 0.5e-6
+        lo, hi = max(wear - half, grid[0]), min(wear + half, grid[-1])
+        dlm = (self.tables.lost_motion(hi) - self.tables.lost_motion(lo)) / (hi - lo)
+        return wear, wear_std, lost, float(abs(dlm) * wear_std), float(comp[best])
+
+
+_BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
+
+
+def _whole(name, value, lo, hi):
+    """Return ``value`` as an int in ``[lo, hi]``, else raise."""
+    whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+    if not whole or not lo <= value <= hi:
+        raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
+    return int(value)
+
+
+def _solve_identifiable(normal, rhs, energy):
+    """
+    Solve normal equations, leaving out parameters the data cannot identify.
+
+    A parameter is identifiable when the share of its regressor's energy
+    that no other regressor explains, ``1/(A^-1)_jj`` of the energy-scaled
+    matrix ``A``, is at least :data:`_MIN_IDENTIFIABILITY`. The least
+    identifiable parameter is removed until all that remain pass.
+
+    Returns
+    -------
+    tuple of ndarray
+        Coefficients (0 where not identifiable) and the identifiable mask.
+
+    """
+    n_par = rhs.size
+    ident = energy > 0.0
+    scale = np.where(ident, 1.0 / np.sqrt(np.where(ident, energy, 1.0)), 0.0)
+    a = normal * np.outer(scale, scale)
+    b = rhs * scale
+    beta = np.zeros(n_par)
+    while ident.any():
+        idx = np.flatnonzero(ident)
+        sub = a[np.ix_(idx, idx)]
+        try:
+            inv = np.linalg.inv(sub)
+            share = 1.0 / np.diag(inv)
+        except np.linalg.LinAlgError:
+            share = np.zeros(idx.size)
+        share = np.where(np.isfinite(share), share, 0.0)
+        worst = int(np.argmin(share))
+        if share[worst] >= _MIN_IDENTIFIABILITY:
+            beta[idx] = inv @ b[idx] * scale[idx]
+            break
+        ident[idx[worst]] = False
+    return beta, ident
