@@ -331,6 +331,7 @@ class _Layout:
     names: tuple
     fields: tuple  # ((offset, count), ...) for position, velocity, effort
     spans: tuple  # ((start, stop), ...) bytes that must equal the template
+    coarse: tuple  # fewer, wider spans: ``spans`` plus the padding between them
 
 
 def _reject(where, offset, problem):
@@ -409,7 +410,17 @@ def _parse_layout(payload, where):
             merged[-1] = (merged[-1][0], stop)
         else:
             merged.append((start, stop))
-    return _Layout(size, order, frame_id, tuple(names), tuple(fields), tuple(merged))
+    variable = [(2, 12)] + [(offset, offset + 8 * count) for offset, count in fields if count]
+    coarse = []
+    begin = 0
+    for start, stop in variable:
+        if start > begin:
+            coarse.append((begin, start))
+        begin = stop
+    if pos > begin:
+        coarse.append((begin, pos))
+    return _Layout(size, order, frame_id, tuple(names), tuple(fields), tuple(merged),
+                   tuple(coarse))
 
 
 def _as_buffer(payloads, offsets, lengths):
@@ -531,7 +542,11 @@ def _decode_length_group(buf, starts, index, length, pieces, errors):
             remaining = remaining[1:]
             continue
         rows = _rows(buf, starts[remaining], length)
-        ok = _matches(rows, rows[0], layout.spans)
+        # Padding included, one comparison per gap between stamp and float arrays; rows
+        # that differ there (padding may hold garbage) get the exact check.
+        ok = _matches(rows, rows[0], layout.coarse)
+        if not ok.all():
+            ok[~ok] = _matches(rows[~ok], rows[0], layout.spans)
         matched = remaining[ok]
         pieces.add(matched, layout, *_read_group(rows[ok] if not ok.all() else rows, layout))
         remaining = remaining[~ok]
@@ -574,10 +589,10 @@ def decode_joint_states(payloads, offsets=None, lengths=None, errors='raise'):
     n = starts.shape[0]
     pieces = _Pieces()
     if n:
-        unique, inverse = np.unique(lens, return_inverse=True)
-        if unique.shape[0] == 1:
-            groups = [(int(unique[0]), np.arange(n))]
+        if lens.min() == lens.max():
+            groups = [(int(lens[0]), np.arange(n))]
         else:
+            unique, inverse = np.unique(lens, return_inverse=True)
             order = np.argsort(inverse, kind='stable')
             bounds = np.searchsorted(inverse[order], np.arange(unique.shape[0] + 1))
             groups = [(int(unique[k]), order[bounds[k]:bounds[k + 1]])

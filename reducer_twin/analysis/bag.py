@@ -419,9 +419,9 @@ class Bag:
     def _split(self, handle, batch):
         if len(batch) == 0:
             return {}
+        if batch.channel_id.min() == batch.channel_id.max():
+            return {handle.topic_of(int(batch.channel_id[0])): batch}
         ids = np.unique(batch.channel_id)
-        if ids.shape[0] == 1:
-            return {handle.topic_of(int(ids[0])): batch}
         out = {}
         for cid in ids.tolist():
             name = handle.topic_of(cid)

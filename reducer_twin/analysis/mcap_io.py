@@ -1267,13 +1267,15 @@ def _walk(buf, start, end, arr=None):
 
 
 def _run_length(arr, pos, opcode, length, stride, room):
-    window = np.lib.stride_tricks.sliding_window_view(arr, 9)
+    """Count the records from ``pos`` on that have this opcode and length (probing 16, 512...)."""
+    expected = np.frombuffer(struct.pack('<BQ', opcode, length), 'V9')[0]
     checked, limit = 1, 16
     while checked < room:
         upto = min(room, limit)
-        heads = window[pos + stride * np.arange(checked, upto, dtype=np.int64)]
-        good = (heads[:, 0] == opcode) & (
-            heads[:, 1:9].view('V8')[:, 0].copy().view('<u8') == length)
+        first = pos + stride * checked
+        heads = np.lib.stride_tricks.as_strided(arr[first:], (upto - checked, 9), (stride, 1),
+                                                writeable=False)
+        good = heads.view('V9')[:, 0] == expected
         if not good.all():
             return checked + int(np.argmin(good))
         checked, limit = upto, limit * 32
@@ -1435,7 +1437,9 @@ class McapBagReader:
                     queue.append((following, pool.submit(self._load_chunk, following)))
                 batch = self._chunk_batch(chunk, wanted, future.result())
                 if batch is not None and len(batch):
-                    if not np.isin(batch.channel_id, wanted_arr).all():
+                    ids = batch.channel_id
+                    if not (ids.min() == ids.max() and int(ids[0]) in wanted) and \
+                            not np.isin(ids, wanted_arr).all():
                         batch = batch.select(np.isin(batch.channel_id, wanted_arr))
                     if len(batch):
                         yield batch
