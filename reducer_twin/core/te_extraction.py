@@ -223,21 +223,11 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
     if tm.size == 0 or idx_l.size == 0:
         return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
                         l_nonfinite, l_unordered, idx_l.size, 0)
-    if tm.size == 1:
-        i0 = np.zeros(tq.size, dtype=np.int64)
-        i1 = i0
-        on0 = on1 = tq == tm[0]
-        bridged = np.zeros(tq.size, dtype=bool)
+    if tq.size == tm.size and np.array_equal(tq, tm):
+        # Shared stamps (one JointState carries both encoders): nothing to interpolate.
+        motor_at, run_at, ok = am, run_m, np.ones(tq.size, dtype=bool)
     else:
-        i0 = np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, tm.size - 2)
-        i1 = i0 + 1
-        on0, on1 = tq == tm[i0], tq == tm[i1]
-        bridged = (tm[i1] - tm[i0] <= max_gap_s) & (tq >= tm[0]) & (tq <= tm[-1])
-    ok = bridged | on0 | on1
-    with np.errstate(divide='ignore', invalid='ignore'):
-        frac = np.where(on0 | on1, 0.0, (tq - tm[i0]) / (tm[i1] - tm[i0]))
-    motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
-    run_at = np.where(on1 & ~on0, run_m[i1], run_m[i0])
+        motor_at, run_at, ok = _interpolate(tm, am, run_m, tq, max_gap_s)
     raw = al_u - motor_at / ratio
 
     sel = np.flatnonzero(ok)
@@ -263,6 +253,26 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
         valid[rows] = True
     return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
                     l_nonfinite, l_unordered, int(idx_l.size - sel.size), corrections)
+
+
+def _interpolate(tm, am, run_m, tq, max_gap_s):
+    """Motor angle and run at the query stamps; ``ok`` where no gap is bridged."""
+    if tm.size == 1:
+        i0 = np.zeros(tq.size, dtype=np.int64)
+        i1 = i0
+        on0 = on1 = tq == tm[0]
+        bridged = np.zeros(tq.size, dtype=bool)
+    else:
+        i0 = np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, tm.size - 2)
+        i1 = i0 + 1
+        on0, on1 = tq == tm[i0], tq == tm[i1]
+        bridged = (tm[i1] - tm[i0] <= max_gap_s) & (tq >= tm[0]) & (tq <= tm[-1])
+    ok = bridged | on0 | on1
+    with np.errstate(divide='ignore', invalid='ignore'):
+        frac = np.where(on0 | on1, 0.0, (tq - tm[i0]) / (tm[i1] - tm[i0]))
+    motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
+    run_at = np.where(on1 & ~on0, run_m[i1], run_m[i0])
+    return motor_at, run_at, ok
 
 
 def _finite(name, value, unit, allowed, test):
@@ -552,10 +562,20 @@ class WindowAnalyzer:
         cuts = self._cut(final)
         if not cuts:
             return []
+        out, first = [], 0
+        # Batches of windows of about _BATCH_SAMPLES samples keep the temporaries small.
+        while first < len(cuts):
+            base = cuts[first][0]
+            last = first + 1
+            while last < len(cuts) and cuts[last][1] - base <= _BATCH_SAMPLES:
+                last += 1
+            end = cuts[last - 1][1]
+            part = {k: v[base:end] for k, v in self._buf.items()}
+            out += self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
+            first = last
         end = cuts[-1][1]
-        part = {k: v[:end] for k, v in self._buf.items()}
         self._buf = {k: v[end:] for k, v in self._buf.items()}
-        return self._analyze(part, cuts)
+        return out
 
     def _cut(self, final):
         """Return ``[(start, end, reason)]`` of the windows complete in the buffer."""
@@ -602,7 +622,8 @@ class WindowAnalyzer:
         x = z[:-1]
         stats = self._group_stats(z, torque, win, starts, ends)
         beta, ident, noise = self._fit_harmonics(stats, n_win)
-        hyst = self._hysteresis(stats, beta, noise)
+        torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
+        fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
         loaded = np.flatnonzero(torque > 0.1 * self.rated_torque)
         fitted = np.zeros(loaded.size)
@@ -621,9 +642,7 @@ class WindowAnalyzer:
         offset = np.where(ident[:, -1], beta[:, -1], np.nan)
         out = []
         for k in range(n_win):
-            torque_b, h_b, sig_b = hyst[k]
-            fit = (self._fit_wear(torque_b, h_b, sig_b) if torque_b.size >= self.min_bins
-                   else (np.nan,) * 5)
+            use = usable[k]
             out.append(WindowFeatures(
                 t_start=float(t[starts[k]]), t_end=float(t[ends[k] - 1]),
                 samples=int(ends[k] - starts[k]), end_reason=cuts[k][2],
@@ -632,9 +651,10 @@ class WindowAnalyzer:
                 loaded_mean_te=float(loaded_mean[k]),
                 orders=dict(zip(self.orders, amp[k].tolist())),
                 time_offset_s=float(offset[k]),
-                wear_fit=fit[0], wear_fit_std=fit[1], lost_motion=fit[2],
-                lost_motion_std=fit[3], compliance_fit=fit[4],
-                hysteresis_torque=torque_b, hysteresis=h_b, hysteresis_std=sig_b,
+                wear_fit=fit[0][k], wear_fit_std=fit[1][k], lost_motion=fit[2][k],
+                lost_motion_std=fit[3][k], compliance_fit=fit[4][k],
+                hysteresis_torque=torque_h[k, use], hysteresis=width[k, use],
+                hysteresis_std=std[k, use],
                 duty=duty[k]))
         return out
 
@@ -752,7 +772,7 @@ class WindowAnalyzer:
         return beta, ident, noise
 
     def _hysteresis(self, stats, beta, noise):
-        """Observed hysteresis per usable bin of each window: ``(|T|, H, std)`` arrays."""
+        """Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins)."""
         n_win, n_par = beta.shape
         b_group = np.repeat(beta, 2 * self.torque_bins, axis=0)
         s0, s1c = stats['s0'], stats['s1c']
@@ -774,9 +794,7 @@ class WindowAnalyzer:
         width = at_eval[..., 1] - at_eval[..., 0]
         std = np.maximum(np.sqrt(var), _SIGMA_FLOOR)
         usable &= np.isfinite(width) & np.isfinite(std)
-        torque_eval = u_eval + self.centres
-        return [(torque_eval[k, usable[k]], width[k, usable[k]], std[k, usable[k]])
-                for k in range(n_win)]
+        return u_eval + self.centres, width, std, usable
 
     def _duty(self, torque, speed, dt, starts):
         """Duty summaries per window."""
@@ -806,9 +824,9 @@ class WindowAnalyzer:
         beta = (1.0 - f) * tab.beta[i] + f * tab.beta[i + 1]
         return 2.0 * (beta + (torque_b / tab.series_stiffness)[:, None])
 
-    def _fit_wear(self, torque_b, h_b, sig_b):
+    def _fit_wear(self, torque_b, h_b, sig_b, usable, chunk=128):
         """
-        Weighted least-squares wear that explains the observed hysteresis.
+        Weighted least-squares wear that explains the observed hysteresis, per window.
 
         Model: ``H_b = H(|T|_b, w) + 2·|T|_b·c`` with the table hysteresis
         :meth:`.transmission_error.ModelTables.hysteresis` and a compliance
@@ -818,48 +836,79 @@ class WindowAnalyzer:
         in torque (under gravity ``cos(theta)`` follows ``T``); wear is
         measured by the level of ``H``, not its slope. The table is bilinear,
         so the model is linear in ``(w, c)`` between wear nodes: the weighted
-        sum of squares is minimised exactly on every interval at once.
+        sum of squares is minimised exactly on every interval at once. The
+        standard error is scaled by the reduced chi-square when above 1.
+
+        Parameters
+        ----------
+        torque_b, h_b, sig_b : ndarray, shape (W, B)
+            Bin torques [N·m], observed widths [rad] and their standard
+            errors [rad].
+        usable : ndarray of bool, shape (W, B)
+            Bins that take part.
+        chunk : int
+            Windows per vectorised pass (bounds the memory).
 
         Returns
         -------
-        tuple of float
-            ``(wear [m], wear std [m], lost motion [rad], lost motion std [rad],
-            compliance correction [rad/(N·m)])``.
+        tuple of ndarray, shape (W,)
+            Wear [m], its std [m], lost motion [rad], its std [rad] and the
+            compliance correction [rad/(N·m)]; NaN for windows with fewer
+            than ``min_bins`` usable bins.
 
         """
+        n_win = torque_b.shape[0]
+        out = np.full((5, n_win), np.nan)
+        todo = np.flatnonzero(usable.sum(axis=1) >= self.min_bins)
+        for lo in range(0, todo.size, chunk):
+            rows = todo[lo:lo + chunk]
+            out[:, rows] = self._fit_wear_rows(torque_b[rows], h_b[rows], sig_b[rows],
+                                               usable[rows])
+        return tuple(out)
+
+    def _fit_wear_rows(self, torque_b, h_b, sig_b, usable):
+        """Vectorised body of :meth:`_fit_wear` for windows that all have enough bins."""
         grid = self.tables.wear
         step = np.diff(grid)
-        model = self._hysteresis_table(torque_b)
-        weight = 1.0 / sig_b[:, None] ** 2
-        slope = np.diff(model, axis=1) / step
-        lever = 2.0 * torque_b[:, None]
-        miss = h_b[:, None] - model[:, :-1]
+        torque_b = np.where(usable, torque_b, self.centres)
+        weight = np.where(usable, 1.0 / np.where(usable, sig_b, 1.0) ** 2, 0.0)[..., None]
+        h_b = np.where(usable, h_b, 0.0)[..., None]
+        model = self._hysteresis_table(torque_b.ravel()).reshape(torque_b.shape + grid.shape)
+        slope = np.diff(model, axis=2) / step
+        lever = 2.0 * torque_b[..., None]
+        miss = h_b - model[..., :-1]
         prior = (self.compliance_prior / self.tables.series_stiffness) ** -2
-        a11 = (weight * slope ** 2).sum(axis=0)
-        a12 = (weight * slope * lever).sum(axis=0)
-        a22 = float((weight * lever ** 2).sum()) + prior
-        b1 = (weight * slope * miss).sum(axis=0)
-        b2 = (weight * lever * miss).sum(axis=0)
+        a11 = (weight * slope ** 2).sum(axis=1)
+        a12 = (weight * slope * lever).sum(axis=1)
+        a22 = (weight * lever ** 2).sum(axis=1) + prior
+        b1 = (weight * slope * miss).sum(axis=1)
+        b2 = (weight * lever * miss).sum(axis=1)
         det = a11 * a22 - a12 ** 2
         with np.errstate(invalid='ignore', divide='ignore'):
             move = np.where(det > 0.0, (a22 * b1 - a12 * b2) / det, 0.0)
         move = np.clip(move, 0.0, step)
         comp = (b2 - a12 * move) / a22
-        chi2 = (weight * (miss - slope * move - lever * comp) ** 2).sum(axis=0) + prior * comp ** 2
-        best = int(np.argmin(chi2))
-        wear = float(grid[best] + move[best])
-        m = h_b.size
-        scale = max(1.0, chi2[best] / (m - 1)) if m > 1 else 1.0
-        wear_var = scale * a22 / det[best] if det[best] > 0.0 else math.inf
-        wear_std = math.sqrt(wear_var)
-        lost = float(self.tables.lost_motion(wear))
+        chi2 = ((weight * (miss - slope * move[:, None] - lever * comp[:, None]) ** 2).sum(axis=1)
+                + prior * comp ** 2)
+        best = np.argmin(chi2, axis=1)
+        pick = np.arange(best.size)
+        wear = grid[best] + move[pick, best]
+        m = usable.sum(axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            scale = np.where(m > 1, np.maximum(1.0, chi2[pick, best] / (m - 1)), 1.0)
+            wear_var = np.where(det[pick, best] > 0.0,
+                                scale * a22[pick, 0] / det[pick, best], np.inf)
+        wear_std = np.sqrt(wear_var)
         half = 0.5e-6
-        lo, hi = max(wear - half, grid[0]), min(wear + half, grid[-1])
+        lo, hi = np.maximum(wear - half, grid[0]), np.minimum(wear + half, grid[-1])
         dlm = (self.tables.lost_motion(hi) - self.tables.lost_motion(lo)) / (hi - lo)
-        return wear, wear_std, lost, float(abs(dlm) * wear_std), float(comp[best])
+        return (wear, wear_std, self.tables.lost_motion(wear), np.abs(dlm) * wear_std,
+                comp[pick, best])
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
+
+_BATCH_SAMPLES = 1 << 16
 
 
 def _whole(name, value, lo, hi):
