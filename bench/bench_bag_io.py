@@ -14,6 +14,7 @@ Usage (with the package installed, e.g. ``pip install -e .``)::
 """
 
 import argparse
+import os
 from pathlib import Path
 import sys
 import tempfile
@@ -59,22 +60,22 @@ def make_batch(n, seed=0):
 
 
 def time_write(out_dir, batch):
-    """Write the batch into a bag directory; return seconds."""
-    start = time.perf_counter()
+    """Write the batch into a bag directory; return (wall, CPU) seconds."""
+    start, cpu = time.perf_counter(), time.process_time()
     with BagDirWriter(out_dir, overwrite=True, custom_data={'bench': 'bag_io'}) as writer:
         channel = writer.add_topic('/joint_states', JOINT_STATE)
         writer.write_joint_states(channel, batch)
-    return time.perf_counter() - start
+    return time.perf_counter() - start, time.process_time() - cpu
 
 
 def time_read(out_dir, batch):
-    """Read and decode the JointState topic; return seconds (checks the values)."""
-    start = time.perf_counter()
+    """Read and decode the JointState topic; return (wall, CPU) seconds; checks values."""
+    start, cpu = time.perf_counter(), time.process_time()
     with open_bag(out_dir) as bag:
         got = bag.read_joint_states(['/joint_states'])['/joint_states']
-    seconds = time.perf_counter() - start
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
     assert len(got) == len(batch) and np.array_equal(got.position, batch.position)
-    return seconds
+    return seconds, cpu
 
 
 def time_rosbags(out_dir):
@@ -120,14 +121,19 @@ def main(argv=None):
     n = args.messages
     batch = make_batch(n)
     rows = []
+    load = os.getloadavg()[0]
     with tempfile.TemporaryDirectory(prefix='bench_bag_io_') as tmp:
         out_dir = Path(tmp) / 'bench'
         writes = [time_write(out_dir, batch) for _ in range(args.repeat)]
         size = (out_dir / 'bench_0.mcap').stat().st_size
+        os.sync()  # the bag is read as a recording written earlier, not while it flushes
         reads = [time_read(out_dir, batch) for _ in range(args.repeat)]
-        rows.append(('reducer_twin write (encode + zstd MCAP + metadata.yaml)',
-                     n / writes[0], n / min(writes)))
-        rows.append(('reducer_twin read + decode to arrays', n / reads[0], n / min(reads)))
+        for label, runs in (('reducer_twin write (encode + zstd MCAP + metadata.yaml)', writes),
+                            ('reducer_twin read + decode to arrays', reads)):
+            walls = [wall for wall, _ in runs]
+            rows.append((label, n / walls[0], n / min(walls)))
+            rows.append(('  same, per CPU second (all threads)', n / runs[0][1],
+                         n / min(cpu for _, cpu in runs)))
         if not args.no_baselines:
             seconds, count = time_rosbags(out_dir)
             assert count == n
@@ -144,8 +150,10 @@ def main(argv=None):
         best_text = f'{best:>12,.0f}' if best is not None else f'{"":>12s}'
         print(f'{label:58s} {first:>12,.0f} {best_text}   msg/s')
     if not args.no_baselines:
-        ours = rows[1][1]
-        print(f'read + decode vs rosbags deserialize: {ours / rows[2][1]:.1f}x (first run)')
+        ours = rows[2][1]
+        print(f'read + decode vs rosbags deserialize: {ours / rows[4][1]:.1f}x (first run)')
+    print(f'1-minute load average {load:.2f} before, {os.getloadavg()[0]:.2f} after '
+          f'({os.cpu_count()} cores; other work on the machine slows the wall-clock figures)')
     return 0
 
 
