@@ -38,7 +38,7 @@ _MAX_TEMPLATES_PER_LENGTH = 8
 _INT32_MIN, _INT32_MAX = -2**31, 2**31 - 1
 
 
-@dataclass
+@dataclass(eq=False)
 class JointStateBatch:
     """
     A batch of N JointState messages, as arrays over messages and joints.

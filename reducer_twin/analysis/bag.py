@@ -257,6 +257,7 @@ class Bag:
         """
         names = self._joint_state_topics(topics)
         parts = {name: [] for name in names}
+        rejected = {name: [] for name in names}
         for handle in self._files:
             for batch in handle.iter_batches(names):
                 by_topic = self._split(handle, batch)
@@ -266,12 +267,17 @@ class Bag:
                     if decoded.rejected:
                         keep = np.ones(len(sub), bool)
                         keep[[i for i, _ in decoded.rejected]] = False
-                        self._warn_rejected(handle, name, decoded.rejected)
+                        rejected[name] += [(handle.path, reason) for _, reason
+                                           in decoded.rejected]
                         decoded.log_time_ns = sub.log_time_ns[keep]
                     else:
                         decoded.log_time_ns = sub.log_time_ns
                     parts[name].append(decoded)
             self._take_warnings(handle)
+        for name, problems in rejected.items():
+            if problems:
+                self._warn(f'{len(problems)} malformed JointState message(s) on {name} '
+                           f'skipped; the first: {problems[0][1]}', problems[0][0])
         out = {}
         for name in names:
             batch = concat_batches(parts[name]) if parts[name] else empty_batch()
@@ -328,10 +334,6 @@ class Bag:
         for warning in handle.warnings:
             if warning not in self.warnings:
                 self.warnings.append(warning)
-
-    def _warn_rejected(self, handle, topic, rejected):
-        self._warn(f'{len(rejected)} malformed JointState message(s) on {topic} skipped; '
-                   f'first: {rejected[0][1]}', handle.path)
 
     def _collect(self):
         details = {}

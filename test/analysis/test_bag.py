@@ -373,3 +373,21 @@ def test_a_split_bag_with_one_unreadable_file_reads_the_others_with_a_warning(tm
         assert any('split_0.mcap is neither MCAP nor sqlite3' in str(w) for w in bag.warnings)
         np.testing.assert_array_equal(bag.read_joint_states()['/joint_states'].stamps_ns,
                                       _batch(100, 100).stamps_ns)
+
+
+def test_malformed_jointstate_messages_in_a_bag_are_skipped_with_one_warning(tmp_path):
+    batch = _batch(100)
+    buffer, offsets = encode_joint_states(batch.stamps_ns, batch.names, batch.position)
+    with McapBagWriter(tmp_path / 'bad.mcap') as writer:
+        channel = writer.add_topic('/joint_states', JOINT_STATE)
+        for i in range(100):
+            payload = buffer[offsets[i]:offsets[i + 1]].tobytes()
+            writer.write(channel, int(batch.stamps_ns[i]), payload[:30] if i % 10 == 3
+                         else payload)
+    with open_bag(tmp_path / 'bad.mcap') as bag:
+        got = bag.read_joint_states()['/joint_states']
+        (warning,) = bag.warnings
+    assert len(got) == 90
+    assert '10 malformed JointState message(s) on /joint_states skipped' in str(warning)
+    np.testing.assert_array_equal(got.position, np.delete(batch.position, np.arange(3, 100, 10),
+                                                          axis=0))
