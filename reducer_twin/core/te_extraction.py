@@ -33,8 +33,15 @@ from .wear import wear_rate
 
 TWO_PI = 2.0 * math.pi
 
-_SIGMA_FLOOR = 2.5e-7
-"""Floor on the standard error of a bin's TE line [rad] (about 0.05 arcsec)."""
+_MODEL_SIGMA = 3e-6
+"""
+Model error of one bin's hysteresis width [rad] (0.3 arcsec), added in quadrature.
+
+What the period-mean table leaves out: mesh ripple (below 0.3 arcsec peak to
+peak) and interpolation (below 0.1 arcsec), and harmonics that leak into a
+bin when they cannot be separated from the torque lines. Without it, bins
+with many samples would claim a precision the model does not have.
+"""
 
 _MIN_IDENTIFIABILITY = 1e-3
 """
@@ -792,7 +799,7 @@ class WindowAnalyzer:
             spread = np.where(sloped, lever ** 2 / np.where(sloped, s_uu, 1.0), 0.0)
             var = noise[:, None] * (1.0 / count + spread).sum(axis=2)
         width = at_eval[..., 1] - at_eval[..., 0]
-        std = np.maximum(np.sqrt(var), _SIGMA_FLOOR)
+        std = np.sqrt(var + _MODEL_SIGMA ** 2)
         usable &= np.isfinite(width) & np.isfinite(std)
         return u_eval + self.centres, width, std, usable
 
