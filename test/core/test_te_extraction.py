@@ -1,0 +1,330 @@
+"""TE from encoder pairs and the window features, checked against the joint simulator."""
+
+from functools import lru_cache
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+import pytest
+from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.simulator import JointSimulator, SimConfig
+from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.transmission_error import lost_motion, model_tables
+from reducer_twin.core.units import ARCSEC, DEG, UM
+from reducer_twin.core.wear import wear_rate
+
+PARAMS = ReducerParams()
+RATIO = total_ratio(PARAMS.geometry)   # 81, paper Table 4
+TWO_PI = 2.0 * math.pi
+
+
+@lru_cache(maxsize=None)
+def simulated(profile='robot', load='gravity', wear=8e-6, samples=40000, exact=True, seed=5,
+              aging=0.0, scale=1.0):
+    """Simulate one joint (cached: several tests read the same stream)."""
+    cfg = SimConfig(profile=profile, load=load, initial_wear_m=wear, aging_factor=aging,
+                    wear_rate_scale=scale, exact_mesh=exact, seed=seed, link_zero_offset_rad=0.4)
+    sim = JointSimulator(PARAMS, cfg)
+    return sim, sim.step(samples)
+
+
+def analyse(batch, **kw):
+    """Extract TE (stamps taken as exact) and return all window features."""
+    stream = compute_te(batch.t, batch.motor_angle, batch.t, batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, **kw)
+    return analyzer.update(stream, batch.effort, batch.link_velocity) + analyzer.flush()
+
+
+def rms_without_offset(err):
+    """RMS after removing the constant (the encoders' unknown zero offset)."""
+    err = err[np.isfinite(err)]
+    return float(np.sqrt(np.mean((err - err.mean()) ** 2)))
+
+
+# -- compute_te -------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('profile', ['robot', 'paper'])
+def test_te_matches_the_simulators_true_te_within_1_arcsec_rms(profile):
+    # Issue floor 1 arcsec; expected about 0.2 arcsec from quantisation (0.15 arcsec link
+    # counts) and the 1e-6 rad link noise.
+    sim, b = simulated(profile=profile)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO,
+                        link_time_offset_s=sim.config.time_offset_s)
+    assert stream.dropped <= 1                # the last stamp + offset is past the motor stream
+    assert rms_without_offset(stream.te - b.true_te) < 0.3 * ARCSEC
+
+
+def test_fitted_time_offset_is_the_simulated_one_and_removing_it_leaves_the_true_te():
+    sim, b = simulated()
+    feats = analyse(b)
+    delta = np.median([f.time_offset_s for f in feats])
+    # 50 us offset seen through 16 arcsec at 90 deg/s and noise of 0.2 arcsec: within 1 us.
+    assert delta == pytest.approx(sim.config.time_offset_s, abs=1e-6)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    assert rms_without_offset(stream.te - b.true_te) > 3.0 * ARCSEC   # the offset matters
+    assert rms_without_offset(stream.te - delta * b.link_velocity - b.true_te) < 0.3 * ARCSEC
+
+
+def wrapped(angle, how):
+    """Wrap an angle stream as some encoders report it."""
+    if how == 'signed':
+        return np.mod(angle + math.pi, TWO_PI) - math.pi
+    if how == 'positive':
+        return np.mod(angle, TWO_PI)
+    return angle
+
+
+@settings(max_examples=25)
+@given(motor_wrap=st.sampled_from(['none', 'signed', 'positive']),
+       link_wrap=st.sampled_from(['none', 'signed', 'positive']),
+       holes=st.lists(st.tuples(st.integers(0, 5999), st.integers(1, 400)), max_size=4))
+def test_te_is_invariant_to_wrapping_the_input_angles_even_across_gaps(
+        motor_wrap, link_wrap, holes):
+    _, b = simulated(samples=6000, exact=False)
+    keep = np.ones(b.t.size, dtype=bool)
+    for start, length in holes:
+        keep[start:start + length] = False
+    t, motor, link = b.t[keep], b.motor_angle[keep], b.link_angle[keep]
+    reference = compute_te(t, motor, t, link, RATIO)
+    other = compute_te(t, wrapped(motor, motor_wrap), t, wrapped(link, link_wrap), RATIO)
+    np.testing.assert_array_equal(other.valid, reference.valid)
+    # Wrapping costs rounding of angles of up to 1e3 rad: 1e-12 rad is far below a count.
+    np.testing.assert_allclose(other.te, reference.te, rtol=0, atol=1e-9)
+    turns = (other.output_angle - reference.output_angle) / TWO_PI
+    np.testing.assert_allclose(turns, np.round(turns), atol=1e-9)
+
+
+def test_motor_angle_is_interpolated_at_link_stamps_that_differ_from_its_own():
+    # Linear motion: linear interpolation is exact, so TE is the link's own error.
+    t_motor = np.arange(0.0, 1.0, 1e-3)
+    t_link = np.arange(0.0004, 0.99, 1e-3)
+    speed = 90.0 * DEG
+    te_true = 1e-4 * np.sin(3.0 * t_link)
+    stream = compute_te(t_motor, RATIO * speed * t_motor, t_link, speed * t_link + te_true, RATIO)
+    assert stream.valid.all()
+    np.testing.assert_allclose(stream.te, te_true - te_true[0] + stream.te[0], atol=1e-12)
+    np.testing.assert_allclose(stream.output_angle, speed * t_link + te_true, atol=1e-12)
+
+
+def test_link_samples_inside_a_motor_gap_are_dropped_not_interpolated():
+    t = np.arange(0.0, 0.1, 1e-3)
+    motor_keep = (t < 0.030) | (t > 0.050)            # a 21 ms hole in the motor stream
+    t_link = t + 0.0005
+    stream = compute_te(t[motor_keep], 81.0 * t[motor_keep], t_link, t_link, RATIO,
+                        max_gap_s=0.005)
+    inside = (t_link > 0.029) & (t_link < 0.051)
+    assert not stream.valid[inside].any()
+    assert stream.valid[~inside & (t_link < t[-1])].all()
+    assert stream.link_uncovered == np.count_nonzero(~stream.valid)
+    assert np.isnan(stream.te[inside]).all()
+
+
+def test_nan_angles_and_non_increasing_stamps_are_dropped_and_counted():
+    t = np.arange(10) * 1e-3
+    motor = np.arange(10) * 0.1
+    link = motor / RATIO
+    t_link = t.copy()
+    t_link[4] = t_link[3]            # duplicate stamp
+    t_link[7] = 0.0                  # stamp going back
+    link = link.copy()
+    link[2] = np.nan
+    motor = motor.copy()
+    motor[5] = np.inf
+    stream = compute_te(t, motor, t_link, link, RATIO)
+    assert (stream.link_nonfinite, stream.link_unordered) == (1, 2)
+    assert (stream.motor_nonfinite, stream.motor_unordered) == (1, 0)
+    assert not stream.valid[[2, 4, 7]].any()
+    assert stream.valid[[0, 1, 3, 5, 6, 8, 9]].all()   # sample 5 interpolated over 2 ms
+    np.testing.assert_allclose(stream.te[stream.valid], 0.0, atol=1e-15)
+    assert stream.dropped == 3 and len(stream) == 10
+
+
+def test_an_empty_stream_gives_an_empty_te():
+    stream = compute_te([], [], [], [], RATIO)
+    assert len(stream) == 0 and stream.dropped == 0
+
+
+BAD_ARRAYS = [
+    ('motor stamps and angles must have the same length', ([0.0, 1.0], [0.0], [0.0], [0.0])),
+    ('link stamps and angles must have the same length', ([0.0], [0.0], [0.0, 1.0], [0.0])),
+    ('must be 1-D', (np.zeros((2, 2)), np.zeros((2, 2)), [0.0], [0.0])),
+    ('must be numeric', (['a'], [0.0], [0.0], [0.0])),
+]
+
+
+@pytest.mark.parametrize('match, arrays', BAD_ARRAYS)
+def test_malformed_arrays_raise_invalid_input(match, arrays):
+    with pytest.raises(InvalidInput, match=match):
+        compute_te(*arrays, RATIO)
+
+
+@pytest.mark.parametrize('kw, match', [
+    ({'ratio': 0.0}, 'ratio must be finite and non-zero'),
+    ({'ratio': float('nan')}, 'ratio'),
+    ({'max_gap_s': 0.0}, r'max_gap_s must be > 0 s, got 0.0'),
+    ({'max_gap_s': -1.0}, 'max_gap_s'),
+    ({'link_time_offset_s': float('inf')}, 'link_time_offset_s must be finite s'),
+])
+def test_out_of_range_settings_raise_invalid_parameter(kw, match):
+    args = {'ratio': RATIO, **kw}
+    with pytest.raises(InvalidParameter, match=match):
+        compute_te([0.0, 1e-3], [0.0, 0.1], [0.0, 1e-3], [0.0, 0.001],
+                   args.pop('ratio'), **args)
+
+
+# -- WindowAnalyzer ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize('wear', [2e-6, 10e-6, 25e-6])
+def test_lost_motion_is_recovered_within_2_percent_on_the_robot_profile(wear):
+    # Exact mesh in the simulator, tables in the analysis; bench: < 1 % at 0-30 um.
+    _, b = simulated(wear=wear, samples=30000)
+    feats = analyse(b)
+    lm = np.array([f.lost_motion for f in feats])
+    usable = np.isfinite(lm)
+    assert usable.sum() >= 8
+    truth = lost_motion(wear, PARAMS)
+    assert np.median(lm[usable]) == pytest.approx(truth, rel=0.02)
+    # The reported standard error is of the order of the window-to-window scatter (which
+    # is about 1.5 times larger: harmonics that leak into the bins differ between windows).
+    std = np.array([f.lost_motion_std for f in feats])[usable]
+    assert 0.3 < np.std(lm[usable]) / np.median(std) < 3.0
+    wear_fit = np.median([f.wear_fit for f in feats if np.isfinite(f.wear_fit)])
+    assert wear_fit == pytest.approx(wear, abs=0.3 * UM)
+
+
+def test_hysteresis_widths_follow_the_model_at_the_true_wear():
+    _, b = simulated(wear=15e-6, samples=20000)
+    tables = model_tables(PARAMS)
+    for f in analyse(b):
+        if f.hysteresis.size:
+            model = tables.hysteresis(f.hysteresis_torque, 15e-6)
+            # Unidentified 1x harmonic (8.4 arcsec) leaks in proportion to |T|: 3 % of H.
+            np.testing.assert_allclose(f.hysteresis, model, rtol=0.03, atol=1.0 * ARCSEC)
+            assert (f.hysteresis_std > 0.0).all()
+
+
+def test_constant_speed_and_load_give_orders_but_no_lost_motion_or_time_offset():
+    _, b = simulated(profile='paper', load='constant', samples=24000)
+    feats = analyse(b)
+    assert {f.end_reason for f in feats[:-1]} == {'revolution'}
+    m = PARAMS.manufacturing
+    for f in feats[:-1]:
+        assert math.isnan(f.lost_motion) and math.isnan(f.lost_motion_std)
+        assert math.isnan(f.time_offset_s)        # omega is constant: an offset like any other
+        # Fitted against the output angle over one revolution: within 0.3 arcsec of the
+        # manufacturing harmonics (mesh ripple 0.3 arcsec p-p, noise 0.2 arcsec).
+        assert f.orders[1] == pytest.approx(m.order1_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[2] == pytest.approx(m.order2_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[40] == pytest.approx(m.crank_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[39] < 0.3 * ARCSEC
+        assert f.te_max >= f.te_mean >= f.te_min and f.te_pp == f.te_max - f.te_min
+
+
+def test_loaded_mean_te_is_the_models_mean_te_under_the_constant_load():
+    sim, b = simulated(profile='paper', load='constant', samples=24000)
+    f = analyse(b)[2]
+    expected = float(model_tables(PARAMS).mean_te(sim.config.load_torque_nm, 8e-6))
+    offset = sim.config.time_offset_s * 90.0 * DEG       # not identified at constant speed
+    stream = compute_te(b.t[:10], b.motor_angle[:10], b.t[:10], b.link_angle[:10], RATIO)
+    zero = stream.te[0] - b.true_te[0] - offset          # the encoders' constant offset
+    # Table interpolation and mesh ripple: 0.5 arcsec.
+    assert f.loaded_mean_te - offset - zero == pytest.approx(expected, abs=0.5 * ARCSEC)
+
+
+def test_windows_are_revolutions_when_turning_and_durations_otherwise():
+    _, robot = simulated(samples=20000)
+    feats = analyse(robot)
+    durations = np.array([f.t_end - f.t_start for f in feats[:-1]])
+    assert {f.end_reason for f in feats[:-1]} <= {'duration', 'motion'}
+    # t_end is the last sample's stamp: a 2 s window of 1 kHz samples spans 1.999 s.
+    assert np.all(durations >= 2.0 - 2e-3) and np.median(durations) < 2.01
+    _, paper = simulated(profile='paper', load='constant', samples=24000)
+    feats = analyse(paper, window='duration', window_s=1.5)
+    assert [f.samples for f in feats] == [1500] * 16
+    assert feats[-1].end_reason == 'flush'
+
+
+def test_windows_never_span_a_gap():
+    _, b = simulated(samples=12000, exact=False)
+    keep = np.ones(b.t.size, dtype=bool)
+    keep[3000:3100] = False
+    stream = compute_te(b.t[keep], b.motor_angle[keep], b.t[keep], b.link_angle[keep], RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    feats = analyzer.update(stream, b.effort[keep], b.link_velocity[keep]) + analyzer.flush()
+    assert any(f.end_reason == 'gap' for f in feats)
+    for f in feats:
+        assert not (f.t_start < 3.0 < f.t_end)
+    # Duty counts covered time only: 12 s less the 0.1 s hole.
+    assert sum(f.duty.duration_s for f in feats) == pytest.approx(11.9 - 1e-3, abs=2e-3)
+
+
+@settings(max_examples=5)
+@given(chunks=st.lists(st.integers(1, 4000), min_size=1, max_size=12))
+def test_feeding_the_stream_in_chunks_gives_the_same_windows(chunks):
+    _, b = simulated(samples=16000, exact=False)
+    whole = analyse(b)
+    analyzer = WindowAnalyzer(PARAMS)
+    feats, start = [], 0
+    for size in chunks + [b.t.size]:
+        sl = slice(start, start + size)
+        stream = compute_te(b.t[sl], b.motor_angle[sl], b.t[sl], b.link_angle[sl], RATIO)
+        feats += analyzer.update(stream, b.effort[sl], b.link_velocity[sl])
+        start += size
+    feats += analyzer.flush()
+    assert [(f.t_start, f.samples) for f in feats] == [(f.t_start, f.samples) for f in whole]
+    for a, c in zip(feats, whole):
+        np.testing.assert_allclose([a.lost_motion, a.te_mean, a.duty.archard_increment],
+                                   [c.lost_motion, c.te_mean, c.duty.archard_increment],
+                                   rtol=1e-9)
+
+
+def test_duty_integrates_the_archard_rate_the_simulator_wears_by():
+    # Little wear: the run-in factor stays within 1e-3 of 1, so the simulator's wear grows
+    # by the run-in-free Archard integral times its hidden rate scale.
+    sim, b = simulated(samples=16000, exact=False, aging=3600.0, scale=2.0, wear=0.0)
+    analyzer = WindowAnalyzer(PARAMS, aging_factor=3600.0)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    feats = analyzer.update(stream, b.effort, b.link_velocity) + analyzer.flush()
+    increment = sum(f.duty.archard_increment for f in feats)
+    grown = sim.truth().wear - b.true_wear[0]
+    assert 2.0 * increment == pytest.approx(grown, rel=0.01)
+    assert sum(f.duty.exposure_s for f in feats) == pytest.approx(3600.0 * b.t[-1])
+    d = feats[3].duty
+    assert d.max_abs_torque >= d.cubic_mean_torque > 0.0
+    assert d.mean_speed == d.mean_abs_speed
+
+
+def test_cubic_mean_torque_and_mean_speed_of_a_constant_duty_are_its_values():
+    sim, b = simulated(profile='paper', load='constant', samples=24000)
+    d = analyse(b)[1].duty
+    # Effort noise 2 N*m (0.4 %) moves the 10/3 power mean by far less than 0.1 %.
+    assert d.cubic_mean_torque == pytest.approx(sim.config.load_torque_nm, rel=1e-3)
+    assert d.mean_abs_speed == pytest.approx(90.0 * DEG, rel=1e-3)
+    rate = float(wear_rate(sim.config.load_torque_nm, 90.0 * DEG, 0.0, PARAMS))
+    assert d.archard_increment == pytest.approx(rate * d.duration_s, rel=5e-3)
+
+
+def test_effort_or_velocity_of_the_wrong_length_raise_invalid_input():
+    stream = compute_te([0.0, 1e-3], [0.0, 0.1], [0.0, 1e-3], [0.0, 0.001], RATIO)
+    with pytest.raises(InvalidInput, match='effort and velocity must match the 2 TE samples'):
+        WindowAnalyzer(PARAMS).update(stream, [1.0], [0.0, 0.0])
+
+
+@pytest.mark.parametrize('kw, match', [
+    ({'window': 'hourly'}, "window must be one of 'auto'"),
+    ({'window_s': 0.0}, 'window_s must be > 0 s'),
+    ({'max_window_s': 1.0}, 'max_window_s must be >= window_s'),
+    ({'aging_factor': -1.0}, 'aging_factor must be >= 0'),
+    ({'torque_bins': 0}, 'torque_bins must be a whole number in'),
+    ({'min_bin_samples': 2.5}, 'min_bin_samples'),
+    ({'bin_range': (0.5, 0.1)}, 'bin_range must be 0 < low < high'),
+    ({'bin_range': 3}, 'bin_range'),
+    ({'orders': (0, 2)}, 'orders'),
+    ({'compliance_prior': 0.0}, 'compliance_prior must be > 0'),
+])
+def test_analyzer_settings_out_of_range_raise_invalid_parameter(kw, match):
+    with pytest.raises(InvalidParameter, match=match):
+        WindowAnalyzer(PARAMS, **kw)
