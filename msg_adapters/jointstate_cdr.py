@@ -519,37 +519,46 @@ class _Pieces:
         self.items.append((index, layout, stamps, values))
 
 
+def _parse_at(buf, starts, i, length, pieces, errors):
+    """Parse message ``i`` fully; return its layout, or None after rejecting it."""
+    start = int(starts[i])
+    try:
+        return _parse_layout(buf[start:start + length].tobytes(),
+                             f'message {i} (buffer byte {start})')
+    except InvalidInput as err:
+        if errors == 'raise':
+            raise
+        pieces.rejected.append((int(i), str(err)))
+        return None
+
+
 def _decode_length_group(buf, starts, index, length, pieces, errors):
+    """Decode messages of one length: a few vectorised template passes, then one by one."""
     remaining = index
-    templates = 0
-    while remaining.size:
-        first = int(remaining[0])
-        start = int(starts[first])
-        payload = buf[start:start + length].tobytes()
-        try:
-            layout = _parse_layout(payload, f'message {first} (buffer byte {start})')
-        except InvalidInput as err:
-            if errors == 'raise':
-                raise
-            pieces.rejected.append((first, str(err)))
-            remaining = remaining[1:]
+    k = 0  # position in ``remaining`` of the next template candidate
+    passes = 0
+    while k < remaining.shape[0] and passes < _MAX_TEMPLATES_PER_LENGTH:
+        layout = _parse_at(buf, starts, remaining[k], length, pieces, errors)
+        if layout is None:
+            k += 1
             continue
-        templates += 1
-        if templates > _MAX_TEMPLATES_PER_LENGTH:
-            # Irregular traffic: no template repeats enough to pay for a vectorised pass.
-            rows = _rows(buf, starts[remaining[:1]], length)
-            pieces.add(remaining[:1], layout, *_read_group(rows, layout))
-            remaining = remaining[1:]
-            continue
-        rows = _rows(buf, starts[remaining], length)
+        passes += 1
+        candidates = remaining[k:]
+        rows = _rows(buf, starts[candidates], length)
         # Padding included, one comparison per gap between stamp and float arrays; rows
         # that differ there (padding may hold garbage) get the exact check.
         ok = _matches(rows, rows[0], layout.coarse)
         if not ok.all():
             ok[~ok] = _matches(rows[~ok], rows[0], layout.spans)
-        matched = remaining[ok]
-        pieces.add(matched, layout, *_read_group(rows[ok] if not ok.all() else rows, layout))
-        remaining = remaining[~ok]
+            rows = rows[ok]
+        pieces.add(candidates[ok], layout, *_read_group(rows, layout))
+        remaining, k = candidates[~ok], 0
+    # Irregular traffic: no template repeats enough to pay for another vectorised pass.
+    for i in remaining[k:]:
+        layout = _parse_at(buf, starts, i, length, pieces, errors)
+        if layout is not None:
+            rows = _rows(buf, starts[[i]], length)
+            pieces.add(np.array([i]), layout, *_read_group(rows, layout))
 
 
 def decode_joint_states(payloads, offsets=None, lengths=None, errors='raise'):
