@@ -11,10 +11,17 @@ metadata indexes with summary offsets and a footer. Channel metadata holds
 ``offered_qos_profiles`` (YAML, metadata version 9: policies as strings) and
 ``topic_type_hash`` (``RIHS01_...``).
 
-Speed comes from treating messages as arrays: ``write_batch`` fills whole chunks of
-message records with numpy column writes into a reused buffer, and the reader hands out
-each decompressed chunk as one buffer plus offset and length arrays, gathered with
-numpy from the Message Index records or from runs of equal-length records.
+Where this writer differs from ``ros2 bag record``, on purpose: the Header names this
+library, not libmcap; chunk CRCs (rosbag2 sets ``noChunkCRC``) and the data-section CRC
+are written, so corruption is detected; chunks are zstd-compressed by default (rosbag2's
+default is none; level 1 is libmcap's ``Zstd`` default) and ``compression='none'`` gives
+rosbag2's plain chunks. Message sequence numbers are 0, as rosbag2 on Jazzy writes them.
+
+Speed comes from treating messages as arrays: ``write_batch`` and
+``write_template_batch`` fill whole chunks of message records with numpy column writes
+into reused buffers while earlier chunks compress on worker threads, and the reader
+hands out each decompressed chunk as one buffer plus offset and length arrays, gathered
+with numpy from runs of equal-length records or from the Message Index records.
 
 A file without a usable summary (a recording cut short) is scanned record by record;
 what is readable is returned and the reader's ``warnings`` say where reading stopped.
