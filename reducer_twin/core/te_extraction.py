@@ -125,10 +125,17 @@ def _as_stream(t, angle, name):
 
 
 def _usable(t, angle):
-    """Mask of finite samples whose stamp is later than every earlier stamp."""
+    """
+    Find finite samples whose stamp is later than every earlier stamp.
+
+    Returns the mask (None when every sample is usable) and the counts of
+    non-finite and of out-of-order samples.
+    """
     finite = np.isfinite(t) & np.isfinite(angle)
+    if finite.all() and (t.size < 2 or (np.diff(t) > 0.0).all()):
+        return None, 0, 0
     tf = np.where(finite, t, -np.inf)
-    previous = np.concatenate([[-np.inf], np.maximum.accumulate(tf)[:-1]]) if t.size else tf
+    previous = np.concatenate([[-np.inf], np.maximum.accumulate(tf)[:-1]])
     ordered = tf > previous
     keep = finite & ordered
     return keep, int(np.count_nonzero(~finite)), int(np.count_nonzero(finite & ~ordered))
@@ -139,15 +146,19 @@ def _unwrap(t, angle, max_gap):
     Unwrap within runs of samples closer than ``max_gap``; never across a gap.
 
     Whole turns are counted as integers, so an already unwrapped stream
-    comes back bit-identical. Returns the angle and the run index per sample.
+    comes back bit-identical. Returns the angle and the run index per sample
+    (None when there is no gap: one run).
     """
     if angle.size < 2:
-        return angle.copy(), np.zeros(angle.size, dtype=np.int64)
+        return angle, None
+    step = np.diff(angle)
     gap = np.diff(t) > max_gap
-    jumps = np.where(gap, 0.0, np.round(np.diff(angle) / TWO_PI)).astype(np.int64)
-    turns = np.concatenate([[0], np.cumsum(jumps)])
-    run = np.concatenate([[0], np.cumsum(gap)])
-    return angle - TWO_PI * turns, run
+    if np.abs(step).max() >= np.pi:
+        jumps = np.where(gap, 0.0, np.round(step / TWO_PI)).astype(np.int64)
+        angle = angle - TWO_PI * np.concatenate([[0], np.cumsum(jumps)])
+    if not gap.any():
+        return angle, None
+    return angle, np.concatenate([[0], np.cumsum(gap)])
 
 
 def _turns(delta, ratio):
@@ -155,6 +166,15 @@ def _turns(delta, ratio):
     link_turns = np.round(delta / TWO_PI)
     motor_turns = np.round((delta - TWO_PI * link_turns) * ratio / TWO_PI)
     return link_turns.astype(np.int64), motor_turns.astype(np.int64)
+
+
+def _run_starts(sel, *runs):
+    """Positions in ``sel`` where a run of any of ``runs`` (None: one run) begins, after 0."""
+    change = np.zeros(max(sel.size - 1, 0), dtype=bool)
+    for run in runs:
+        if run is not None:
+            change |= np.diff(run[sel]) != 0
+    return np.flatnonzero(change) + 1
 
 
 def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
@@ -218,46 +238,53 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
 
     keep_m, m_nonfinite, m_unordered = _usable(tm, am)
     keep_l, l_nonfinite, l_unordered = _usable(tl, al)
-    tm, am = tm[keep_m], am[keep_m]
-    idx_l = np.flatnonzero(keep_l)
-    tq = tl[idx_l] + offset
+    if keep_m is not None:
+        tm, am = tm[keep_m], am[keep_m]
+    idx_l = np.arange(tl.size) if keep_l is None else np.flatnonzero(keep_l)
+    tq, al_k = (tl, al) if keep_l is None else (tl[idx_l], al[idx_l])
+    if offset != 0.0:
+        tq = tq + offset
     am, run_m = _unwrap(tm, am, max_gap_s)
-    al_u, run_l = _unwrap(tl[idx_l], al[idx_l], max_gap_s)
+    al_u, run_l = _unwrap(tq, al_k, max_gap_s)
 
-    te = np.full(tl.size, np.nan)
-    out = np.full(tl.size, np.nan)
-    valid = np.zeros(tl.size, dtype=bool)
     if tm.size == 0 or idx_l.size == 0:
-        return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
-                        l_nonfinite, l_unordered, idx_l.size, 0)
+        empty = np.full(tl.size, np.nan)
+        return TEStream(tl.copy(), empty, empty.copy(), np.zeros(tl.size, dtype=bool),
+                        max_gap_s, m_nonfinite, m_unordered, l_nonfinite, l_unordered,
+                        int(idx_l.size), 0)
     if tq.size == tm.size and np.array_equal(tq, tm):
         # Shared stamps (one JointState carries both encoders): nothing to interpolate.
-        motor_at, run_at, ok = am, run_m, np.ones(tq.size, dtype=bool)
+        motor_at, run_at, ok = am, run_m, None
     else:
         motor_at, run_at, ok = _interpolate(tm, am, run_m, tq, max_gap_s)
     raw = al_u - motor_at / ratio
 
-    sel = np.flatnonzero(ok)
-    raw_ok, corrections = raw[sel], 0
-    link_turns = np.zeros(sel.size, dtype=np.int64)
-    motor_turns = np.zeros(sel.size, dtype=np.int64)
+    sel = np.arange(raw.size) if ok is None else np.flatnonzero(ok)
+    corrections = 0
     if sel.size:
+        raw_ok = raw if ok is None else raw[sel]
         # A new run of either stream may start with unknown whole turns: keep TE continuous.
-        new_run = np.concatenate([[False], (np.diff(run_l[sel]) != 0)
-                                  | (np.diff(run_at[sel]) != 0)])
-        delta = np.concatenate([[raw_ok[0]], np.diff(raw_ok)])
-        lt, mt = _turns(delta, ratio)
-        lt[1:] *= new_run[1:]
-        mt[1:] *= new_run[1:]
-        corrections = int(np.count_nonzero((lt[1:] != 0) | (mt[1:] != 0)))
-        link_turns = np.cumsum(lt)
-        motor_turns = np.cumsum(mt)
         # The first sample only fixes the TE's constant; the output angle keeps its turns.
-        gap_link_turns = link_turns - lt[0]
-        rows = idx_l[sel]
-        te[rows] = raw_ok - TWO_PI * link_turns - TWO_PI * motor_turns / ratio
-        out[rows] = al_u[sel] - TWO_PI * gap_link_turns
-        valid[rows] = True
+        starts = _run_starts(sel, run_l, run_at)
+        lt, mt = _turns(np.concatenate([raw_ok[:1], raw_ok[starts] - raw_ok[starts - 1]]),
+                        ratio)
+        corrections = int(np.count_nonzero((lt[1:] != 0) | (mt[1:] != 0)))
+        if starts.size:
+            lengths = np.diff(np.concatenate([[0], starts, [sel.size]]))
+            link_turns = np.repeat(np.cumsum(lt), lengths)
+            motor_turns = np.repeat(np.cumsum(mt), lengths)
+        else:
+            link_turns, motor_turns = lt[0], mt[0]
+        te_ok = raw_ok - TWO_PI * link_turns - TWO_PI * motor_turns / ratio
+        out_ok = (al_u if ok is None else al_u[sel]) - TWO_PI * (link_turns - lt[0])
+    rows = idx_l[sel]
+    if rows.size == tl.size:
+        te, out, valid = te_ok, np.asarray(out_ok, dtype=float), np.ones(tl.size, dtype=bool)
+    else:
+        te, out = np.full(tl.size, np.nan), np.full(tl.size, np.nan)
+        valid = np.zeros(tl.size, dtype=bool)
+        if rows.size:
+            te[rows], out[rows], valid[rows] = te_ok, out_ok, True
     return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
                     l_nonfinite, l_unordered, int(idx_l.size - sel.size), corrections)
 
@@ -278,7 +305,9 @@ def _interpolate(tm, am, run_m, tq, max_gap_s):
     with np.errstate(divide='ignore', invalid='ignore'):
         frac = np.where(on0 | on1, 0.0, (tq - tm[i0]) / (tm[i1] - tm[i0]))
     motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
-    run_at = np.where(on1 & ~on0, run_m[i1], run_m[i0])
+    # A run id per query: the motor run it reads from; a bridged gap always starts a new one.
+    base = run_m if run_m is not None else np.zeros(tm.size, dtype=np.int64)
+    run_at = np.where(on1 & ~on0, base[i1], base[i0])
     return motor_at, run_at, ok
 
 
@@ -501,6 +530,7 @@ class WindowAnalyzer:
         self._pool_raw = np.zeros(n_par)
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._last_t = None
+        self._aliased = False
         self.ignored_samples = 0
 
     def update(self, stream, effort, velocity):
@@ -537,7 +567,13 @@ class WindowAnalyzer:
         if self._last_t is not None:
             use &= stream.t > self._last_t
         self.ignored_samples += int(np.count_nonzero(stream.valid & ~use))
-        t = stream.t[use]
+        if use.all():
+            def pick(a):
+                return a
+        else:
+            def pick(a):
+                return a[use]
+        t = pick(stream.t)
         if t.size:
             previous = np.concatenate([[np.nan if self._last_t is None else self._last_t],
                                        t[:-1]])
@@ -545,10 +581,12 @@ class WindowAnalyzer:
             gap = step > stream.max_gap_s
             dt = np.where(step <= stream.max_gap_s, step, 0.0)
             self._last_t = float(t[-1])
-            new = {'t': t, 'te': stream.te[use], 'theta': stream.output_angle[use],
-                   'torque': effort[use], 'speed': velocity[use], 'dt': dt,
+            new = {'t': t, 'te': pick(stream.te), 'theta': pick(stream.output_angle),
+                   'torque': pick(effort), 'speed': pick(velocity), 'dt': dt,
                    'gap': gap.astype(float)}
-            self._buf = {k: np.concatenate([self._buf[k], new[k]]) for k in _BUFFER}
+            self._buf = {k: np.concatenate([self._buf[k], new[k]]) if self._buf[k].size
+                         else new[k] for k in _BUFFER}
+            self._aliased = True
         return self._emit(final=False)
 
     def flush(self):
@@ -568,6 +606,10 @@ class WindowAnalyzer:
     def _emit(self, final):
         cuts = self._cut(final)
         if not cuts:
+            if self._aliased:
+                # The buffer must not alias arrays the caller may reuse.
+                self._buf = {k: v.copy() for k, v in self._buf.items()}
+                self._aliased = False
             return []
         out, first = [], 0
         # Batches of windows of about _BATCH_SAMPLES samples keep the temporaries small.
@@ -581,7 +623,8 @@ class WindowAnalyzer:
             out += self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
             first = last
         end = cuts[-1][1]
-        self._buf = {k: v[end:] for k, v in self._buf.items()}
+        self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
+        self._aliased = False
         return out
 
     def _cut(self, final):

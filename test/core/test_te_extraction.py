@@ -328,3 +328,18 @@ def test_effort_or_velocity_of_the_wrong_length_raise_invalid_input():
 def test_analyzer_settings_out_of_range_raise_invalid_parameter(kw, match):
     with pytest.raises(InvalidParameter, match=match):
         WindowAnalyzer(PARAMS, **kw)
+
+
+def test_the_analyzer_keeps_its_own_copy_of_samples_it_buffers():
+    _, b = simulated(samples=6000, exact=False)
+    analyzer = WindowAnalyzer(PARAMS)
+    feats = []
+    for sl in (slice(0, 1000), slice(1000, 6000)):   # no window ends in the first part
+        stream = compute_te(b.t[sl], b.motor_angle[sl], b.t[sl], b.link_angle[sl], RATIO)
+        effort, speed = b.effort[sl].copy(), b.link_velocity[sl].copy()
+        feats += analyzer.update(stream, effort, speed)
+        effort[:] = 0.0                               # a caller reusing its arrays
+        speed[:] = 0.0
+    feats += analyzer.flush()
+    reference = analyse(b)
+    assert [f.duty.max_abs_torque for f in feats] == [f.duty.max_abs_torque for f in reference]
