@@ -10,7 +10,8 @@ For a few seeds, wears and profiles, simulates a joint at fixed wear
   offset given to ``compute_te`` and (b) with it left out and the fitted
   ``omega·delta`` term removed afterwards;
 * the median lost motion of the windows against the truth, its spread over
-  windows and the mean reported standard error;
+  windows and the median reported standard error (a clipped fit at zero
+  wear can only err upwards);
 * the simulator's throughput (exact and tabulated mesh) and the extraction
   throughput (``compute_te`` plus the analyzer) on 1,000,000 samples.
 
@@ -64,8 +65,7 @@ def recovery(params, profile, load, wear, seed, samples, exact):
     blind = compute_te(b.t, b.motor_angle, b.t, b.link_angle, sim.ratio)
     analyzer = WindowAnalyzer(params)
     feats = analyzer.update(blind, b.effort, b.link_velocity) + analyzer.flush()
-    deltas = np.array([f.time_offset_s for f in feats])
-    delta = float(np.median(deltas[np.isfinite(deltas)])) if np.isfinite(deltas).any() else np.nan
+    delta = finite_stat(np.median, [f.time_offset_s for f in feats])
     fitted = blind.te - (0.0 if np.isnan(delta) else delta) * b.link_velocity
     lm = np.array([f.lost_motion for f in feats])
     std = np.array([f.lost_motion_std for f in feats])
@@ -75,11 +75,18 @@ def recovery(params, profile, load, wear, seed, samples, exact):
         'te_fitted': rms_without_offset(fitted - b.true_te),
         'delta': delta,
         'lm_true': lost_motion(wear, params),
-        'lm_median': float(np.median(lm[ok])) if ok.any() else np.nan,
-        'lm_spread': float(np.std(lm[ok])) if ok.sum() > 1 else np.nan,
-        'lm_std': float(np.mean(std[ok])) if ok.any() else np.nan,
+        'lm_median': finite_stat(np.median, lm),
+        'lm_spread': finite_stat(np.std, lm) if ok.sum() > 1 else np.nan,
+        'lm_std': finite_stat(np.median, std[ok]),
         'windows': len(feats), 'usable': int(ok.sum()),
     }
+
+
+def finite_stat(fn, values):
+    """Apply ``fn`` to the finite values, NaN when there are none."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    return float(fn(values)) if values.size else np.nan
 
 
 def throughput(fn, n):
@@ -118,15 +125,15 @@ def main():
             worst_te = max(worst_te, te_k, te_f)
             lm_true = rows[0]['lm_true']
             med = np.array([r['lm_median'] for r in rows])
-            err = 100.0 * (med - lm_true) / lm_true
-            if np.isfinite(err).any():
-                worst_lm = max(worst_lm, float(np.nanmax(np.abs(err))))
+            err = np.abs(100.0 * (med - lm_true) / lm_true)
+            worst_lm = max(worst_lm, finite_stat(np.max, err) if np.isfinite(err).any() else 0.0)
             print(f'{profile:>8} {load:>8} {wear / UM:7.1f} | known {te_k:5.2f} '
-                  f'fitted {te_f:5.2f} | {np.nanmedian([r["delta"] for r in rows]) * 1e6:8.2f} | '
-                  f'{lm_true / ARCMIN:7.3f} {np.nanmedian(med) / ARCMIN:7.3f} '
-                  f'{np.nanmax(np.abs(err)) if np.isfinite(err).any() else np.nan:6.2f} '
-                  f'{np.nanmean([r["lm_spread"] for r in rows]) / ARCMIN:6.3f} '
-                  f'{np.nanmean([r["lm_std"] for r in rows]) / ARCMIN:7.3f} | '
+                  f'fitted {te_f:5.2f} | '
+                  f'{finite_stat(np.median, [r["delta"] for r in rows]) * 1e6:8.2f} | '
+                  f'{lm_true / ARCMIN:7.3f} {finite_stat(np.median, med) / ARCMIN:7.3f} '
+                  f'{finite_stat(np.max, err):6.2f} '
+                  f'{finite_stat(np.mean, [r["lm_spread"] for r in rows]) / ARCMIN:6.3f} '
+                  f'{finite_stat(np.mean, [r["lm_std"] for r in rows]) / ARCMIN:7.3f} | '
                   f'{sum(r["windows"] for r in rows):5d} {sum(r["usable"] for r in rows):5d}')
     print(f'worst TE extraction error {worst_te:.2f} arcsec RMS (target <= 1); worst lost-motion '
           f'error (median of windows, per seed) {worst_lm:.2f} % (target: a few %)')

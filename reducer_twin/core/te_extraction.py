@@ -20,6 +20,14 @@ and the time offset jointly with a straight line in ``|T|`` per torque bin
 and torque sign; ``H`` at each bin follows from the two lines, and the wear
 that explains all bins through
 :meth:`.transmission_error.ModelTables.hysteresis` gives the lost motion.
+
+Two things the data cannot do are handled explicitly. A harmonic or the time
+offset that the window's motion cannot separate from the torque dependence
+(at constant speed ``omega`` is a constant; under gravity ``cos(theta)``
+follows ``T``) is reported as NaN and left to the bin lines. What such a 1x
+harmonic leaves in ``H`` is odd in torque and grows with ``|T|``, like a
+stiffness error, so the wear fit carries a compliance correction with a prior
+and reads the wear from the level of ``H``, not its slope.
 """
 
 from dataclasses import dataclass, field
@@ -35,7 +43,7 @@ TWO_PI = 2.0 * math.pi
 
 _MODEL_SIGMA = 3e-6
 """
-Model error of one bin's hysteresis width [rad] (0.3 arcsec), added in quadrature.
+Model error of one bin's hysteresis width [rad] (0.6 arcsec), added in quadrature.
 
 What the period-mean table leaves out: mesh ripple (below 0.3 arcsec peak to
 peak) and interpolation (below 0.1 arcsec), and harmonics that leak into a
@@ -398,8 +406,9 @@ class WindowFeatures:
         Combined wear that explains the observed hysteresis, and its
         standard error [m]; NaN like ``lost_motion``.
     compliance_fit : float
-        Compliance correction fitted with the wear [rad/(N·m)] (see
-        :meth:`WindowAnalyzer._fit_wear`); NaN like ``lost_motion``.
+        Compliance correction ``c`` fitted with the wear [rad/(N·m)]: the
+        observed widths are modelled as ``H(|T|, w) + 2·|T|·c``; NaN like
+        ``lost_motion``.
     hysteresis_torque : ndarray
         Torque of each usable bin [N·m]: mean ``|T|`` of its samples.
     hysteresis : ndarray
@@ -480,6 +489,9 @@ class WindowAnalyzer:
         Memory of the pooled harmonic fit in windows (0: this window only).
     min_speed : float
         Slowest output speed counted as turning [rad/s].
+    compliance_prior : float
+        Prior standard deviation of the compliance correction of the wear
+        fit, as a fraction of the series compliance ``1/k_s``.
 
     Raises
     ------
