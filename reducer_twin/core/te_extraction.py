@@ -186,7 +186,7 @@ def _run_starts(sel, *runs):
 
 
 def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
-               link_time_offset_s=0.0):
+               link_time_offset_s=0.0, te_reference=None):
     """
     Compute the transmission error from motor and link encoder streams.
 
@@ -217,6 +217,11 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
     link_time_offset_s : float
         The link sample stamped ``t`` was taken at ``t + delta`` [s]; the
         motor angle is read there (0: take stamps as exact).
+    te_reference : float, optional
+        TE just before this chunk [rad] (the last valid TE of the previous
+        chunk): the TE's constant is chosen continuous with it instead of in
+        ``(-pi/i, pi/i]``, so that chunks of one stream agree
+        (:class:`TEExtractor` does this).
 
     Returns
     -------
@@ -243,6 +248,8 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
     ratio = _finite('ratio', ratio, '', 'finite and non-zero', lambda v: v != 0.0)
     max_gap_s = _finite('max_gap_s', max_gap_s, 's', '> 0', lambda v: v > 0.0)
     offset = _finite('link_time_offset_s', link_time_offset_s, 's', 'finite', lambda v: True)
+    reference = 0.0 if te_reference is None else _finite(
+        'te_reference', te_reference, 'rad', 'finite', lambda v: True)
 
     keep_m, m_nonfinite, m_unordered = _usable(tm, am)
     keep_l, l_nonfinite, l_unordered = _usable(tl, al)
@@ -274,8 +281,8 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
         # A new run of either stream may start with unknown whole turns: keep TE continuous.
         # The first sample only fixes the TE's constant; the output angle keeps its turns.
         starts = _run_starts(sel, run_l, run_at)
-        lt, mt = _turns(np.concatenate([raw_ok[:1], raw_ok[starts] - raw_ok[starts - 1]]),
-                        ratio)
+        lt, mt = _turns(np.concatenate([raw_ok[:1] - reference,
+                                        raw_ok[starts] - raw_ok[starts - 1]]), ratio)
         corrections = int(np.count_nonzero((lt[1:] != 0) | (mt[1:] != 0)))
         if starts.size:
             lengths = np.diff(np.concatenate([[0], starts, [sel.size]]))
@@ -295,6 +302,58 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
             te[rows], out[rows], valid[rows] = te_ok, out_ok, True
     return TEStream(tl.copy(), te, out, valid, max_gap_s, m_nonfinite, m_unordered,
                     l_nonfinite, l_unordered, int(idx_l.size - sel.size), corrections)
+
+
+class TEExtractor:
+    """
+    Stateful :func:`compute_te` for a stream that arrives in chunks.
+
+    Each chunk's TE constant is chosen continuous with the previous chunk's
+    last valid TE, so a TE whose constant sits near ``±pi/i`` (an encoder
+    zero offset) does not jump by ``2·pi/i`` between chunks. Angles should be
+    multi-turn across chunks (as ros2_control reports them): the turn count
+    of a wrapped link encoder is not carried from one chunk to the next.
+
+    Parameters
+    ----------
+    ratio : float
+        Reduction ratio ``i``.
+    max_gap_s : float
+        Largest stamp spacing [s] interpolated or unwrapped across.
+    link_time_offset_s : float
+        Time offset of the link encoder behind its stamps [s].
+
+    """
+
+    def __init__(self, ratio, max_gap_s=0.005, link_time_offset_s=0.0):
+        self.ratio = ratio
+        self.max_gap_s = max_gap_s
+        self.link_time_offset_s = link_time_offset_s
+        self.last_te = None
+
+    def update(self, t_motor, motor_angle, t_link, link_angle):
+        """
+        Compute the TE of the next chunk.
+
+        Parameters
+        ----------
+        t_motor, motor_angle : array_like
+            Motor stamps [s] and angles [rad].
+        t_link, link_angle : array_like
+            Link stamps [s] and angles [rad].
+
+        Returns
+        -------
+        TEStream
+            As :func:`compute_te`.
+
+        """
+        stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,
+                            self.max_gap_s, self.link_time_offset_s, self.last_te)
+        kept = np.flatnonzero(stream.valid)
+        if kept.size:
+            self.last_te = float(stream.te[kept[-1]])
+        return stream
 
 
 def _interpolate(tm, am, run_m, tq, max_gap_s):

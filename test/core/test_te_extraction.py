@@ -11,7 +11,7 @@ from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
-from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.te_extraction import compute_te, TEExtractor, WindowAnalyzer
 from reducer_twin.core.transmission_error import lost_motion, model_tables
 from reducer_twin.core.units import ARCSEC, DEG, UM
 from reducer_twin.core.wear import wear_rate
@@ -343,3 +343,15 @@ def test_the_analyzer_keeps_its_own_copy_of_samples_it_buffers():
     feats += analyzer.flush()
     reference = analyse(b)
     assert [f.duty.max_abs_torque for f in feats] == [f.duty.max_abs_torque for f in reference]
+
+
+def test_chunks_through_the_extractor_agree_even_with_the_te_near_half_a_motor_turn():
+    # A link zero offset that puts the TE constant at pi/i: compute_te alone may pick
+    # either side per chunk; TEExtractor keeps the chunks continuous.
+    cfg = SimConfig(exact_mesh=False, link_zero_offset_rad=math.pi / RATIO, seed=2)
+    b = JointSimulator(PARAMS, cfg).step(5000)
+    whole = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO).te
+    extractor = TEExtractor(RATIO)
+    parts = [extractor.update(b.t[sl], b.motor_angle[sl], b.t[sl], b.link_angle[sl]).te
+             for sl in (slice(k, k + 700) for k in range(0, 5000, 700))]
+    np.testing.assert_allclose(np.concatenate(parts), whole, rtol=0, atol=1e-12)
