@@ -8,6 +8,7 @@ statuses and stamps. Everything is SI; a field that cannot be used raises
 :class:`~reducer_twin.core.errors.InvalidInput` with the reason.
 """
 
+from array import array
 import math
 
 from builtin_interfaces.msg import Time
@@ -97,15 +98,80 @@ def to_multiarray(layout, values):
         msg.layout.dim = [
             MultiArrayDimension(label='samples', size=arr.shape[0], stride=arr.size),
             MultiArrayDimension(label=layout.label, size=n_fields, stride=n_fields)]
-        msg.data = arr.ravel().tolist()
+        msg.data = _doubles(arr)
     else:
-        data = [float(v) for v in values]
-        if len(data) != n_fields:
-            raise InvalidInput(f'{layout.name}: expected {n_fields} values, got {len(data)}')
+        data = np.asarray(values, dtype=float).ravel()
+        if data.size != n_fields:
+            raise InvalidInput(f'{layout.name}: expected {n_fields} values, got {data.size}')
         msg.layout.dim = [MultiArrayDimension(label=layout.label, size=n_fields,
                                               stride=n_fields)]
-        msg.data = data
+        msg.data = _doubles(data)
     return msg
+
+
+class BatchPublisherMessage:
+    """
+    One reusable ``Float64MultiArray`` for a batch layout.
+
+    Building the layout objects costs more than publishing; a publisher
+    serialises the message at once, so one message can be refilled for
+    every batch.
+
+    Parameters
+    ----------
+    layout : msg_adapters.layouts.Layout
+        Batch layout.
+
+    """
+
+    def __init__(self, layout):
+        self.layout = layout
+        n = len(layout.fields)
+        self.msg = Float64MultiArray()
+        self.msg.layout.dim = [MultiArrayDimension(label='samples', size=0, stride=0),
+                               MultiArrayDimension(label=layout.label, size=n, stride=n)]
+
+    def fill(self, rows):
+        """
+        Put rows (samples, fields) into the message and return it.
+
+        Parameters
+        ----------
+        rows : ndarray
+            Values, one row per sample.
+
+        Returns
+        -------
+        std_msgs.msg.Float64MultiArray
+            The refilled message.
+
+        """
+        rows = np.asarray(rows, dtype=np.float64)
+        dim = self.msg.layout.dim[0]
+        dim.size = rows.shape[0]
+        dim.stride = rows.size
+        self.msg.data = _doubles(rows)
+        return self.msg
+
+
+def _doubles(values):
+    """
+    Return values as ``array('d')``, which rosidl takes without checking each element.
+
+    Parameters
+    ----------
+    values : array_like
+        Numbers.
+
+    Returns
+    -------
+    array.array
+        Contiguous float64 values.
+
+    """
+    out = array('d')
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return out
 
 
 def from_multiarray(msg, layout):
@@ -156,7 +222,7 @@ def batch_array(msg, layout):
     if (len(dims) != 2 or dims[1].label != layout.label or dims[1].size != n_fields
             or len(msg.data) != dims[0].size * n_fields):
         raise InvalidInput(f'expected a {layout.name!r} batch with fields {layout.label!r}')
-    return np.asarray(msg.data, dtype=float).reshape(dims[0].size, n_fields)
+    return np.frombuffer(msg.data, dtype=np.float64).reshape(dims[0].size, n_fields)
 
 
 def diagnostic_status(name, hardware_id, level, message, values):
@@ -242,9 +308,9 @@ def make_joint_state(stamp_ns, names, position, velocity=None, effort=None, fram
     msg.header.stamp = ns_to_stamp(stamp_ns)
     msg.header.frame_id = frame_id
     msg.name = list(names)
-    msg.position = [float(x) for x in position]
-    msg.velocity = [] if velocity is None else [float(x) for x in velocity]
-    msg.effort = [] if effort is None else [float(x) for x in effort]
+    msg.position = _doubles(position)
+    msg.velocity = array('d') if velocity is None else _doubles(velocity)
+    msg.effort = array('d') if effort is None else _doubles(effort)
     return msg
 
 
@@ -305,7 +371,9 @@ class JointStatePicker:
         out = []
         for arr in (msg.position, msg.velocity, msg.effort):
             if len(arr):
-                out.append(np.asarray(arr, dtype=float)[self._index])
+                out.append(np.frombuffer(arr, dtype=np.float64)[self._index]
+                           if isinstance(arr, array) else
+                           np.asarray(arr, dtype=float)[self._index])
             else:
                 out.append(np.full(len(self.names), np.nan))
         return tuple(out)

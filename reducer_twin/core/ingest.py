@@ -22,9 +22,12 @@ reason            what happens
                   starts; nothing is interpolated across it
 ``wrap``          a jump of about a multiple of 2·pi between neighbours
                   (an encoder that wraps): repaired by unwrapping
-``spike``         one sample off its neighbours by more than the spike
-                  threshold while the next one returns: dropped (this
-                  costs one sample of delay)
+``spike``         a paired sample whose TE (``link - motor/i``) is further
+                  than ``spike_te_rad`` from the last accepted TE: dropped
+                  (TE is smooth, so a glitch of either encoder shows; the
+                  test is causal and adds no delay)
+``step``          a second consecutive sample that agrees with the dropped
+                  one: the jump is real (re-homing), it is accepted
 ================  ==========================================================
 
 Counts of each reason are kept for the diagnostics.
@@ -38,7 +41,13 @@ import numpy as np
 from .errors import InvalidInput
 from .params import _Validated, spec
 
-REASONS = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump', 'gap', 'wrap', 'spike')
+FAST_ROWS = 8
+"""Chunks of at most this many rows try the plain-Python path first."""
+
+REASONS = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump', 'gap', 'wrap')
+"""Reasons a stream sample is dropped or repaired (per encoder stream)."""
+
+SPIKE_REASONS = ('spike', 'step')
 """Reasons a sample is dropped or repaired, in the order of the table above."""
 
 
@@ -51,12 +60,9 @@ class IngestConfig(_Validated):
                             lo_open=True)
     clock_jump_s: float = spec(1.0, 's', 0.0, 1e6,
                                'backward stamp jump treated as a clock reset', lo_open=True)
-    link_spike_rad: float = spec(math.radians(0.5), 'rad', 0.0, 10.0,
-                                 'deviation of a link sample that counts as a spike',
-                                 lo_open=True)
-    motor_spike_rad: float = spec(math.radians(0.5) * 81.0, 'rad', 0.0, 1000.0,
-                                  'deviation of a motor sample that counts as a spike',
-                                  lo_open=True)
+    spike_te_rad: float = spec(math.radians(0.5), 'rad', 0.0, 1.0,
+                               'TE jump from the last accepted sample that marks a spike',
+                               lo_open=True)
 
 
 @dataclass
@@ -126,16 +132,13 @@ class StreamCleaner:
 
     Parameters
     ----------
-    spike_rad : float or array_like
-        Deviation from the neighbours that marks a spike [rad], per column.
     config : IngestConfig
         Thresholds.
 
     """
 
-    def __init__(self, spike_rad, config=None):
+    def __init__(self, config=None):
         self.config = config or IngestConfig()
-        self.spike_rad = np.asarray(spike_rad, dtype=float)
         self.counts = dict.fromkeys(REASONS, 0)
         self.accepted = 0
         self.missing = 0
@@ -147,8 +150,6 @@ class StreamCleaner:
         self._segment = 0
         self._unwrap = None     # per-column unwrap offset [rad]
         self._raw_last = None   # per-column last finite raw value
-        self._held = None       # last row, waiting for its right neighbour
-        self._prev = None       # (t, positions) of the last released row
         self._ndim = None
 
     def process(self, t_ns, position, velocity=None, effort=None):
@@ -167,9 +168,7 @@ class StreamCleaner:
         Returns
         -------
         CleanStream
-            Accepted samples, same dimensionality as ``position`` (the last
-            row is held back until the next call or :meth:`flush` for the
-            spike test).
+            Accepted samples, same dimensionality as ``position``.
 
         Raises
         ------
@@ -188,14 +187,58 @@ class StreamCleaner:
             raise InvalidInput(f'position has shape {np.shape(position)} for {n} stamps')
         vel = _optional(velocity, pos.shape, 'velocity')
         eff = _optional(effort, pos.shape, 'effort')
+        if n <= FAST_ROWS:
+            out = self._fast(t, pos, vel, eff)
+            if out is not None:
+                return _squeeze(out) if one_d else out
         self._count_missing(t)
         finite = np.isfinite(pos)
         self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
         pos = np.where(finite, pos, np.nan)
         t, pos, vel, eff, seg = self._order(t, pos, vel, eff)
         pos = self._unwrap_positions(pos)
-        out = self._despike(t, pos, vel, eff, seg)
+        self.accepted += t.size
+        out = CleanStream(t, pos, vel, eff, seg)
         return _squeeze(out) if one_d else out
+
+    def _fast(self, t, pos, vel, eff):
+        """
+        Clean a few rows in plain Python when no rule fires (the live common case).
+
+        Returns None, having changed nothing, when any rule would act (a
+        stamp out of order or across a gap, a non-finite value, a wrap) or
+        the stream is still starting: the vectorised path then handles the
+        chunk. When it returns, the result and the state are exactly what
+        the vectorised path produces (a test checks this).
+        """
+        if self._last_t is None or self.period_ns is None:
+            return None
+        gap_ns = int(self.config.max_gap_s * 1e9)
+        stamps = t.tolist()
+        last = self._last_t
+        for ti in stamps:
+            if ti <= last or ti - last > gap_ns:
+                return None
+            last = ti
+        prev_raw = self._raw_last.tolist()
+        for row in pos.tolist():
+            for j, x in enumerate(row):
+                if not (-math.pi < x - prev_raw[j] < math.pi):  # also catches NaN/inf
+                    return None
+            prev_raw = row
+        period = self.period_ns
+        d_prev = self._raw_prev_t
+        for ti in stamps:
+            d = ti - d_prev
+            if d > 1.5 * period:
+                self.missing += int(round(d / period) - 1)
+            d_prev = ti
+        self._raw_prev_t = stamps[-1]
+        self._last_t = self._max_t = stamps[-1]
+        self._raw_last = pos[-1].copy()
+        self.accepted += len(stamps)
+        return CleanStream(t, pos + self._unwrap, vel, eff,
+                           np.full(len(stamps), self._segment, dtype=np.int64))
 
     def _count_missing(self, t):
         """Count samples missing from the stream (stamp holes at the nominal period)."""
@@ -215,22 +258,16 @@ class StreamCleaner:
 
     def flush(self):
         """
-        Release the row held back for the spike test.
+        Return what is still held (nothing: the rules are causal).
 
         Returns
         -------
         CleanStream
-            Zero or one sample.
+            An empty stream.
 
         """
-        if self._held is None:
-            return CleanStream.empty()
-        t, p, v, e, s = self._held
-        self._held = None
-        self.accepted += 1
-        out = CleanStream(np.array([t], np.int64), p[None, :], v[None, :], e[None, :],
-                          np.array([s], np.int64))
-        return _squeeze(out) if self._ndim == 1 else out
+        return CleanStream.empty(None if self._ndim == 1 else
+                                 (0 if self._raw_last is None else self._raw_last.size))
 
     def _order(self, t, pos, vel, eff):
         """Drop duplicate/out-of-order stamps, split segments at gaps and clock jumps."""
@@ -302,48 +339,79 @@ class StreamCleaner:
         self._unwrap = offset[-1].copy()
         return pos + offset
 
-    def _despike(self, t, pos, vel, eff, seg):
-        """Drop single values off both neighbours; hold the newest row back one call."""
-        if self._held is not None:
-            h = self._held
-            t = np.concatenate([[h[0]], t])
-            pos = np.concatenate([h[1][None, :], pos])
-            vel = np.concatenate([h[2][None, :], vel])
-            eff = np.concatenate([h[3][None, :], eff])
-            seg = np.concatenate([[h[4]], seg])
-            self._held = None
-        n = t.size
+
+class SpikeFilter:
+    """
+    Drop paired samples whose TE jumps away from the last accepted TE.
+
+    TE (``link - motor/i``) changes by far less than ``spike_te_rad``
+    between samples of a working reducer (lost motion is a few arc minutes,
+    traversed over many samples), so a larger jump is an encoder glitch of
+    either side. A second consecutive sample that agrees with the dropped one
+    (within the threshold) means the jump is real (e.g. re-homing): it is
+    accepted and counted as a ``step``. Causal: no sample is held back.
+
+    Parameters
+    ----------
+    ratio : float
+        Reduction ratio ``i``.
+    config : IngestConfig
+        Thresholds.
+
+    """
+
+    def __init__(self, ratio, config=None):
+        self.ratio = float(ratio)
+        self.threshold = (config or IngestConfig()).spike_te_rad
+        self.counts = dict.fromkeys(SPIKE_REASONS, 0)
+        self._last = None       # last accepted TE
+        self._rejected = None   # TE of the sample dropped just before
+
+    def keep(self, motor, link):
+        """
+        Return the mask of samples to keep.
+
+        Parameters
+        ----------
+        motor, link : ndarray
+            Motor (input) and link angles of paired samples [rad].
+
+        Returns
+        -------
+        ndarray of bool
+            True for samples that are not spikes.
+
+        """
+        te = link - motor / self.ratio
+        n = te.size
+        keep = np.ones(n, dtype=bool)
         if n == 0:
-            return CleanStream.empty(pos.shape[1])
-        if n >= 2:
-            left_t = np.empty(n, np.int64)
-            left_p = np.empty_like(pos)
-            left_t[1:], left_p[1:] = t[:-1], pos[:-1]
-            if self._prev is not None:
-                left_t[0], left_p[0] = self._prev
+            return keep
+        prev = np.empty(n)
+        prev[0] = te[0] if self._last is None else self._last
+        prev[1:] = te[:-1]
+        suspects = np.flatnonzero(np.abs(te - prev) > self.threshold)
+        if suspects.size == 0 and self._rejected is None:
+            self._last = float(te[-1])
+            return keep
+        # Rare: walk from the first suspect with the true "last accepted" TE.
+        start = int(suspects[0]) if suspects.size else 0
+        last = self._last if start == 0 else float(te[start - 1])
+        rejected = self._rejected
+        thr = self.threshold
+        for k in range(start, n):
+            x = float(te[k])
+            if last is None or abs(x - last) <= thr:
+                last, rejected = x, None
+            elif rejected is not None and abs(x - rejected) <= thr:
+                self.counts['step'] += 1
+                last, rejected = x, None
             else:
-                left_t[0], left_p[0] = t[0], np.nan
-            span = (t[1:] - left_t[:-1]).astype(float)
-            frac = np.where(span > 0, (t[:-1] - left_t[:-1]) / np.where(span > 0, span, 1.0),
-                            0.5)[:, None]
-            right_p = pos[1:]
-            line = left_p[:-1] + frac * (right_p - left_p[:-1])
-            with np.errstate(invalid='ignore'):
-                dev = np.abs(pos[:-1] - line)
-                agree = np.abs(right_p - left_p[:-1]) < self.spike_rad
-                spike = (dev > self.spike_rad) & agree & (seg[:-1] == seg[1:])[:, None]
-            if spike.any():
-                self.counts['spike'] += int(np.count_nonzero(spike))
-                pos = pos.copy()
-                pos[:-1][spike] = np.nan
-        self._held = (int(t[-1]), pos[-1].copy(), vel[-1].copy(), eff[-1].copy(), int(seg[-1]))
-        rel = slice(0, n - 1)
-        out = CleanStream(t[rel], pos[rel], vel[rel], eff[rel], seg[rel])
-        if n >= 2:
-            self._prev = (int(t[n - 2]), np.where(np.isfinite(pos[n - 2]), pos[n - 2],
-                                                  self._prev[1] if self._prev else np.nan))
-        self.accepted += n - 1
-        return out
+                keep[k] = False
+                self.counts['spike'] += 1
+                rejected = x
+        self._last, self._rejected = last, rejected
+        return keep
 
 
 def _squeeze(stream):
@@ -508,6 +576,38 @@ class Pairer:
             keep_from = len(motor)
         self._motor = _take(motor, np.arange(keep_from, len(motor)))
         return out
+
+
+def pair_columns(stream, link_col, motor_col, motor_scale=1.0):
+    """
+    Pair two columns of a stream cleaned together (one message per tick).
+
+    Parameters
+    ----------
+    stream : CleanStream
+        2-D stream holding both columns.
+    link_col, motor_col : int
+        Column indices of the link and motor sides.
+    motor_scale : float
+        Factor that turns reported motor angles into input angles.
+
+    Returns
+    -------
+    tuple
+        ``(rows, unpaired)``: rows ``(stamp_ns, motor, link, effort,
+        velocity)`` where both sides are valid, as float64 with the stamp in
+        the first column, and the number of rows with only one side.
+
+    """
+    link = stream.position[:, link_col]
+    motor = stream.position[:, motor_col]
+    ok = np.isfinite(link) & np.isfinite(motor)
+    unpaired = int(np.count_nonzero(np.isfinite(link) ^ np.isfinite(motor)))
+    if ok.all():
+        return (stream.t_ns, motor * motor_scale, link, stream.effort[:, link_col],
+                stream.velocity[:, link_col]), unpaired
+    return (stream.t_ns[ok], motor[ok] * motor_scale, link[ok], stream.effort[ok, link_col],
+            stream.velocity[ok, link_col]), unpaired
 
 
 def pair_same_stamps(link, motor, motor_scale=1.0):

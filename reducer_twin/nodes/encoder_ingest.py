@@ -18,12 +18,13 @@ published per joint on ``/reducer_twin/<joint>/encoder_pairs``
 
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_adapters.layouts import PAIRED_SAMPLES
-from msg_adapters.ros import diagnostic_array, diagnostic_status, JointStatePicker
-from msg_adapters.ros import stamp_to_ns, to_multiarray
+from msg_adapters.ros import BatchPublisherMessage, diagnostic_array, diagnostic_status
+from msg_adapters.ros import JointStatePicker, stamp_to_ns
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import IngestConfig, pair_same_stamps, Pairer, StreamCleaner
+from reducer_twin.core.ingest import IngestConfig, pair_columns, Pairer, SpikeFilter
+from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
@@ -35,12 +36,14 @@ from std_msgs.msg import Float64MultiArray
 class _JointOutput:
     """Pairing state, pending rows and publisher of one joint."""
 
-    def __init__(self, name, config, motor_scale):
+    def __init__(self, name, config, motor_scale, ratio):
         self.name = name
         self.pairer = Pairer(config, motor_scale)
+        self.spikes = SpikeFilter(ratio, config)
         self.motor_scale = motor_scale
         self.published = 0
         self.publisher = None
+        self.message = BatchPublisherMessage(PAIRED_SAMPLES)
 
 
 class EncoderIngest(Node):
@@ -67,17 +70,12 @@ class EncoderIngest(Node):
         self.batch_ns = int(p['batch_period_s'] * 1e9)
         self.split = bool(p['motor_topic'])
         cfg = self.ingest_params.value
-        n = len(self.joints)
-        if self.split:
-            self.link = StreamCleaner(np.full(n, cfg.link_spike_rad), cfg)
-            self.motor = StreamCleaner(np.full(n, cfg.motor_spike_rad), cfg)
-        else:
-            # Columns: link_1, motor_1, link_2, motor_2, ...
-            self.link = StreamCleaner(np.tile([cfg.link_spike_rad, cfg.motor_spike_rad], n), cfg)
-            self.motor = None
+        # Combined form: one cleaner, columns link_1, motor_1, link_2, motor_2, ...
+        self.link = StreamCleaner(cfg)
+        self.motor = StreamCleaner(cfg) if self.split else None
         self.outputs = {}
         for joint in self.joints:
-            out = _JointOutput(joint, cfg, scale)
+            out = _JointOutput(joint, cfg, scale, ratio)
             out.publisher = self.create_publisher(
                 Float64MultiArray, joint_topic(joint, 'encoder_pairs'), encoder_qos())
             self.outputs[joint] = out
@@ -158,19 +156,27 @@ class EncoderIngest(Node):
                 if clean_motor is not None:
                     out.pairer.add_motor(clean_motor.column(k))
                 self._publish(out, out.pairer.pop())
-        elif clean_link is not None:
+        elif clean_link is not None and len(clean_link):
+            stamp_s = clean_link.t_ns * 1e-9
             for k, out in enumerate(self.outputs.values()):
-                pairs, unpaired = pair_same_stamps(clean_link.column(2 * k),
-                                                   clean_link.column(2 * k + 1),
-                                                   out.motor_scale)
+                cols, unpaired = pair_columns(clean_link, 2 * k, 2 * k + 1, out.motor_scale)
                 out.pairer.unpaired += unpaired
-                self._publish(out, pairs)
+                if cols[0].size:
+                    t = stamp_s if cols[0].size == stamp_s.size else cols[0] * 1e-9
+                    self._send(out, np.column_stack((t,) + cols[1:]))
 
     def _publish(self, out, pairs):
-        if len(pairs) == 0:
-            return
-        out.published += len(pairs)
-        out.publisher.publish(to_multiarray(PAIRED_SAMPLES, pairs.as_rows()))
+        if len(pairs):
+            self._send(out, pairs.as_rows())
+
+    def _send(self, out, rows):
+        keep = out.spikes.keep(rows[:, 1], rows[:, 2])
+        if not keep.all():
+            rows = rows[keep]
+            if rows.shape[0] == 0:
+                return
+        out.published += rows.shape[0]
+        out.publisher.publish(out.message.fill(rows))
 
     def _flush_stale(self):
         if self._raw_since is None:
@@ -191,6 +197,7 @@ class EncoderIngest(Node):
                     c[f'{side}_{reason}'] = count
                 c[f'{side}_missing'] = cleaner.missing
             c['unpaired'] = out.pairer.unpaired
+            c.update(out.spikes.counts)
             c['published'] = out.published
             result[joint] = c
         return result
@@ -199,7 +206,7 @@ class EncoderIngest(Node):
         statuses = []
         for joint, counts in self.counts().items():
             bad = sum(v for k, v in counts.items()
-                      if k != 'published' and not k.endswith('_wrap'))
+                      if k not in ('published', 'step') and not k.endswith('_wrap'))
             counts['rejected_messages'] = self.rejects.total
             statuses.append(diagnostic_status(
                 f'reducer_twin: {joint} encoder ingest', joint, 'OK' if bad == 0 else 'WARN',

@@ -19,7 +19,8 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
-from msg_adapters.ros import batch_array, diagnostic_array, diagnostic_status, to_multiarray
+from msg_adapters.ros import batch_array, BatchPublisherMessage, diagnostic_array
+from msg_adapters.ros import diagnostic_status, to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
@@ -105,6 +106,7 @@ class TEMonitor(Node):
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
         self._pending = []
         self._te_rows = []
+        self._te_msg = BatchPublisherMessage(TE_BATCH)
         self._latency = np.zeros(LATENCY_KEEP)
         self._latency_n = 0
         self.samples = 0
@@ -159,7 +161,7 @@ class TEMonitor(Node):
         if not self._te_rows:
             return
         rows, self._te_rows = np.concatenate(self._te_rows), []
-        self.te_pub.publish(to_multiarray(TE_BATCH, rows))
+        self.te_pub.publish(self._te_msg.fill(rows))
 
     def _analyze(self):
         if not self._pending:
@@ -177,6 +179,14 @@ class TEMonitor(Node):
             self.last_features = f
             rec = features_record(f, self.params)
             self.feat_pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
+
+    def reset_latency(self):
+        """Forget the latency samples so far (a benchmark's warm-up)."""
+        self._latency_n = 0
+
+    def latency_samples(self):
+        """Return the kept stamp-to-TE latencies [s]."""
+        return self._latency[:min(self._latency_n, LATENCY_KEEP)].copy()
 
     def latency_stats(self):
         """

@@ -1,0 +1,176 @@
+"""
+twin_bringup: every reducer_twin node for every configured joint, in one process.
+
+Reads one YAML (``config/twin.yaml`` by default, parameter ``config``) and
+builds one ``encoder_ingest`` for the robot and, per joint, a
+``te_monitor``, a ``wear_estimator`` and a ``life_publisher`` (and the
+``joint_simulator`` when ``twin.simulate`` is true), all spun by one
+EventsExecutor (single-threaded executor as fallback). Nodes are named
+``<kind>_<joint>`` so several joints coexist.
+"""
+
+from pathlib import Path
+import sys
+
+from rclpy.parameter import Parameter
+from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.nodes.base import Node, run_nodes
+
+DEFAULTS = {
+    'twin': {'joints': ['joint_1'], 'link_topic': '/joint_states', 'motor_topic': '',
+             'motor_suffix': '_motor', 'motor_angles': 'raw', 'aging_factor': 1.0,
+             'window_s': 2.0, 'state_dir': '', 'simulate': False},
+    'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
+}
+
+
+def default_config():
+    """Return the packaged ``config/twin.yaml`` (source tree or installed share)."""
+    here = Path(__file__).resolve()
+    for candidate in (here.parents[2] / 'config' / 'twin.yaml',
+                      Path(sys.prefix) / 'share' / 'reducer_twin' / 'config' / 'twin.yaml'):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def load_config(path):
+    """
+    Load and check a bringup YAML.
+
+    Parameters
+    ----------
+    path : str or Path or None
+        YAML file; None uses the defaults only.
+
+    Returns
+    -------
+    dict
+        Sections ``twin``, ``life``, ``simulator``, ``reducer`` with defaults
+        filled in.
+
+    Raises
+    ------
+    InvalidParameter
+        If the file cannot be read or holds unknown keys.
+
+    """
+    import yaml
+    data = {}
+    if path:
+        try:
+            data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+        except (OSError, yaml.YAMLError) as err:
+            raise InvalidParameter(f'cannot read bringup config {path}: {err}') from err
+        if not isinstance(data, dict):
+            raise InvalidParameter(f'{path}: expected a mapping, got {type(data).__name__}')
+    out = {}
+    for section, defaults in DEFAULTS.items():
+        given = data.get(section) or {}
+        if not isinstance(given, dict):
+            raise InvalidParameter(f'{path}: section {section!r} must be a mapping')
+        if section == 'twin':
+            unknown = set(given) - set(defaults)
+            if unknown:
+                raise InvalidParameter(f'{path}: unknown twin keys {sorted(unknown)}; allowed: '
+                                       f'{sorted(defaults)}')
+        out[section] = {**defaults, **given}
+    unknown = set(data) - set(DEFAULTS)
+    if unknown:
+        raise InvalidParameter(f'{path}: unknown sections {sorted(unknown)}')
+    joints = out['twin']['joints']
+    named = all(isinstance(j, str) and j for j in joints)
+    if not joints or len(set(joints)) != len(joints) or not named:
+        raise InvalidParameter(f'{path}: twin.joints must be distinct names, got {joints!r}')
+    return out
+
+
+def build_nodes(config, sim_overrides=None):
+    """
+    Create the nodes of a bringup configuration (rclpy must be initialised).
+
+    Parameters
+    ----------
+    config : dict
+        Output of :func:`load_config`.
+    sim_overrides : list of rclpy.parameter.Parameter, optional
+        Extra parameters of the simulator node (the demo sets the aging
+        factor and the rate scales this way).
+
+    Returns
+    -------
+    dict
+        ``{'simulator': node or None, 'ingest': node, 'te': {joint: node},
+        'estimator': {joint: node}, 'life': {joint: node}}``.
+
+    """
+    from reducer_twin.nodes.encoder_ingest import EncoderIngest
+    from reducer_twin.nodes.joint_simulator import JointSimulatorNode
+    from reducer_twin.nodes.life_publisher import LifePublisher
+    from reducer_twin.nodes.te_monitor import TEMonitor
+    from reducer_twin.nodes.wear_estimator import WearEstimatorNode
+    twin, life = config['twin'], config['life']
+    params = ReducerParams().with_overrides(config['reducer']) if config['reducer'] else (
+        ReducerParams())
+    joints = list(twin['joints'])
+    nodes = {'simulator': None, 'te': {}, 'estimator': {}, 'life': {}}
+    if twin['simulate']:
+        sim = [Parameter('joints', value=joints),
+               Parameter('profile', value=config['simulator']['profile']),
+               Parameter('sim.aging_factor', value=float(twin['aging_factor']))]
+        scales = [float(s) for s in config['simulator'].get('wear_rate_scales') or []]
+        if scales:
+            sim.append(Parameter('wear_rate_scales', value=scales))
+        sim += list(sim_overrides or [])
+        nodes['simulator'] = JointSimulatorNode(params=params, parameter_overrides=sim)
+    nodes['ingest'] = EncoderIngest(parameter_overrides=[
+        Parameter('joints', value=joints),
+        Parameter('link_topic', value=twin['link_topic']),
+        Parameter('motor_topic', value=twin['motor_topic']),
+        Parameter('motor_suffix', value=twin['motor_suffix']),
+        Parameter('motor_angles', value=twin['motor_angles'])])
+    life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
+    for joint in joints:
+        nodes['te'][joint] = TEMonitor(f'te_monitor_{joint}', params=params, parameter_overrides=[
+            Parameter('joint', value=joint),
+            Parameter('aging_factor', value=float(twin['aging_factor'])),
+            Parameter('window_s', value=float(twin['window_s']))])
+        nodes['estimator'][joint] = WearEstimatorNode(
+            f'wear_estimator_{joint}', params=params, parameter_overrides=[
+                Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir'])])
+        nodes['life'][joint] = LifePublisher(f'life_publisher_{joint}', params=params,
+                                             parameter_overrides=[Parameter('joint', value=joint),
+                                                                  *life_params])
+    return nodes
+
+
+def all_nodes(nodes):
+    """Return the nodes of :func:`build_nodes` as a flat list."""
+    out = [nodes['simulator']] if nodes['simulator'] is not None else []
+    out.append(nodes['ingest'])
+    for kind in ('te', 'estimator', 'life'):
+        out.extend(nodes[kind].values())
+    return out
+
+
+class _ConfigReader(Node):
+    """A short-lived node that reads the ``config`` parameter from the command line."""
+
+    def __init__(self):
+        super().__init__('twin_bringup')
+        self.path = self.declare_parameter('config', '').value
+
+
+def main(args=None):
+    """Run every node of the bringup configuration in this process."""
+    def factory():
+        reader = _ConfigReader()
+        path = reader.path or default_config()
+        reader.destroy_node()
+        return all_nodes(build_nodes(load_config(path)))
+    return run_nodes(factory, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
