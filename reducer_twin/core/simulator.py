@@ -500,6 +500,8 @@ class JointSimulator:
             sl = slice(j * size, (j + 1) * size)
             after = integrate_wear(dt, torque[sl], speed[sl], params, wear0=w,
                                    rate_scale=cfg.wear_rate_scale, aging=cfg.aging_factor)
+            # The run-in map's round trip w -> s -> w may lose an ulp; wear never shrinks.
+            after = np.maximum(after, w)
             wear[sl.start] = w
             wear[sl.start + 1:sl.stop] = after[:-1]
             w = float(after[-1])
