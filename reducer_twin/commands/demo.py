@@ -21,6 +21,9 @@ from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 
 MAX_JOINTS = 12
 
+DEMO_LOAD_NM = 1.2 * 784.0
+"""Gravity-load amplitude of the demo joints: a heavily loaded axis that ages visibly."""
+
 
 def add_parser(sub):
     """Register the subcommand."""
@@ -87,7 +90,9 @@ def run(args):
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     history = {j: [] for j in joints}
     try:
-        nodes = build_nodes(config, sim_overrides=[Parameter('sim.seed', value=args.seed)])
+        nodes = build_nodes(config, sim_overrides=[
+            Parameter('sim.seed', value=args.seed),
+            Parameter('sim.load_torque_nm', value=DEMO_LOAD_NM)])
         executor = make_executor()
         for node in all_nodes(nodes):
             executor.add_node(node)

@@ -11,6 +11,8 @@ streams), and published in batches on ``/reducer_twin/<joint>/te``. Every
 window is published on ``/reducer_twin/<joint>/te_features`` (paper Table 5
 figures, lost motion, order amplitudes, duty).
 
+The link encoder's time offset is learnt from the first windows and then
+compensated (:class:`~reducer_twin.core.pipeline.TimeOffsetCalibration`).
 The node also measures how long samples take from their stamp to their TE
 (``latency_stats()``, and the ``latency_p99_ms`` diagnostic).
 """
@@ -26,8 +28,8 @@ from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import duty_to_record
-from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.pipeline import duty_to_record, TimeOffsetCalibration
+from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos
@@ -92,7 +94,8 @@ class TEMonitor(Node):
         self.ratio = total_ratio(self.params.geometry)
         self.analyzer = WindowAnalyzer(self.params, window=p['window'], window_s=p['window_s'],
                                        aging_factor=p['aging_factor'])
-        self.max_gap_s = p['max_gap_s']
+        self.extractor = TEExtractor(self.ratio, max_gap_s=p['max_gap_s'])
+        self.calibration = TimeOffsetCalibration(self.extractor)
         self.rejects = RejectCounter(self)
         self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
                                             stream_qos())
@@ -168,13 +171,15 @@ class TEMonitor(Node):
             return
         rows, self._pending = np.concatenate(self._pending), []
         try:
-            stream = compute_te(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2], self.ratio,
-                                max_gap_s=self.max_gap_s)
+            stream = self.extractor.update(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2])
             windows = self.analyzer.update(stream, rows[:, 3], rows[:, 4])
         except InvalidInput as err:
             self.rejects.reject('bad_samples', str(err))
             return
         for f in windows:
+            if self.calibration.observe(f):
+                self.get_logger().info(f'{self.joint}: link encoder time offset '
+                                       f'{self.calibration.applied * 1e6:.1f} us, compensated')
             self.windows += 1
             self.last_features = f
             rec = features_record(f, self.params)
