@@ -32,6 +32,8 @@ setup(
         'filterpy',
         'mcap',
         'rosbags',
+        'lz4',
+        "backports.zstd; python_version < '3.14'",
         'pyyaml',
         'rich',
         'matplotlib',
