@@ -174,7 +174,9 @@ class NumpyUKF:
         self.P = np.diag([config.initial_wear_std ** 2, config.initial_log_rate_scale_std ** 2])
         self.grid_w, self.grid_s = wear._run_in_map(params.wear)
         self.tables = model_tables(params)
-        self.slope0 = float(self.tables.lost_motion(1e-6) - self.tables.lost_motion(0.0)) / 1e-6
+        # Below w = 0 the model continues with the slope of the table's first segment.
+        w1 = float(self.tables.wear[1])
+        self.slope0 = float(self.tables.lost_motion(w1) - self.tables.lost_motion(0.0)) / w1
         self.rejected = 0
         self.consecutive = 0
 
