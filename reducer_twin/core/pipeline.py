@@ -133,6 +133,41 @@ class TimeOffsetCalibration:
         return True
 
 
+def features_record(f, params):
+    """
+    Flatten window features into a ``te_features`` record.
+
+    Shared by the ``te_monitor`` node and the bag analysis, so a live recording and an
+    offline analysis carry the same values.
+
+    Parameters
+    ----------
+    f : WindowFeatures
+        Output of the window analysis.
+    params : ReducerParams
+        Reducer parameters (for the order numbers).
+
+    Returns
+    -------
+    dict
+        Layout field name to value (SI).
+
+    """
+    g = params.geometry
+    orders = f.orders
+    rec = {
+        'window_start_s': f.t_start, 'window_end_s': f.t_end, 'samples': f.samples,
+        'te_max_rad': f.te_max, 'te_min_rad': f.te_min, 'te_pp_rad': f.te_pp,
+        'te_mean_rad': f.te_mean, 'loaded_mean_te_rad': f.loaded_mean_te,
+        'lost_motion_rad': f.lost_motion, 'lost_motion_std_rad': f.lost_motion_std,
+        'wear_fit_m': f.wear_fit, 'wear_fit_std_m': f.wear_fit_std,
+        'order1_rad': orders.get(1, np.nan), 'order2_rad': orders.get(2, np.nan),
+        'order_zc_rad': orders.get(g.z_cycloid, np.nan),
+        'order_zp_rad': orders.get(g.z_pins, np.nan), 'time_offset_s': f.time_offset_s}
+    rec.update(duty_to_record(f.duty))
+    return rec
+
+
 class EstimatorStage:
     """
     Kalman wear estimation with persistence, one reducer.

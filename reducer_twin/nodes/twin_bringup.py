@@ -9,81 +9,12 @@ EventsExecutor (single-threaded executor as fallback). Nodes are named
 ``<kind>_<joint>`` so several joints coexist.
 """
 
-from pathlib import Path
-import sys
-
 from rclpy.parameter import Parameter
-from reducer_twin.core.errors import InvalidParameter
+# The configuration lives in a ROS-free module (the bag analysis reads it too); its
+# names stay importable from here.
+from reducer_twin.config import default_config, DEFAULTS, load_config  # noqa: F401
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.nodes.base import Node, run_nodes
-
-DEFAULTS = {
-    'twin': {'joints': ['joint_1'], 'link_topic': '/joint_states', 'motor_topic': '',
-             'motor_suffix': '_motor', 'motor_angles': 'raw', 'aging_factor': 1.0,
-             'window_s': 2.0, 'state_dir': '', 'simulate': False},
-    'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
-}
-
-
-def default_config():
-    """Return the packaged ``config/twin.yaml`` (source tree or installed share)."""
-    here = Path(__file__).resolve()
-    for candidate in (here.parents[2] / 'config' / 'twin.yaml',
-                      Path(sys.prefix) / 'share' / 'reducer_twin' / 'config' / 'twin.yaml'):
-        if candidate.is_file():
-            return candidate
-    return None
-
-
-def load_config(path):
-    """
-    Load and check a bringup YAML.
-
-    Parameters
-    ----------
-    path : str or Path or None
-        YAML file; None uses the defaults only.
-
-    Returns
-    -------
-    dict
-        Sections ``twin``, ``life``, ``simulator``, ``reducer`` with defaults
-        filled in.
-
-    Raises
-    ------
-    InvalidParameter
-        If the file cannot be read or holds unknown keys.
-
-    """
-    import yaml
-    data = {}
-    if path:
-        try:
-            data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise InvalidParameter(f'cannot read bringup config {path}: {err}') from err
-        if not isinstance(data, dict):
-            raise InvalidParameter(f'{path}: expected a mapping, got {type(data).__name__}')
-    out = {}
-    for section, defaults in DEFAULTS.items():
-        given = data.get(section) or {}
-        if not isinstance(given, dict):
-            raise InvalidParameter(f'{path}: section {section!r} must be a mapping')
-        if section == 'twin':
-            unknown = set(given) - set(defaults)
-            if unknown:
-                raise InvalidParameter(f'{path}: unknown twin keys {sorted(unknown)}; allowed: '
-                                       f'{sorted(defaults)}')
-        out[section] = {**defaults, **given}
-    unknown = set(data) - set(DEFAULTS)
-    if unknown:
-        raise InvalidParameter(f'{path}: unknown sections {sorted(unknown)}')
-    joints = out['twin']['joints']
-    named = all(isinstance(j, str) and j for j in joints)
-    if not joints or len(set(joints)) != len(joints) or not named:
-        raise InvalidParameter(f'{path}: twin.joints must be distinct names, got {joints!r}')
-    return out
 
 
 def build_nodes(config, sim_overrides=None):
