@@ -397,7 +397,8 @@ class SpikeFilter:
         # Rare: walk from the first suspect with the true "last accepted" TE.
         start = int(suspects[0]) if suspects.size else 0
         last = self._last if start == 0 else float(te[start - 1])
-        rejected = self._rejected
+        # Samples before ``start`` were accepted, which clears a rejection of the last call.
+        rejected = self._rejected if start == 0 else None
         thr = self.threshold
         for k in range(start, n):
             x = float(te[k])
