@@ -44,6 +44,9 @@ from .params import _Validated, spec
 FAST_ROWS = 8
 """Chunks of at most this many rows try the plain-Python path first."""
 
+PERIOD_STEPS = 16
+"""The nominal period of a stream is the median of its first this many stamp steps."""
+
 REASONS = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump', 'gap', 'wrap')
 """Reasons a stream sample is dropped or repaired (per encoder stream)."""
 
@@ -249,10 +252,14 @@ class StreamCleaner:
         d = d[d > 0]
         self._raw_prev_t = int(t[-1])
         if self.period_ns is None:
-            self._diffs.extend(d[:64].tolist())
-            if len(self._diffs) < 16:
+            # Steps seen before the period is known are kept, and their holes counted once
+            # it is: the count and the period do not depend on how the stream is chunked.
+            d = np.concatenate([np.asarray(self._diffs, dtype=d.dtype), d])
+            if d.size < PERIOD_STEPS:
+                self._diffs = d.tolist()
                 return
-            self.period_ns = float(np.median(self._diffs))
+            self.period_ns = float(np.median(d[:PERIOD_STEPS]))
+            self._diffs = []
         holes = d[(d > 1.5 * self.period_ns) & (d < self.config.max_gap_s * 1e9 * 200)]
         self.missing += int(np.sum(np.round(holes / self.period_ns) - 1))
 
