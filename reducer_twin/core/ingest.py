@@ -183,13 +183,21 @@ class StreamCleaner:
         pos = np.asarray(position, dtype=float)
         n = t.size
         one_d = pos.ndim == 1
-        if self._ndim is None:
-            self._ndim = pos.ndim
-        pos = pos.reshape(n, -1) if pos.size == n * max(1, pos.size // max(n, 1)) else pos
+        if one_d and pos.shape[0] == n:
+            pos = pos.reshape(n, 1)
         if pos.ndim != 2 or pos.shape[0] != n:
-            raise InvalidInput(f'position has shape {np.shape(position)} for {n} stamps')
+            raise InvalidInput(f'position has shape {np.shape(position)} for {n} stamps, '
+                               f'expected ({n},) or ({n}, columns)')
+        if self._raw_last is not None and pos.shape[1] != self._raw_last.size:
+            raise InvalidInput(f'position has {pos.shape[1]} columns, the stream has '
+                               f'{self._raw_last.size}')
+        if self._ndim is None:
+            self._ndim = 1 if one_d else 2
         vel = _optional(velocity, pos.shape, 'velocity')
         eff = _optional(effort, pos.shape, 'effort')
+        if n == 0:
+            out = CleanStream(t, pos, vel, eff, np.zeros(0, np.int64))
+            return _squeeze(out) if one_d else out
         if n <= FAST_ROWS:
             out = self._fast(t, pos, vel, eff)
             if out is not None:
@@ -433,8 +441,8 @@ def _optional(values, shape, name):
     if values is None:
         return np.full(shape, np.nan)
     arr = np.asarray(values, dtype=float)
-    if arr.size != int(np.prod(shape)):
-        raise InvalidInput(f'{name} has {arr.size} values for positions of shape {shape}')
+    if arr.shape != shape and not (shape[1] == 1 and arr.shape == shape[:1]):
+        raise InvalidInput(f'{name} has shape {arr.shape} for positions of shape {shape}')
     return arr.reshape(shape)
 
 
