@@ -507,9 +507,9 @@ class Pairer:
 
     The motor angle is interpolated linearly at each link stamp, from motor
     samples of the same segment no further than ``max_gap_s`` away on both
-    sides. Link samples waiting for a later motor sample are held (up to
-    ``max_gap_s``); link samples that cannot be paired are counted as
-    ``unpaired``.
+    sides. Link samples waiting for a later motor sample are held while
+    the link stream runs on for up to ``max_gap_s``; link samples that cannot
+    be paired are counted as ``unpaired``.
 
     Parameters
     ----------
@@ -555,17 +555,18 @@ class Pairer:
         if len(link) == 0:
             return PairedSamples.empty()
         gap_ns = int(self.config.max_gap_s * 1e9)
+        # A link sample the motor stream has not covered while the link stream ran on for
+        # max_gap_s is given up: a stalled motor topic must not hold the link for ever.
+        stale = link.t_ns < link.t_ns[-1] - gap_ns
         if len(motor) == 0:
-            if final:
-                self.unpaired += len(link)
-                self._link = CleanStream.empty()
+            drop = np.ones(len(link), bool) if final else stale
+            self.unpaired += int(np.count_nonzero(drop))
+            self._link = _take(link, np.flatnonzero(~drop))
             return PairedSamples.empty()
         horizon = motor.t_ns[-1]
-        ready = link.t_ns <= horizon
-        if not final:
-            # Hold samples the motor stream may still cover, unless too old.
-            ready |= link.t_ns < horizon - gap_ns
-        else:
+        # Hold samples the motor stream may still cover, unless too old.
+        ready = (link.t_ns <= horizon) | stale
+        if final:
             ready[:] = True
         idx = np.flatnonzero(ready)
         rest = np.flatnonzero(~ready)
