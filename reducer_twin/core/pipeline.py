@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import InvalidInput, InvalidParameter
+from .errors import InvalidInput, InvalidParameter, StateFileError
 from .life import catalogue_life, DEFAULT_HORIZON_S, LOST_MOTION_LIMIT, remaining_life
 from .params import _Validated, spec
 from .units import HOUR
@@ -187,7 +187,8 @@ class EstimatorStage:
     Raises
     ------
     StateFileError
-        If a state file exists but neither it nor its backup can be used.
+        If a state file exists but neither it nor its backup can be used, or
+        its directory cannot be created.
 
     """
 
@@ -199,6 +200,14 @@ class EstimatorStage:
         self.last_observation = float('nan')
         self.skipped_replays = 0
         self.restored_from = None
+        if self.state_path:
+            # A fresh machine has no ~/.local/state/reducer_twin: make it now, so that the
+            # first save does not fail in the middle of a run.
+            try:
+                self.state_path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as err:
+                raise StateFileError(f'cannot create the directory of the estimator state '
+                                     f'{self.state_path}: {err}') from err
         if self.state_path and (self.state_path.exists() or backup_path(self.state_path).exists()):
             loaded = load_with_fallback(self.state_path, params, config)
             self.estimator = loaded.estimator
