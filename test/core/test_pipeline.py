@@ -1,0 +1,307 @@
+"""
+The processing stages the nodes share: EstimatorStage, LifeStage and the record helpers.
+
+Windows are synthetic ``te_features`` records: torque uniform in 60-120 % of
+rated at the paper's speed for 10 operating hours each, wear grown by
+``wear.integrate_wear`` with a hidden rate scale and observed through
+``model_tables(params).lost_motion`` with 0.05 arcmin of noise (the set-up of
+test_estimator.py, as the live chain delivers it).
+"""
+
+import json
+import math
+
+from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
+import numpy as np
+import pytest
+from reducer_twin.core import wear
+from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
+from reducer_twin.core.estimator import backup_path, decode_state, EstimatorConfig
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
+from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
+from reducer_twin.core.pipeline import state_from_record
+from reducer_twin.core.te_extraction import DutySummary
+from reducer_twin.core.transmission_error import model_tables
+from reducer_twin.core.units import ARCMIN, HOUR
+
+PARAMS = ReducerParams()
+NOISE = 0.05 * ARCMIN
+EXPOSURE = 10.0 * HOUR
+WINDOW_S = 2.0
+
+
+def feature_records(n=40, scale=1.0, seed=3, t0=100.0):
+    """
+    Return ``n`` te_features records of a reducer wearing with rate ``scale``.
+
+    Returns
+    -------
+    tuple
+        ``(records, true_wear [m])``.
+
+    """
+    rng = np.random.default_rng(seed)
+    torque = PARAMS.rating.rated_torque * rng.uniform(0.6, 1.2, n)
+    speed = np.full(n, wear.reference_speed(PARAMS))
+    exposure = np.full(n, EXPOSURE)
+    increment = wear.wear_rate(torque, speed, 0.0, PARAMS) * exposure
+    true_w = wear.integrate_wear(exposure, torque, speed, PARAMS, rate_scale=scale)
+    z = model_tables(PARAMS).lost_motion(true_w) + rng.normal(0.0, NOISE, n)
+    records = []
+    for k in range(n):
+        duty = DutySummary(duration_s=WINDOW_S, exposure_s=EXPOSURE,
+                           archard_increment=float(increment[k]),
+                           mean_abs_torque=float(torque[k]), mean_abs_speed=float(speed[k]),
+                           cubic_mean_torque=float(torque[k]),
+                           max_abs_torque=float(1.1 * torque[k]))
+        rec = dict.fromkeys(TE_FEATURES.fields, math.nan)
+        rec.update({'window_start_s': t0 + k * WINDOW_S, 'window_end_s': t0 + (k + 1) * WINDOW_S,
+                    'samples': 2000.0, 'lost_motion_rad': float(z[k]),
+                    'lost_motion_std_rad': NOISE})
+        rec.update(duty_to_record(duty))
+        records.append(rec)
+    return records, true_w
+
+
+@pytest.fixture(scope='module')
+def windows():
+    return [features_from_record(r) for r in feature_records()[0]]
+
+
+def run(stage, windows):
+    """Step a stage with windows; return the statuses."""
+    return [stage.process(f) for f in windows]
+
+
+# -- record helpers ---------------------------------------------------------------------------
+
+
+def test_duty_to_record_writes_the_duty_fields_of_the_te_features_layout():
+    duty = DutySummary(2.0, 7200.0, 3e-9, 400.0, 1.2, 450.0, 600.0)
+    rec = duty_to_record(duty)
+    assert set(rec) <= set(TE_FEATURES.fields)
+    assert rec == {'duration_s': 2.0, 'exposure_s': 7200.0, 'archard_increment_m': 3e-9,
+                   'mean_abs_torque_nm': 400.0, 'mean_abs_speed_rad_s': 1.2,
+                   'cubic_mean_torque_nm': 450.0, 'mean_speed_rad_s': 1.2,
+                   'max_abs_torque_nm': 600.0}
+
+
+def test_features_from_record_reads_back_what_the_te_monitor_writes():
+    rec = feature_records(n=1)[0][0]
+    rec.update({'wear_fit_m': 3e-6, 'wear_fit_std_m': 2e-7, 'lost_motion_std_rad': 1e-5})
+    f = features_from_record(rec)
+    assert (f.t_start, f.t_end) == (rec['window_start_s'], rec['window_end_s'])
+    assert (f.lost_motion, f.lost_motion_std) == (rec['lost_motion_rad'], 1e-5)
+    assert (f.wear_fit, f.wear_fit_std) == (3e-6, 2e-7)
+    assert duty_to_record(f.duty) == {k: rec[k] for k in duty_to_record(f.duty)}
+
+
+def test_a_record_round_trip_through_json_keeps_every_value():
+    rec = feature_records(n=1)[0][0]
+    again = json.loads(json.dumps(duty_to_record(features_from_record(rec).duty)))
+    assert again == duty_to_record(features_from_record(rec).duty)
+
+
+def test_state_from_record_refuses_a_non_finite_state():
+    rec = EstimatorStage(PARAMS).record(0.0)
+    x, P = state_from_record(rec)
+    assert x.shape == (2,) and P.shape == (2, 2)
+    rec['var_wear_m2'] = math.nan
+    with pytest.raises(InvalidInput, match='non-finite'):
+        state_from_record(rec)
+
+
+# -- EstimatorStage ---------------------------------------------------------------------------
+
+
+def test_a_stage_without_state_file_steps_the_filter_and_records_the_wear_layout(windows):
+    stage = EstimatorStage(PARAMS)
+    statuses = run(stage, windows[:10])
+    assert set(statuses) <= {'accepted', 'skipped'} and statuses.count('accepted') >= 8
+    rec = stage.record(windows[9].t_end)
+    assert set(rec) == set(WEAR_ESTIMATE.fields)
+    assert rec['exposure_s'] == pytest.approx(10 * EXPOSURE)
+    assert rec['updates'] == statuses.count('accepted')
+    assert rec['lost_motion_obs_rad'] == windows[9].lost_motion
+    assert stage.restored_from is None
+
+
+def test_the_estimate_follows_the_synthetic_truth(windows):
+    records, true_w = feature_records()
+    stage = EstimatorStage(PARAMS)
+    run(stage, windows)
+    assert stage.estimator.wear == pytest.approx(true_w[-1], rel=0.15)
+
+
+def test_a_restored_stage_continues_exactly_where_the_saved_one_stopped(windows, tmp_path):
+    path = tmp_path / 'joint_1.json'
+    logs = []
+    first = EstimatorStage(PARAMS, state_path=path, log=logs.append)
+    assert 'starting from a new reducer' in logs[0]
+    run(first, windows[:15])
+    second = EstimatorStage(PARAMS, state_path=path, log=logs.append)
+    assert second.restored_from == str(path)
+    assert 'restored estimator state' in logs[-1]
+    assert second.estimator.state_dict() == first.estimator.state_dict()
+    reference = EstimatorStage(PARAMS)
+    run(reference, windows)
+    run(second, windows[15:])
+    assert second.estimator.state_dict() == reference.estimator.state_dict()
+    assert decode_state(path.read_bytes(), path) == reference.estimator.state_dict()
+
+
+def test_a_window_seen_again_after_a_restart_is_skipped_as_a_replay(windows, tmp_path):
+    path = tmp_path / 'joint_1.json'
+    stage = EstimatorStage(PARAMS, state_path=path)
+    run(stage, windows[:6])
+    saved = path.read_bytes()
+    restarted = EstimatorStage(PARAMS, state_path=path)
+    assert run(restarted, windows[4:6]) == ['replay', 'replay']
+    assert restarted.skipped_replays == 2
+    assert restarted.estimator.exposure_s == stage.estimator.exposure_s
+    assert path.read_bytes() == saved, 'a replay changes nothing, not even the file'
+    assert run(restarted, windows[6:7]) != ['replay']
+
+
+@pytest.mark.parametrize('back_s, status', [
+    (0.0, 'replay'),
+    (CLOCK_RESET_S - 0.5, 'replay'),
+    (CLOCK_RESET_S, 'accepted'),
+    (10 * CLOCK_RESET_S, 'accepted'),
+])
+def test_a_window_far_enough_back_is_a_clock_reset_and_is_accepted(windows, back_s, status):
+    stage = EstimatorStage(PARAMS)
+    run(stage, windows[:5])
+    exposure = stage.estimator.exposure_s
+    last = windows[4].t_end
+    later = features_from_record({**feature_records(n=6)[0][5],
+                                  'window_start_s': last - back_s - WINDOW_S,
+                                  'window_end_s': last - back_s})
+    assert stage.process(later) == status
+    grew = stage.estimator.exposure_s > exposure
+    assert grew == (status != 'replay')
+    if status == 'accepted':
+        assert stage.estimator.t_end == last - back_s
+
+
+def test_a_corrupt_state_file_falls_back_to_its_backup(windows, tmp_path):
+    path = tmp_path / 'joint_1.json'
+    stage = EstimatorStage(PARAMS, state_path=path)
+    run(stage, windows[:5])
+    previous = decode_state(backup_path(path).read_bytes())
+    path.write_bytes(path.read_bytes()[:40])     # a crash mid-write of some other tool
+    logs = []
+    restored = EstimatorStage(PARAMS, state_path=path, log=logs.append)
+    assert restored.restored_from == str(backup_path(path))
+    assert restored.estimator.state_dict() == previous
+    assert 'primary unusable' in logs[0]
+    assert restored.estimator.updates == stage.estimator.updates - 1
+
+
+def test_a_corrupt_state_file_without_backup_refuses_to_start_naming_the_file(tmp_path):
+    path = tmp_path / 'joint_1.json'
+    path.write_text('{"format": "reducer_twin.wear_estimator.file", "sha256": "0"')
+    with pytest.raises(StateFileError, match=str(path)):
+        EstimatorStage(PARAMS, state_path=path)
+
+
+def test_the_state_directory_is_created_when_missing(windows, tmp_path):
+    path = tmp_path / 'state' / 'reducer_twin' / 'joint_1.json'
+    stage = EstimatorStage(PARAMS, state_path=path)
+    run(stage, windows[:1])
+    assert decode_state(path.read_bytes())['t_end'] == windows[0].t_end
+
+
+def test_a_state_directory_that_cannot_be_made_refuses_to_start(tmp_path):
+    blocker = tmp_path / 'file'
+    blocker.write_text('not a directory')
+    with pytest.raises(StateFileError, match='directory'):
+        EstimatorStage(PARAMS, state_path=blocker / 'joint_1.json')
+
+
+def test_reset_returns_to_a_new_reducer_and_saves_the_event(windows, tmp_path):
+    path = tmp_path / 'joint_1.json'
+    stage = EstimatorStage(PARAMS, state_path=path)
+    run(stage, windows[:10])
+    assert stage.estimator.wear > 0.0
+    stage.reset('maintenance: reducer replaced')
+    assert stage.estimator.wear == EstimatorConfig().initial_wear
+    state = decode_state(path.read_bytes())
+    assert state['events'][-1]['reason'] == 'maintenance: reducer replaced'
+    assert state['exposure_since_reset_s'] == 0.0
+    assert state['exposure_s'] == pytest.approx(10 * EXPOSURE)
+
+
+# -- LifeStage --------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope='module')
+def worn_record(windows):
+    stage = EstimatorStage(PARAMS)
+    run(stage, windows)
+    return stage.record(windows[-1].t_end)
+
+
+@pytest.mark.parametrize('warn_h, error_h, level', [
+    (1.0, 0.5, 'OK'),
+    (1e6, 1.0, 'WARN'),
+    (1e6, 1e6, 'ERROR'),
+])
+def test_life_levels_follow_the_thresholds_on_p10(windows, worn_record, warn_h, error_h, level):
+    stage = LifeStage(PARAMS, LifeConfig(warn_s=warn_h * HOUR, error_s=error_h * HOUR))
+    stage.observe_duty(windows[-1].duty)
+    record, got, message = stage.process(worn_record)
+    assert got == level
+    assert set(record) == set(REMAINING_LIFE.fields)
+    assert 0.0 < record['p10_s'] <= record['p50_s'] <= record['p90_s']
+    assert math.isfinite(record['catalogue_life_s'])
+    assert 'remaining life P10' in message
+
+
+def test_a_reducer_beyond_the_limit_is_an_error_with_no_life_left(worn_record):
+    worn_out = {**worn_record, 'wear_m': 200e-6}
+    record, level, message = LifeStage(PARAMS).process(worn_out)
+    assert level == 'ERROR'
+    assert record['p10_s'] == record['p50_s'] == record['p90_s'] == 0.0
+    assert record['threshold_met'] == 1.0
+    assert 'worn out' in message
+
+
+def test_the_catalogue_life_needs_a_duty(worn_record):
+    record, _, _ = LifeStage(PARAMS).process(worn_record)
+    assert math.isnan(record['catalogue_life_s'])
+
+
+def test_predictions_are_repeatable_for_the_same_record(windows, worn_record):
+    # Common random numbers: successive predictions differ by the state only.
+    stage = LifeStage(PARAMS)
+    stage.observe_duty(windows[-1].duty)
+    assert stage.process(worn_record) == stage.process(worn_record)
+
+
+@pytest.mark.parametrize('values, name', [
+    ({'warn_s': -1.0}, 'life.warn_s'),
+    ({'error_s': math.nan}, 'life.error_s'),
+    ({'warn_s': 10.0 * HOUR, 'error_s': 20.0 * HOUR}, 'life.error_s'),
+    ({'lost_motion_limit': 0.0}, 'life.lost_motion_limit'),
+    ({'lost_motion_limit': 0.2}, 'life.lost_motion_limit'),
+    ({'horizon_s': 0.0}, 'life.horizon_s'),
+    ({'n_samples': 99}, 'life.n_samples'),
+    ({'n_samples': 2500.5}, 'life.n_samples'),
+    ({'duty_rate_rel_std': True}, 'life.duty_rate_rel_std'),
+    ({'duty_rate_rel_std': -0.1}, 'life.duty_rate_rel_std'),
+])
+def test_bad_life_config_values_raise_invalid_parameter_naming_them(values, name):
+    with pytest.raises(InvalidParameter, match=name):
+        LifeConfig(**values)
+
+
+def test_life_config_error_above_warn_names_both_thresholds():
+    with pytest.raises(InvalidParameter, match=r'life\.error_s .* must not exceed life\.warn_s'):
+        LifeConfig(warn_s=10.0 * HOUR, error_s=20.0 * HOUR)
+
+
+def test_a_non_finite_wear_record_raises_invalid_input(worn_record):
+    with pytest.raises(InvalidInput):
+        LifeStage(PARAMS).process({**worn_record, 'wear_m': math.inf})
