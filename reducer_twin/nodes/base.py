@@ -15,10 +15,12 @@ import time
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 import rclpy
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
+from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.params import check_value, describe_range
 
 ENCODER_DEPTH = 200
@@ -114,11 +116,16 @@ class SpecParameters:
                                                        to_value=int(meta['hi']), step=1)]
             else:
                 desc.type = ParameterType.PARAMETER_DOUBLE
-                if (meta['lo'] is not None and meta['hi'] is not None
-                        and not meta['lo_open'] and not meta['hi_open']):
+                if meta['lo'] is not None and meta['hi'] is not None:
+                    # ROS ranges are closed: an open bound is declared closed (tools show the
+                    # range), additional_constraints says it is open and the core enforces it.
                     desc.floating_point_range = [FloatingPointRange(
                         from_value=float(meta['lo']), to_value=float(meta['hi']), step=0.0)]
-            param = node.declare_parameter(name, default, desc)
+            try:
+                param = node.declare_parameter(name, default, desc)
+            except (InvalidParameterTypeException, InvalidParameterValueException) as err:
+                raise InvalidParameter(
+                    f'{node.get_name()}: {_refused_override(node, name, meta, err)}') from err
             values[f.name] = param.value
         try:
             self.value = replace(instance, **values)
@@ -146,6 +153,39 @@ class SpecParameters:
         if self.on_change is not None:
             self.on_change(candidate)
         return SetParametersResult(successful=True)
+
+
+def _refused_override(node, name, meta, err):
+    """
+    Say in the core's words why rclpy refused the start value of a parameter.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    name : str
+        Parameter name.
+    meta : mapping
+        Field metadata made by :func:`reducer_twin.core.params.spec`.
+    err : rclpy.exceptions.ParameterException
+        What rclpy raised (wrong type, or outside the descriptor's range).
+
+    Returns
+    -------
+    str
+        ``'<name> must be <allowed> <unit>, got <value>'``.
+
+    """
+    # rclpy keeps the command-line and constructor overrides here, and nowhere public.
+    given = getattr(node, '_parameter_overrides', {}).get(name)
+    if given is None:
+        return str(err)
+    try:
+        check_value(name, given.value, meta)
+    except InvalidParameter as bad:
+        return str(bad)
+    kind = 'a whole number' if meta['integer'] else 'a floating-point number (e.g. 5.0, not 5)'
+    return out_of_range(name, given.value, meta['unit'], f'{kind} {describe_range(meta)}')
 
 
 class RejectCounter:
@@ -254,7 +294,8 @@ def run_nodes(factory, args=None):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except ReducerTwinError as err:
+    except (ReducerTwinError, ParameterException) as err:
+        # ParameterException: rclpy refused a start value of a plain (non-spec) parameter.
         sys.stderr.write(f'ERROR: {err}\n')
         return 1
     finally:
