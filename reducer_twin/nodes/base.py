@@ -87,7 +87,9 @@ class SpecParameters:
     instance : dataclass
         Default values (a frozen, validated dataclass of the core).
     on_change : callable, optional
-        Called with the new instance after an accepted change.
+        Called with the new instance after an accepted change. Without it
+        the node cannot apply a change while running, and the parameters are
+        declared read-only (set them at start).
 
     """
 
@@ -108,7 +110,8 @@ class SpecParameters:
             desc = ParameterDescriptor(
                 name=name,
                 description=f"{meta['doc']} [{meta['unit'] or '-'}]",
-                additional_constraints=f"{describe_range(meta)} {meta['unit']}".strip())
+                additional_constraints=f"{describe_range(meta)} {meta['unit']}".strip(),
+                read_only=on_change is None)
             if meta['integer']:
                 desc.type = ParameterType.PARAMETER_INTEGER
                 if meta['lo'] is not None and meta['hi'] is not None:
