@@ -30,6 +30,7 @@ what is readable is returned and the reader's ``warnings`` say where reading sto
 import collections
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+import functools
 import itertools
 import json
 import mmap
@@ -254,6 +255,12 @@ def parse_qos_profiles(value):
 _PLAIN = re.compile(r'[A-Za-z0-9_./][A-Za-z0-9_./\-]*')
 
 
+@functools.lru_cache(maxsize=4096)
+def _reads_back(text):
+    """Whether YAML reads the plain scalar ``text`` as that string (cached: 0.3 ms a call)."""
+    return yaml.safe_load(text) == text
+
+
 def _scalar(value):
     if value is None:
         return '~'
@@ -262,7 +269,7 @@ def _scalar(value):
     if isinstance(value, (int, np.integer)):
         return str(int(value))
     text = str(value)
-    if _PLAIN.fullmatch(text) and yaml.safe_load(text) == text:
+    if _PLAIN.fullmatch(text) and _reads_back(text):
         return text
     return json.dumps(text, ensure_ascii=False)
 
