@@ -9,6 +9,7 @@ core's own message while the old value stays.
 """
 
 from dataclasses import fields, replace
+import signal
 import sys
 import time
 
@@ -20,6 +21,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.params import check_value, describe_range
 
@@ -268,6 +270,28 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
+def spin_until_shutdown(executor, context=None):
+    """
+    Spin until the context shuts down (Ctrl-C, SIGTERM, ``rclpy.shutdown``).
+
+    ``EventsExecutor.spin()`` stays in C++ and never sees the shutdown that
+    rclpy's signal handler makes: a node would ignore Ctrl-C. Spinning in
+    slices of 0.2 s lets the loop notice it.
+
+    Parameters
+    ----------
+    executor : rclpy.executors.Executor
+        Executor with the nodes added.
+    context : rclpy.context.Context, optional
+        Context to watch (default: the global one).
+
+    """
+    context = context or rclpy.get_default_context()
+    never = Future()
+    while context.ok():
+        executor.spin_until_future_complete(never, timeout_sec=0.2)
+
+
 def run_nodes(factory, args=None):
     """
     Run nodes built by ``factory`` until shutdown; the body of every ``main()``.
@@ -285,6 +309,10 @@ def run_nodes(factory, args=None):
         Exit code: 0 on a clean shutdown, 1 on an invalid parameter.
 
     """
+    # Ctrl-C stops the nodes through rclpy's handler, which shuts the context down (then
+    # spin_until_shutdown returns); Python's own KeyboardInterrupt would land in whatever
+    # callback runs and print its stack, so the Python-level handler does nothing.
+    previous = signal.signal(signal.SIGINT, _ignore_signal)
     rclpy.init(args=args)
     nodes = []
     try:
@@ -294,7 +322,7 @@ def run_nodes(factory, args=None):
         for node in nodes:
             executor.add_node(node)
         quiet_gc()
-        executor.spin()
+        spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ReducerTwinError, ParameterException) as err:
@@ -308,8 +336,14 @@ def run_nodes(factory, args=None):
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
+        signal.signal(signal.SIGINT, previous)
     return 0
 
 
+def _ignore_signal(signum, frame):
+    """Python-level SIGINT handler of the node programs: rclpy's handler does the work."""
+
+
 __all__ = ['Node', 'SpecParameters', 'RejectCounter', 'encoder_qos', 'stream_qos',
-           'latest_qos', 'diagnostics_qos', 'joint_topic', 'make_executor', 'run_nodes']
+           'latest_qos', 'diagnostics_qos', 'joint_topic', 'make_executor', 'run_nodes',
+           'spin_until_shutdown']
