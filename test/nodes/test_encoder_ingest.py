@@ -1,0 +1,318 @@
+"""
+encoder_ingest over real DDS: controller JointState in, encoder_pairs batches out.
+
+A probe node publishes what robot controllers publish, in both forms the node
+accepts: (a) one ``/joint_states`` carrying ``<joint>`` and ``<joint>_motor``
+(ros2_control's joint_state_broadcaster with a motor interface; arrays sized
+to all joints, unavailable interfaces NaN), and (b) link and motor sides on
+two topics with the same names at different rates (1 kHz link, 500 Hz
+motor). Motor angles are raw (input side) or already divided by the ratio.
+Stamps are a wall-clock time 10 s in the past, so the node's stale-batch
+flush works as on a live robot.
+"""
+
+import itertools
+import math
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from msg_adapters.layouts import PAIRED_SAMPLES
+from msg_adapters.ros import batch_array, make_joint_state
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.nodes.base import encoder_qos, joint_topic
+from reducer_twin.nodes.encoder_ingest import EncoderIngest
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+pytestmark = pytest.mark.timeout(60, method='thread')
+
+RATIO = 81.0
+"""Total ratio of the RV-80E (paper Table 4), the node's default."""
+
+MS = 1_000_000
+_ids = itertools.count()
+
+RECEIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
+
+def link_angle(k, t_s):
+    """Link angle of joint ``k`` at ``t_s`` seconds of stream [rad]: a smooth robot move."""
+    return 0.2 * k + 0.5 * np.sin(2.0 * math.pi * 0.5 * t_s) + 0.3 * t_s
+
+
+def motor_angle(k, t_s):
+    """Raw (input-side) motor angle of joint ``k``: ratio x link plus a TE of 1 arcmin."""
+    return RATIO * (link_angle(k, t_s) + 2.9e-4 * np.sin(2.0 * math.pi * 3.0 * t_s)) + 7.0
+
+
+class Robot:
+    """
+    A fake controller: joint names, topics and the messages it sends.
+
+    Parameters
+    ----------
+    ros : RosHarness
+        The test's harness.
+    split : bool
+        Form (b), two topics; else form (a), one combined topic.
+    motor_angles : str
+        ``'raw'`` or ``'output'`` (reported divided by the ratio).
+
+    """
+
+    def __init__(self, ros, split=False, motor_angles='raw', joints=2):
+        n = next(_ids)
+        self.ros = ros
+        self.joints = [f'arm{n}_j{k + 1}' for k in range(joints)]
+        self.link_topic = f'/robot{n}/joint_states'
+        self.motor_topic = f'/robot{n}/motor_states' if split else ''
+        self.split = split
+        self.scale = RATIO if motor_angles == 'output' else 1.0
+        self.t0 = (time.time_ns() // MS - 10_000) * MS
+        self.node = ros.add(EncoderIngest(
+            f'encoder_ingest_{n}', context=ros.context, parameter_overrides=[
+                Parameter('joints', value=self.joints),
+                Parameter('link_topic', value=self.link_topic),
+                Parameter('motor_topic', value=self.motor_topic),
+                Parameter('motor_angles', value=motor_angles),
+                Parameter('diagnostics_period_s', value=0.1)]))
+        self.probe = ros.probe()
+        self.link_pub = self.probe.publisher(self.link_topic, JointState, encoder_qos())
+        self.motor_pub = (self.probe.publisher(self.motor_topic, JointState, encoder_qos())
+                          if split else None)
+        # The probe hears its own link topic: once it has, the node's reader has the samples.
+        self.echo = self.probe.listen(self.link_topic, JointState, RECEIVE_QOS)
+        self.pairs = {j: self.probe.listen(joint_topic(j, 'encoder_pairs'), Float64MultiArray,
+                                           RECEIVE_QOS) for j in self.joints}
+        self.diagnostics = self.probe.listen('/diagnostics', DiagnosticArray, RECEIVE_QOS)
+        self.sent = 0
+        ros.wait_matched(self.link_pub, *([self.motor_pub] if split else []),
+                         *(out.publisher for out in self.node.outputs.values()))
+
+    def stamp(self, k):
+        """Stamp of sample ``k`` [ns] (1 kHz)."""
+        return self.t0 + k * MS
+
+    def combined(self, k, overrides=None):
+        """Form (a) message of sample ``k``, names in a controller's own order plus a gripper."""
+        t_s = k * 1e-3
+        names, pos, vel, eff = ['gripper'], [0.01], [0.0], [1.0]
+        for j, name in reversed(list(enumerate(self.joints))):
+            names += [name + '_motor', name]
+            pos += [motor_angle(j, t_s) / self.scale, link_angle(j, t_s)]
+            vel += [math.nan, 0.3 + math.pi * 0.5 * math.cos(math.pi * t_s)]
+            eff += [math.nan, 100.0 * (j + 1) * math.cos(t_s)]
+        for name, value in (overrides or {}).items():
+            pos[names.index(name)] = value
+        return make_joint_state(self.stamp(k), names, pos, vel, eff)
+
+    def link_only(self, k):
+        """Form (b) link message of sample ``k``."""
+        t_s = k * 1e-3
+        return make_joint_state(
+            self.stamp(k), self.joints, [link_angle(j, t_s) for j in range(len(self.joints))],
+            [0.3] * len(self.joints), [50.0 * (j + 1) for j in range(len(self.joints))])
+
+    def motor_only(self, k):
+        """Form (b) motor message of sample ``k``."""
+        return make_joint_state(self.stamp(k), self.joints,
+                                [motor_angle(j, k * 1e-3) / self.scale
+                                 for j in range(len(self.joints))])
+
+    def send(self, messages):
+        """
+        Publish ``(publisher, message)`` pairs in order, 20 at a time.
+
+        The node's reader keeps 200 samples (KEEP_LAST): the probe waits to
+        hear its own link messages before sending more.
+        """
+        for start in range(0, len(messages), 20):
+            for pub, msg in messages[start:start + 20]:
+                pub.publish(msg)
+                if pub is self.link_pub:
+                    self.sent += 1
+            self.ros.spin_until(lambda: len(self.echo) >= self.sent, what='the link echo')
+
+    def rows(self, joint):
+        """Return every encoder_pairs row received for ``joint``, oldest first."""
+        batches = [batch_array(m, PAIRED_SAMPLES) for m in self.pairs[joint]]
+        return np.concatenate(batches) if batches else np.zeros((0, 5))
+
+    def wait_rows(self, joint, n):
+        """Spin until ``n`` rows of ``joint`` arrived; return them."""
+        self.ros.spin_until(lambda: sum(m.layout.dim[0].size for m in self.pairs[joint]) >= n,
+                            what=f'{n} encoder pairs of {joint}')
+        return self.rows(joint)
+
+    def status(self, joint, predicate=lambda s: True):
+        """Spin until a /diagnostics status of this node's ``joint`` satisfies ``predicate``."""
+        name = f'reducer_twin: {joint} encoder ingest'
+        found = []
+
+        def latest():
+            found[:] = [s for s in self.ros.statuses(self.diagnostics, name) if predicate(s)]
+            return bool(found)
+
+        self.ros.spin_until(latest, what=f'a diagnostics status {name!r}')
+        return found[-1]
+
+
+def expected_stamps_s(robot, ks):
+    """Stamps of samples ``ks`` in seconds, as the node sends them."""
+    return np.array([robot.stamp(k) for k in ks]) * 1e-9
+
+
+# -- form (a): one JointState with <joint> and <joint>_motor ----------------------------------
+
+
+@pytest.mark.parametrize('motor_angles', ['raw', 'output'])
+def test_combined_joint_states_become_aligned_encoder_pairs(ros, motor_angles):
+    robot = Robot(ros, motor_angles=motor_angles)
+    n = 300
+    robot.send([(robot.link_pub, robot.combined(k)) for k in range(n)])
+    ks = np.arange(n)
+    for j, joint in enumerate(robot.joints):
+        rows = robot.wait_rows(joint, n)
+        assert rows.shape == (n, 5)
+        np.testing.assert_allclose(rows[:, 0], expected_stamps_s(robot, ks), rtol=0, atol=1e-6)
+        # Shared stamps: motor and link of one message stay together to < 1e-9 rad.
+        np.testing.assert_allclose(rows[:, 1], motor_angle(j, ks * 1e-3), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(rows[:, 2], link_angle(j, ks * 1e-3), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(rows[:, 3], 100.0 * (j + 1) * np.cos(ks * 1e-3))
+        assert np.isfinite(rows[:, 4]).all()
+        counts = robot.node.counts()[joint]
+        assert counts['published'] == n
+        assert counts['stream_missing'] == 0 and counts['unpaired'] == 0
+        assert counts['stream_non_finite'] == counts['spike'] == 0
+    status = robot.status(robot.joints[0], lambda s: s.values and robot.ros.key_values(s).get(
+        'published') == str(n))
+    assert status.level == DiagnosticStatus.OK
+    assert status.hardware_id == robot.joints[0]
+    assert status.message == 'streams clean'
+    values = robot.ros.key_values(status)
+    assert values['stream_missing'] == '0' and values['unpaired'] == '0'
+    assert values['rejected_messages'] == '0'
+
+
+def test_nan_positions_glitches_and_holes_are_dropped_and_counted(ros):
+    robot = Robot(ros)
+    j1, j2 = robot.joints
+    nan = {50: {j2: math.nan, j2 + '_motor': math.nan},      # j2's position interface is down
+           80: {j1 + '_motor': math.nan}}                      # only j1's motor value is lost
+    glitch = 150
+    messages = []
+    for k in range(300):
+        if k == 120:
+            continue                                           # a lost message: a stamp hole
+        msg = robot.combined(k, nan.get(k))
+        if k == glitch:
+            msg = robot.combined(k, {j1: link_angle(0, k * 1e-3) + 0.05})   # a link glitch
+        messages.append((robot.link_pub, msg))
+    robot.send(messages)
+    rows1 = robot.wait_rows(j1, 297)
+    rows2 = robot.wait_rows(j2, 298)
+    stamps = expected_stamps_s(robot, range(300))
+    np.testing.assert_allclose(rows1[:, 0], np.delete(stamps, [80, 120, glitch]), atol=1e-6)
+    np.testing.assert_allclose(rows2[:, 0], np.delete(stamps, [50, 120]), atol=1e-6)
+    c1, c2 = robot.node.counts()[j1], robot.node.counts()[j2]
+    assert (c1['unpaired'], c2['unpaired']) == (1, 0)
+    assert (c1['spike'], c2['spike']) == (1, 0)
+    assert c1['stream_missing'] == c2['stream_missing'] == 1
+    assert c1['stream_non_finite'] + c2['stream_non_finite'] >= 3
+    status = robot.status(j1, lambda s: robot.ros.key_values(s).get('published') == '297')
+    assert status.level == DiagnosticStatus.WARN
+    assert 'dropped or repaired' in status.message
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    'known defect, reported: in the combined form all joints share one StreamCleaner, so '
+    'counts() gives every joint the non_finite/wrap/... counts of the whole message'))
+def test_non_finite_counts_belong_to_the_joint_that_had_them(ros):
+    robot = Robot(ros)
+    j1, j2 = robot.joints
+    robot.send([(robot.link_pub, robot.combined(k, {j2: math.nan} if k == 30 else None))
+                for k in range(60)])
+    robot.wait_rows(j1, 60)
+    counts = robot.node.counts()
+    assert counts[j2]['stream_non_finite'] == 1
+    assert counts[j1]['stream_non_finite'] == 0
+
+
+def test_bad_messages_are_rejected_counted_and_warned_about_once(ros, capfd):
+    robot = Robot(ros)
+    j1 = robot.joints[0]
+    bad = [
+        make_joint_state(robot.stamp(1000), ['elbow', 'elbow_motor'], [0.0, 0.0]),
+        make_joint_state(robot.stamp(1001), [j1, j1 + '_motor'], [0.0, 0.0]),   # j2 missing
+    ]
+    short = robot.combined(1002)
+    short.position = short.position[:-1]                       # 4 names, 3 positions
+    bad.append(short)
+    long_vel = robot.combined(1003)
+    long_vel.velocity = list(long_vel.velocity) + [0.0]
+    bad.append(long_vel)
+    messages = []
+    for k in range(200):
+        messages.append((robot.link_pub, robot.combined(k)))
+        if k % 40 == 10:
+            messages.append((robot.link_pub, bad[(k // 40) % len(bad)]))
+    robot.send(messages)
+    rows = robot.wait_rows(j1, 200)
+    assert rows.shape[0] == 200, 'the node keeps working between bad messages'
+    assert robot.node.rejects.counts == {'bad_joint_state': 5}
+    status = robot.status(j1, lambda s: robot.ros.key_values(s).get('published') == '200')
+    assert robot.ros.key_values(status)['rejected_messages'] == '5'
+    err = capfd.readouterr().err
+    assert err.count('dropped a message (bad_joint_state)') == 1, err[-2000:]
+    assert 'JointState lacks' in err
+
+
+# -- form (b): link and motor on two topics, different rates ----------------------------------
+
+
+@pytest.mark.parametrize('motor_angles', ['raw', 'output'])
+def test_split_streams_at_1khz_and_500hz_are_paired_by_interpolation(ros, motor_angles):
+    robot = Robot(ros, split=True, motor_angles=motor_angles)
+    n = 301                                         # ends on a motor sample: all can pair
+    messages = []
+    for k in range(n):
+        messages.append((robot.link_pub, robot.link_only(k)))
+        if k % 2 == 0:
+            messages.append((robot.motor_pub, robot.motor_only(k)))
+    robot.send(messages)
+    ks = np.arange(n)
+    t_motor = ks[::2] * 1e-3
+    for j, joint in enumerate(robot.joints):
+        rows = robot.wait_rows(joint, n)
+        assert rows.shape == (n, 5)
+        np.testing.assert_allclose(rows[:, 0], expected_stamps_s(robot, ks), atol=1e-6)
+        np.testing.assert_allclose(rows[:, 2], link_angle(j, ks * 1e-3), rtol=0, atol=1e-9)
+        # Linear interpolation of the 500 Hz motor samples at the 1 kHz link stamps.
+        interp = np.interp(ks * 1e-3, t_motor, motor_angle(j, t_motor))
+        np.testing.assert_allclose(rows[:, 1], interp, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(rows[::2, 1], motor_angle(j, t_motor), rtol=0, atol=1e-9)
+        # ... which is within its curvature error of the true motor angle: |a|max h^2 / 8,
+        # |a|max about ratio x 0.5 x pi^2 rad/s^2 at the motor, h = 2 ms.
+        np.testing.assert_allclose(rows[:, 1], motor_angle(j, ks * 1e-3), rtol=0,
+                                   atol=RATIO * 0.5 * math.pi ** 2 * 0.002 ** 2 / 8 * 1.1)
+        counts = robot.node.counts()[joint]
+        assert counts['link_missing'] == counts['motor_missing'] == counts['unpaired'] == 0
+        assert counts['published'] == n
+    status = robot.status(robot.joints[1], lambda s: robot.ros.key_values(s).get(
+        'published') == str(n))
+    assert status.level == DiagnosticStatus.OK
+
+
+def test_a_silent_motor_topic_shows_as_unpaired_samples_and_a_warning(ros):
+    robot = Robot(ros, split=True)
+    robot.send([(robot.link_pub, robot.link_only(k)) for k in range(200)])
+    joint = robot.joints[0]
+    status = robot.status(joint, lambda s: s.level == DiagnosticStatus.WARN)
+    values = robot.ros.key_values(status)
+    assert int(values['unpaired']) >= 140
+    assert values['published'] == '0'
+    assert robot.rows(joint).shape[0] == 0
