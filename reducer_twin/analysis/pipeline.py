@@ -1,0 +1,793 @@
+"""
+Offline analysis of a rosbag2 recording with the twin's own stages.
+
+The same core objects the live nodes run, in the same order, on whole arrays:
+
+* ``encoder_ingest``: :class:`~reducer_twin.core.ingest.StreamCleaner` over all joint
+  columns of a chunk of JointState messages at once, :func:`~reducer_twin.core.ingest.
+  pair_columns` (one message with ``<joint>`` and ``<joint><motor_suffix>``) or
+  :class:`~reducer_twin.core.ingest.Pairer` (link and motor on two topics), then
+  :class:`~reducer_twin.core.ingest.SpikeFilter`;
+* ``te_monitor``: :class:`~reducer_twin.core.te_extraction.TEExtractor`,
+  :class:`~reducer_twin.core.pipeline.TimeOffsetCalibration` and
+  :class:`~reducer_twin.core.te_extraction.WindowAnalyzer`, records by
+  :func:`~reducer_twin.core.pipeline.features_record`;
+* ``wear_estimator`` and ``life_publisher``: :class:`~reducer_twin.core.pipeline.
+  EstimatorStage` and :class:`~reducer_twin.core.pipeline.LifeStage` per window.
+
+The derived bag carries what the nodes publish, in their layouts:
+``/reducer_twin/<joint>/te`` (TE batches; :data:`TE_BATCH_S` of stream per message
+instead of the node's 20 ms), ``te_features``, ``wear`` and ``remaining_life`` per
+window, ``/diagnostics`` (the life publisher's status per window and joint, and the
+ingest counts at the end), and the input's ``ground_truth`` topics when it has them.
+Log times are the stamps of the data a message was computed from.
+
+Differences from a live run, on purpose: TE messages are longer; until the encoder time
+offset is learnt (or for :data:`CALIBRATION_WINDOWS` windows) the stream is fed in
+0.1 s pieces as the node's analysis timer does, then in large chunks, so a calibration
+that is learnt late applies from the next chunk; the last, partial window is analysed
+(a node that stops drops it); the estimator starts from a new reducer and keeps no state
+file.
+
+Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
+window) can run in a forked worker process while this process reads, cleans and
+analyses the next chunk (``stage_worker=True``); results are identical.
+"""
+
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+import time
+
+from msg_adapters.diagnostic_cdr import encode_diagnostic_array, MSGTYPE as DIAGNOSTICS
+from msg_adapters.diagnostic_cdr import Status
+from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states
+from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
+from msg_adapters.layouts import GROUND_TRUTH, record_values, REMAINING_LIFE, TE_BATCH
+from msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
+from msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
+from msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
+import numpy as np
+from reducer_twin.analysis.bag import BagDirWriter, open_bag
+from reducer_twin.analysis.mcap_io import DEFAULT_QOS
+from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
+from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
+from reducer_twin.config import load_config_sources
+from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
+from reducer_twin.core.ingest import IngestConfig, pair_columns, StreamCleaner
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import features_record, LifeConfig
+from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+
+CHUNK_MESSAGES = 1 << 17
+"""JointState messages cleaned, paired and analysed per step."""
+
+REPORT_TE_POINTS = 20_000
+"""TE samples per joint kept for the report plots (evenly thinned)."""
+
+_REPAIRED = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump')
+
+
+# --------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class AnalysisSettings:
+    """
+    How to analyse a bag (the bringup configuration's meaning, offline).
+
+    Attributes
+    ----------
+    joints : tuple of str or None
+        Joints to analyse; None: every ``<joint>``/``<joint><motor_suffix>`` pair found.
+    link_topic, motor_topic : str
+        JointState topics (``motor_topic`` empty: motor entries are in the link topic).
+    motor_suffix : str
+        Suffix of motor entries in a combined message.
+    motor_angles : str
+        ``'raw'`` or ``'output'`` (already divided by the ratio).
+    aging_factor : float or None
+        Seconds of wear exposure per stream second; None: the bag's own
+        (``custom_data`` :data:`~reducer_twin.analysis.simulate.AGING_KEY`), else 1.
+    window_s : float
+        Analysis window [s of stream].
+    params : ReducerParams
+        Reducer parameters.
+    life : LifeConfig
+        Limit and thresholds of the remaining-life stage.
+    ingest : IngestConfig
+        Ingestion thresholds.
+    compression : str
+        MCAP chunk compression of the derived bag (``'none'``: as ``ros2 bag record``
+        writes by default, and the cheapest to write).
+
+    """
+
+    joints: tuple = None
+    link_topic: str = '/joint_states'
+    motor_topic: str = ''
+    motor_suffix: str = '_motor'
+    motor_angles: str = 'raw'
+    aging_factor: float = None
+    window_s: float = 2.0
+    params: ReducerParams = field(default_factory=ReducerParams)
+    life: LifeConfig = field(default_factory=LifeConfig)
+    ingest: IngestConfig = field(default_factory=IngestConfig)
+    compression: str = 'none'
+
+    @classmethod
+    def from_config(cls, path):
+        """
+        Read a bringup YAML (``config/twin.yaml``) as analysis settings.
+
+        Joints and the aging factor count only when the file sets them; otherwise the
+        joints are found in the bag and the bag's aging factor applies.
+
+        Parameters
+        ----------
+        path : str or Path or None
+            The file; None gives the defaults.
+
+        Returns
+        -------
+        AnalysisSettings
+            The settings.
+
+        Raises
+        ------
+        InvalidParameter
+            If the file is unreadable or holds invalid values.
+
+        """
+        config, given = load_config_sources(path)
+        twin = config['twin']
+        if twin['motor_angles'] not in ('raw', 'output'):
+            raise InvalidParameter(f"{path}: twin.motor_angles must be 'raw' or 'output', got "
+                                   f"{twin['motor_angles']!r}")
+        aging = None
+        if 'twin.aging_factor' in given:
+            aging = _number(path, 'twin.aging_factor', twin['aging_factor'], 0.0, 1e9)
+        window_s = _number(path, 'twin.window_s', twin['window_s'], 1e-3, 3600.0)
+        try:
+            params = ReducerParams().with_overrides(config['reducer']) if config['reducer'] \
+                else ReducerParams()
+            life = LifeConfig(**{k: (int(v) if k == 'n_samples' else float(v))
+                                 for k, v in config['life'].items()})
+        except TypeError as err:
+            raise InvalidParameter(f'{path}: life section: {err}; allowed keys: '
+                                   f'{sorted(LifeConfig.__dataclass_fields__)}') from None
+        except ValueError as err:
+            raise InvalidParameter(f'{path}: {err}') from None
+        return cls(joints=tuple(twin['joints']) if 'twin.joints' in given else None,
+                   link_topic=str(twin['link_topic']), motor_topic=str(twin['motor_topic']),
+                   motor_suffix=str(twin['motor_suffix']), motor_angles=twin['motor_angles'],
+                   aging_factor=aging, window_s=window_s, params=params, life=life)
+
+
+def _number(path, name, value, lo, hi):
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
+        math.isfinite(value) and lo <= value <= hi
+    if not ok:
+        raise InvalidParameter(f'{path}: {name} must be a number in [{lo:g}, {hi:g}], got '
+                               f'{value!r}')
+    return float(value)
+
+
+# --------------------------------------------------------------------------- joints
+
+
+@dataclass(frozen=True)
+class JointPlan:
+    """
+    Where the joints of a bag are.
+
+    Attributes
+    ----------
+    link_topic : str
+        JointState topic of the link side (and of the motor side when combined).
+    motor_topic : str or None
+        JointState topic of the motor side when split.
+    joints : tuple of str
+        Joint names.
+    motor_names : tuple of str
+        Name of each joint's motor entry (``<joint><suffix>`` combined, ``<joint>``
+        split).
+
+    """
+
+    link_topic: str
+    motor_topic: str
+    joints: tuple
+    motor_names: tuple
+
+
+def _topic_list(bag):
+    if not bag.topics:
+        return 'no topics'
+    return ', '.join(f'{name} ({t.msgtype})' for name, t in bag.topics.items())
+
+
+def _first_names(bag, topic):
+    """Joint names of the first readable messages of a topic."""
+    batches = bag.iter_raw([topic])
+    try:
+        for _, raw in batches:
+            decoded = decode_joint_states(raw.data, raw.offsets, raw.lengths, errors='skip')
+            if len(decoded):
+                return decoded.names
+    finally:
+        batches.close()
+    return ()
+
+
+def plan_joints(bag, settings):
+    """
+    Find the JointState topics and motor/link pairs by the ingestion node's rules.
+
+    Combined form: one topic whose messages name ``<joint>`` and
+    ``<joint><motor_suffix>``. Split form: ``motor_topic`` (configured, or a
+    JointState topic whose name contains ``motor``) names the same joints as the link
+    topic. The configured ``link_topic`` is used when the bag has it, else the
+    JointState topic that holds pairs.
+
+    Parameters
+    ----------
+    bag : Bag
+        Opened bag.
+    settings : AnalysisSettings
+        Topics, suffix and joints.
+
+    Returns
+    -------
+    JointPlan
+        Topics and joints.
+
+    Raises
+    ------
+    BagError
+        If the bag has no JointState topic (naming the topics it has), no pairs, or
+        lacks a configured joint or topic.
+
+    """
+    states = [n for n, t in bag.topics.items() if t.msgtype == JOINT_STATE]
+    if not states:
+        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)}')
+    names = {}
+
+    def names_of(topic):
+        if topic not in names:
+            names[topic] = _first_names(bag, topic)
+        return names[topic]
+
+    suffix = settings.motor_suffix
+    if settings.motor_topic:
+        for topic in (settings.link_topic, settings.motor_topic):
+            if topic not in states:
+                raise BagError(f'{bag.path}: configured JointState topic {topic} is not in the '
+                               f'bag; its JointState topics: {states}')
+        link, motor = settings.link_topic, settings.motor_topic
+        common = [n for n in names_of(link) if n in names_of(motor)]
+        return _pick(bag, settings, link, motor, common, common)
+    candidates = [settings.link_topic] if settings.link_topic in states else []
+    candidates += [t for t in states if t not in candidates]
+    for link in candidates:
+        have = names_of(link)
+        pairs = [n for n in have if n + suffix in have]
+        if pairs:
+            return _pick(bag, settings, link, None, pairs, [n + suffix for n in pairs])
+    for link in candidates:
+        for motor in [t for t in states if t != link and 'motor' in t.lower()]:
+            common = [n for n in names_of(link) if n in names_of(motor)]
+            if common and 'motor' not in link.lower():
+                return _pick(bag, settings, link, motor, common, common)
+    found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)
+    raise BagError(f'{bag.path}: no motor/link encoder pairs: expected <joint> and '
+                   f'<joint>{suffix} in one JointState message, or a motor JointState topic '
+                   f'(twin.motor_topic in --config); JointState topics and names: {found}')
+
+
+def _pick(bag, settings, link, motor, available, motor_names):
+    lookup = dict(zip(available, motor_names))
+    if settings.joints is None:
+        joints = tuple(available)
+    else:
+        missing = [j for j in settings.joints if j not in lookup]
+        if missing:
+            raise BagError(f'{bag.path}: configured joints {missing} have no motor/link pair '
+                           f'on {link}{" and " + motor if motor else ""}; pairs found: '
+                           f'{list(available)}')
+        joints = tuple(settings.joints)
+    if not joints:
+        raise BagError(f'{bag.path}: {link} and {motor} name no common joints')
+    return JointPlan(link, motor, joints, tuple(lookup[j] for j in joints))
+
+
+# --------------------------------------------------------------------------- reading
+
+
+class _Chunks:
+    """JointState messages of the plan's topics, decoded in chunks of about N messages."""
+
+    def __init__(self, bag, topics, size):
+        self.bag = bag
+        self.topics = list(topics)
+        self.size = size
+        self.messages = dict.fromkeys(self.topics, 0)
+        self.malformed = dict.fromkeys(self.topics, 0)
+        self.first_problem = {}
+
+    def __iter__(self):
+        parts = {t: [] for t in self.topics}
+        pending = 0
+        for topic, raw in self.bag.iter_raw(self.topics):
+            decoded = decode_joint_states(raw.data, raw.offsets, raw.lengths, errors='skip')
+            if decoded.rejected:
+                self.malformed[topic] += len(decoded.rejected)
+                self.first_problem.setdefault(topic, decoded.rejected[0][1])
+            self.messages[topic] += len(decoded)
+            parts[topic].append(decoded)
+            pending += len(decoded)
+            if pending >= self.size:
+                yield {t: concat_batches(p) if p else None for t, p in parts.items()}
+                parts = {t: [] for t in self.topics}
+                pending = 0
+        if pending:
+            yield {t: concat_batches(p) if p else None for t, p in parts.items()}
+
+
+def _columns(batch, names):
+    """Position, velocity and effort columns of the given names (NaN where absent)."""
+    index = {n: k for k, n in enumerate(batch.names)}
+    out = []
+    for values in (batch.position, batch.velocity, batch.effort):
+        cols = np.full((len(batch), len(names)), np.nan)
+        for j, name in enumerate(names):
+            if name in index:
+                cols[:, j] = values[:, index[name]]
+        out.append(cols)
+    return out
+
+
+# --------------------------------------------------------------------------- results
+
+
+@dataclass
+class JointResult:
+    """
+    What the analysis found for one joint.
+
+    Attributes
+    ----------
+    name : str
+        Joint name.
+    messages : int
+        JointState messages read that carry the joint.
+    rejected : int
+        Samples the ingestion rules dropped (non-finite, duplicate, out of order,
+        unpaired, spikes) plus malformed messages skipped.
+    counts : dict
+        Count of every ingestion rule (as ``encoder_ingest`` reports them).
+    features : numpy.ndarray
+        ``te_features`` records, (windows, fields).
+    wear, life : numpy.ndarray
+        ``wear`` and ``remaining_life`` records, (windows + 1, fields) (first: start).
+    levels : list of str
+        Health level of each ``life`` record.
+    te : numpy.ndarray
+        Thinned TE samples (stamp_s, output_angle_rad, te_rad, torque_nm).
+    truth : numpy.ndarray or None
+        ``ground_truth`` records from the bag, if it has them.
+
+    """
+
+    name: str
+    messages: int = 0
+    rejected: int = 0
+    counts: dict = field(default_factory=dict)
+    features: np.ndarray = None
+    wear: np.ndarray = None
+    life: np.ndarray = None
+    levels: list = field(default_factory=list)
+    te: np.ndarray = None
+    truth: np.ndarray = None
+
+    def summary(self):
+        """
+        Return the ``--json`` fields of this joint (edge units; NaN as None).
+
+        Returns
+        -------
+        dict
+            ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
+            ``lost_motion_arcmin``, ``messages``, ``rejected``.
+
+        """
+        nan = float('nan')
+        wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
+            len(self.wear) else {}
+        life = dict(zip(REMAINING_LIFE.fields, self.life[-1])) if self.life is not None and \
+            len(self.life) else {}
+        out = {'wear_um': m_to_um(wear.get('wear_m', nan)),
+               'wear_std_um': m_to_um(wear.get('wear_std_m', nan)),
+               'rul_p10_h': life.get('p10_s', nan) / HOUR,
+               'rul_p50_h': life.get('p50_s', nan) / HOUR,
+               'rul_p90_h': life.get('p90_s', nan) / HOUR,
+               'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
+        out = {k: (float(v) if math.isfinite(v) else None) for k, v in out.items()}
+        out['messages'] = int(self.messages)
+        out['rejected'] = int(self.rejected)
+        return out
+
+
+@dataclass
+class BagResult:
+    """
+    The analysis of one bag.
+
+    Attributes
+    ----------
+    bag : pathlib.Path
+        The input.
+    out : pathlib.Path
+        The derived bag directory.
+    plan : JointPlan
+        Topics and joints used.
+    joints : dict of str to JointResult
+        Per joint.
+    messages : int
+        JointState messages read.
+    seconds : float
+        Wall time of the analysis [s].
+    aging_factor : float
+        Aging factor applied.
+    warnings : list of ReadWarning
+        Problems met while reading.
+    damaged : bool
+        Whether reading stopped early or skipped data (truncated or corrupt files).
+
+    """
+
+    bag: Path
+    out: Path
+    plan: JointPlan
+    joints: dict
+    messages: int
+    seconds: float
+    aging_factor: float
+    warnings: list
+    damaged: bool
+
+    @property
+    def messages_per_s(self):
+        """Return the JointState messages analysed per second of wall time."""
+        return self.messages / self.seconds if self.seconds > 0 else float('nan')
+
+    def as_json(self):
+        """Return ``{"joints": {name: {...}}, "messages_per_s": x}``."""
+        rate = self.messages_per_s
+        return {'joints': {name: j.summary() for name, j in self.joints.items()},
+                'messages_per_s': float(rate) if math.isfinite(rate) else None}
+
+
+def is_damage(warning):
+    """
+    Tell whether a read warning means data were lost (truncation, corruption).
+
+    Parameters
+    ----------
+    warning : ReadWarning
+        A warning of the bag reader.
+
+    Returns
+    -------
+    bool
+        True when reading stopped early or skipped a damaged part.
+
+    """
+    text = warning.message
+    return warning.offset is not None or any(
+        key in text for key in ('reading stopped', 'corrupt', 'skipping that file',
+                                'without a data end'))
+
+
+# --------------------------------------------------------------------------- the run
+
+
+def _bag_aging_factor(bag, settings):
+    if settings.aging_factor is not None:
+        return settings.aging_factor
+    text = bag.metadata.get(AGING_KEY)
+    if text is None:
+        return 1.0
+    try:
+        value = float(text)
+    except ValueError:
+        value = float('nan')
+    if not (math.isfinite(value) and 0.0 <= value <= 1e9):
+        raise InvalidInput(f'{bag.path}: custom_data {AGING_KEY} = {text!r} is not an aging '
+                           'factor in [0, 1e9]; set twin.aging_factor with --config')
+    return value
+
+
+def _motor_scale(settings):
+    if settings.motor_angles == 'output':
+        return total_ratio(settings.params.geometry)
+    return 1.0
+
+
+class _Output:
+    """Channels and writes of the derived bag."""
+
+    def __init__(self, writer, joints, truth_topics):
+        self.writer = writer
+        self.channels = {}
+        for joint in joints:
+            for suffix, qos in (('te', DEFAULT_QOS), ('te_features', DEFAULT_QOS),
+                                ('wear', LATEST_QOS), ('remaining_life', LATEST_QOS)):
+                self.channels[joint, suffix] = writer.add_topic(joint_topic(joint, suffix),
+                                                                MULTIARRAY, qos)
+            if joint in truth_topics:
+                self.channels[joint, 'ground_truth'] = writer.add_topic(
+                    truth_topics[joint], MULTIARRAY, LATEST_QOS)
+        self.diagnostics = writer.add_topic('/diagnostics', DIAGNOSTICS, DEFAULT_QOS)
+
+    def arrays(self, joint, suffix, layout, log_ns, values):
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape[0]:
+            self.writer.write_batch(self.channels[joint, suffix], np.asarray(log_ns, np.int64),
+                                    *encode_multiarrays(layout, values))
+
+    def raw(self, channel, log_ns, payloads):
+        if not payloads:
+            return
+        bounds = np.zeros(len(payloads) + 1, np.int64)
+        np.cumsum([len(p) for p in payloads], out=bounds[1:])
+        self.writer.write_batch(channel, np.asarray(log_ns, np.int64), b''.join(payloads),
+                                bounds)
+
+
+def _stamp_ns(t_s):
+    return int(round(float(t_s) * 1e9))
+
+
+class _Run:
+    """The analysis of one opened bag."""
+
+    def __init__(self, bag, plan, settings, writer, backs, aging):
+        self.bag = bag
+        self.plan = plan
+        self.settings = settings
+        self.backs = backs
+        self.aging = aging
+        truth = {}
+        for joint in plan.joints:
+            topic = joint_topic(joint, 'ground_truth')
+            if bag.topics.get(topic, (None,))[0] == MULTIARRAY:
+                truth[joint] = topic
+        self.truth_topics = truth
+        self.out = _Output(writer, plan.joints, truth)
+        count = bag.topics[plan.link_topic].count
+        keep = max(1, count // REPORT_TE_POINTS)
+        scale = _motor_scale(settings)
+        self.fronts = {j: JointFront(j, settings, aging, scale, keep) for j in plan.joints}
+        self.results = {j: JointResult(j) for j in plan.joints}
+        self.features = {j: [] for j in plan.joints}
+        self.back_out = {j: [] for j in plan.joints}
+        self.started = False
+        self.messages_read = 0
+
+    def run(self):
+        plan = self.plan
+        topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
+        chunks = _Chunks(self.bag, topics, CHUNK_MESSAGES)
+        link_clean = StreamCleaner(self.settings.ingest)
+        motor_clean = StreamCleaner(self.settings.ingest) if plan.motor_topic else None
+        link_names = [x for j, m in zip(plan.joints, plan.motor_names) for x in (j, m)] \
+            if not plan.motor_topic else list(plan.joints)
+        for chunk in chunks:
+            link = chunk[plan.link_topic]
+            if not self.started and link is not None and len(link):
+                self._start(int(link.stamps_ns[0]))
+            if plan.motor_topic is None:
+                self._combined(link_clean, link, link_names)
+            else:
+                self._split(link_clean, motor_clean, link, chunk[plan.motor_topic])
+            self._drain(self.backs.poll())
+        for joint, front in self.fronts.items():
+            if plan.motor_topic is not None:
+                pairs = front.pairer.pop(final=True)
+                self._feed(joint, pairs.t_ns, pairs.motor_angle, pairs.link_angle, pairs.effort,
+                           pairs.link_velocity)
+            self._windows(joint, front.flush())
+            for log_ns, values in front.te_messages(None, final=True):
+                self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+        self._drain(self.backs.close())
+        self._copy_truth()
+        self._finish(chunks, link_clean, motor_clean)
+        return self.results
+
+    def _start(self, stamp_ns):
+        self.started = True
+        for joint in self.plan.joints:
+            self.backs.submit(joint, 'start', stamp_ns * 1e-9)
+
+    def _combined(self, cleaner, link, names):
+        if link is None or not len(link):
+            return
+        pos, vel, eff = _columns(link, names)
+        clean = cleaner.process(link.stamps_ns, pos, vel, eff)
+        for k, joint in enumerate(self.plan.joints):
+            front = self.fronts[joint]
+            cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale)
+            front.unpaired += unpaired
+            self._feed(joint, *cols)
+
+    def _split(self, link_clean, motor_clean, link, motor):
+        clean_link = clean_motor = None
+        if link is not None and len(link):
+            clean_link = link_clean.process(link.stamps_ns, *_columns(link, self.plan.joints))
+        if motor is not None and len(motor):
+            clean_motor = motor_clean.process(motor.stamps_ns,
+                                              *_columns(motor, self.plan.motor_names))
+        for k, joint in enumerate(self.plan.joints):
+            front = self.fronts[joint]
+            if clean_link is not None:
+                front.pairer.add_link(clean_link.column(k))
+            if clean_motor is not None:
+                front.pairer.add_motor(clean_motor.column(k))
+            pairs = front.pairer.pop()
+            self._feed(joint, pairs.t_ns, pairs.motor_angle, pairs.link_angle, pairs.effort,
+                       pairs.link_velocity)
+
+    def _feed(self, joint, t_ns, motor, link, effort, velocity):
+        if t_ns.size == 0:
+            return
+        front = self.fronts[joint]
+        windows, rows = front.feed(np.asarray(t_ns, np.int64), motor, link, effort, velocity)
+        for log_ns, values in front.te_messages(rows):
+            self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+        self._windows(joint, windows)
+
+    def _windows(self, joint, windows):
+        if not windows:
+            return
+        params = self.settings.params
+        records = [features_record(f, params) for f in windows]
+        values = np.array([record_values(TE_FEATURES, r) for r in records])
+        self.features[joint].append(values)
+        self.out.arrays(joint, 'te_features', TE_FEATURES,
+                        [_stamp_ns(f.t_end) for f in windows], values)
+        self.backs.submit(joint, 'windows', records)
+
+    def _drain(self, done):
+        for joint, outputs in done:
+            self.back_out[joint] += outputs
+            log_ns = [_stamp_ns(o['wear']['stamp_s']) for o in outputs]
+            self.out.arrays(joint, 'wear', WEAR_ESTIMATE, log_ns,
+                            [record_values(WEAR_ESTIMATE, o['wear']) for o in outputs])
+            self.out.arrays(joint, 'remaining_life', REMAINING_LIFE, log_ns,
+                            [record_values(REMAINING_LIFE, o['life']) for o in outputs])
+            payloads = [encode_diagnostic_array(ns, [Status(
+                o['level'], f'reducer_twin: {joint} reducer', o['message'], joint,
+                o['values'])]) for ns, o in zip(log_ns, outputs)]
+            self.out.raw(self.out.diagnostics, log_ns, payloads)
+
+    def _copy_truth(self):
+        topics = {topic: joint for joint, topic in self.truth_topics.items()}
+        if not topics:
+            return
+        rows = {joint: [] for joint in self.truth_topics}
+        for topic, raw in self.bag.iter_raw(list(topics)):
+            joint = topics[topic]
+            payloads = [raw.payload(i) for i in range(len(raw))]
+            self.out.raw(self.out.channels[joint, 'ground_truth'], raw.log_time_ns, payloads)
+            for p in payloads:
+                try:
+                    rows[joint].append(decode_multiarray(p).values(GROUND_TRUTH))
+                except InvalidInput:
+                    continue
+        for joint, values in rows.items():
+            self.results[joint].truth = np.array(values) if values else None
+
+    def _finish(self, chunks, link_clean, motor_clean):
+        plan = self.plan
+        self.messages_read = sum(chunks.messages.values())
+        statuses = []
+        last_ns = 0
+        for joint, front in self.fronts.items():
+            res = self.results[joint]
+            counts = {}
+            sides = (('stream', link_clean),) if motor_clean is None else (
+                ('link', link_clean), ('motor', motor_clean))
+            for side, cleaner in sides:
+                for reason, count in cleaner.counts.items():
+                    counts[f'{side}_{reason}'] = int(count)
+                counts[f'{side}_missing'] = int(cleaner.missing)
+            counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
+            counts.update({k: int(v) for k, v in front.spikes.counts.items()})
+            counts['published'] = int(front.samples)
+            malformed = sum(chunks.malformed.values())
+            counts['malformed_messages'] = int(malformed)
+            res.counts = counts
+            res.messages = chunks.messages[plan.link_topic] + (
+                chunks.messages[plan.motor_topic] if plan.motor_topic else 0)
+            res.rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
+                counts.get(f'{side}_{r}', 0) for side, _ in sides for r in _REPAIRED
+                if r != 'clock_jump')
+            outputs = self.back_out[joint]
+            res.wear = np.array([record_values(WEAR_ESTIMATE, o['wear']) for o in outputs])
+            res.life = np.array([record_values(REMAINING_LIFE, o['life']) for o in outputs])
+            res.levels = [o['level'] for o in outputs]
+            feats = self.features[joint]
+            res.features = np.concatenate(feats) if feats else np.zeros(
+                (0, len(TE_FEATURES.fields)))
+            res.te = te_values(np.concatenate(front.report_te)[None])[0] \
+                if front.report_te else np.zeros((0, 4))
+            if len(res.wear):
+                last_ns = max(last_ns, _stamp_ns(res.wear[-1][0]))
+            bad = sum(v for k, v in counts.items()
+                      if k not in ('published', 'step') and not k.endswith('_wrap'))
+            statuses.append(Status('OK' if bad == 0 else 'WARN',
+                                   f'reducer_twin: {joint} encoder ingest', 'streams clean'
+                                   if bad == 0 else f'{bad} samples dropped or repaired',
+                                   joint, counts))
+        if statuses and last_ns:
+            self.out.raw(self.out.diagnostics, [last_ns],
+                         [encode_diagnostic_array(last_ns, statuses)])
+
+
+def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False):
+    """
+    Analyse one rosbag2 recording and write the derived bag.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        Bag directory, ``.mcap`` or ``.db3`` file.
+    out_dir : str or os.PathLike
+        Derived bag directory to create (empty or missing unless ``overwrite``).
+    settings : AnalysisSettings, optional
+        Topics, joints, aging factor, windows, thresholds.
+    overwrite : bool
+        Replace a bag already in ``out_dir``.
+    stage_worker : bool
+        Run the estimator and life stages in a forked worker process.
+
+    Returns
+    -------
+    BagResult
+        Per-joint results, counts, warnings and timing.
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read, has no JointState topic or no encoder pairs, or the
+        output cannot be written.
+    InvalidInput
+        If the bag's aging factor is unusable.
+
+    """
+    settings = settings or AnalysisSettings()
+    start = time.perf_counter()
+    backs = WorkerBacks(settings.params, settings.life) if stage_worker else \
+        LocalBacks(settings.params, settings.life)
+    try:
+        with open_bag(path) as bag:
+            plan = plan_joints(bag, settings)
+            aging = _bag_aging_factor(bag, settings)
+            custom = {'reducer_twin.source': str(Path(path).resolve()),
+                      AGING_KEY: repr(float(aging)),
+                      'reducer_twin.joints': ','.join(plan.joints)}
+            with BagDirWriter(out_dir, compression=settings.compression, custom_data=custom,
+                              overwrite=overwrite) as writer:
+                run = _Run(bag, plan, settings, writer, backs, aging)
+                joints = run.run()
+            warnings = list(bag.warnings)
+    except BaseException:
+        if stage_worker:
+            backs.terminate()
+        raise
+    return BagResult(Path(path), Path(out_dir), plan, joints, run.messages_read,
+                     time.perf_counter() - start, aging, warnings,
+                     any(is_damage(w) for w in warnings))

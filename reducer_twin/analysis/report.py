@@ -1,0 +1,258 @@
+"""
+The analysis report: PNG plots and one self-contained HTML page per bag.
+
+Plots (matplotlib, Agg backend, no display needed): TE over the output angle and over
+time (thinned to :data:`~reducer_twin.analysis.pipeline.REPORT_TE_POINTS` samples per
+joint), the lost-motion trend (observed per window and the estimate, against the truth
+when the bag has it), the wear estimate with its ±2σ band against the truth, and the
+remaining life P50 with its P10–P90 band against the true remaining life. Edge units:
+arc minutes, µm, hours. The HTML page embeds the PNGs (data URIs), so it can be mailed
+or archived alone; the PNG files sit beside it.
+"""
+
+import base64
+import html
+import math
+from pathlib import Path
+
+from msg_adapters.layouts import GROUND_TRUTH, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
+import numpy as np
+from reducer_twin.core.errors import BagError
+from reducer_twin.core.units import ARCMIN, HOUR, UM
+
+PLOTS = (('te_angle', 'Transmission error over the output angle'),
+         ('te_time', 'Transmission error over time'),
+         ('lost_motion', 'Lost motion trend'),
+         ('wear', 'Wear estimate'),
+         ('remaining_life', 'Remaining life'))
+"""File stems and titles of the plots, in page order."""
+
+
+def _col(array, layout, name):
+    return array[:, layout.fields.index(name)] if array is not None and len(array) else \
+        np.zeros(0)
+
+
+def _pyplot():
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _te_angle(ax, joint, res):
+    te = res.te
+    if not len(te):
+        ax.text(0.5, 0.5, 'no TE samples', ha='center', transform=ax.transAxes)
+        return
+    angle = np.degrees(np.mod(te[:, 1], 2.0 * np.pi))
+    loaded = te[:, 3] >= 0.0
+    ax.plot(angle[loaded], te[loaded, 2] / ARCMIN, '.', ms=1.5, alpha=0.5, label='T >= 0')
+    ax.plot(angle[~loaded], te[~loaded, 2] / ARCMIN, '.', ms=1.5, alpha=0.5, label='T < 0')
+    ax.set_xlabel('output angle (deg, mod 360)')
+    ax.set_ylabel('TE (arcmin)')
+    ax.set_title(joint)
+    ax.legend(fontsize=7, markerscale=6)
+
+
+def _te_time(ax, joint, res, t0):
+    te = res.te
+    if not len(te):
+        ax.text(0.5, 0.5, 'no TE samples', ha='center', transform=ax.transAxes)
+        return
+    ax.plot(te[:, 0] - t0, te[:, 2] / ARCMIN, lw=0.4)
+    ax.set_xlabel('stream time (s)')
+    ax.set_ylabel('TE (arcmin)')
+    ax.set_title(joint)
+
+
+def _hours(res):
+    """Exposure hours at the end of each window (cumulated duty exposure)."""
+    return np.cumsum(_col(res.features, TE_FEATURES, 'exposure_s')) / HOUR
+
+
+def _lost_motion(ax, joint, res, limit):
+    h = _hours(res)
+    obs = _col(res.features, TE_FEATURES, 'lost_motion_rad') / ARCMIN
+    std = _col(res.features, TE_FEATURES, 'lost_motion_std_rad') / ARCMIN
+    line, = ax.plot(h, obs, '.', ms=3, alpha=0.5, label=f'{joint} observed per window')
+    ax.errorbar(h, obs, yerr=std, fmt='none', ecolor=line.get_color(), alpha=0.15)
+    wh = _col(res.wear, WEAR_ESTIMATE, 'exposure_s') / HOUR
+    ax.plot(wh, _col(res.wear, WEAR_ESTIMATE, 'lost_motion_rad') / ARCMIN,
+            color=line.get_color(), label=f'{joint} estimate')
+    if res.truth is not None and len(res.truth):
+        ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
+                _col(res.truth, GROUND_TRUTH, 'lost_motion_rad') / ARCMIN, '--',
+                color=line.get_color(), label=f'{joint} truth')
+    ax.axhline(limit / ARCMIN, color='k', lw=0.8, ls=':')
+
+
+def _wear(ax, joint, res):
+    h = _col(res.wear, WEAR_ESTIMATE, 'exposure_s') / HOUR
+    w = _col(res.wear, WEAR_ESTIMATE, 'wear_m') / UM
+    s = _col(res.wear, WEAR_ESTIMATE, 'wear_std_m') / UM
+    line, = ax.plot(h, w, label=f'{joint} estimate')
+    ax.fill_between(h, w - 2 * s, w + 2 * s, color=line.get_color(), alpha=0.2,
+                    label=f'{joint} ±2σ')
+    if res.truth is not None and len(res.truth):
+        ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
+                _col(res.truth, GROUND_TRUTH, 'wear_m') / UM, '--', color=line.get_color(),
+                label=f'{joint} truth')
+
+
+def _life(ax, joint, res):
+    h = _col(res.wear, WEAR_ESTIMATE, 'exposure_s') / HOUR
+    p10, p50, p90 = (_col(res.life, REMAINING_LIFE, k) / HOUR for k in ('p10_s', 'p50_s',
+                                                                        'p90_s'))
+    line, = ax.plot(h, p50, label=f'{joint} P50')
+    ax.fill_between(h, p10, p90, color=line.get_color(), alpha=0.2, label=f'{joint} P10–P90')
+    if res.truth is not None and len(res.truth):
+        ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
+                _col(res.truth, GROUND_TRUTH, 'true_rul_s') / HOUR, '--',
+                color=line.get_color(), label=f'{joint} truth')
+
+
+def _life_top(results):
+    """Top of the remaining-life axis: the bands after the first window, not the horizon."""
+    tops = []
+    for res in results:
+        p90 = _col(res.life, REMAINING_LIFE, 'p90_s')[1:] / HOUR
+        censored = _col(res.life, REMAINING_LIFE, 'p90_censored')[1:] > 0
+        tops += p90[~censored & np.isfinite(p90)].tolist()
+        if res.truth is not None and len(res.truth):
+            tops += (_col(res.truth, GROUND_TRUTH, 'true_rul_s') / HOUR).tolist()
+    tops = [t for t in tops if math.isfinite(t)]
+    return 1.2 * max(np.percentile(tops, 95), max(tops[-5:])) if tops else None
+
+
+def _figures(result, limit):
+    """Yield ``(stem, figure)`` of every plot."""
+    plt = _pyplot()
+    joints = result.joints
+    n = max(1, len(joints))
+    t0 = min((float(r.te[0, 0]) for r in joints.values() if len(r.te)), default=0.0)
+    for stem, draw in (('te_angle', _te_angle), ('te_time', _te_time)):
+        fig, axes = plt.subplots(n, 1, figsize=(9, 2.8 * n), squeeze=False)
+        for ax, (joint, res) in zip(axes[:, 0], joints.items()):
+            draw(ax, joint, res) if stem == 'te_angle' else draw(ax, joint, res, t0)
+            ax.grid(alpha=0.3)
+        fig.tight_layout()
+        yield stem, fig
+    for stem, draw, ylabel in (
+            ('lost_motion', _lost_motion, 'lost motion (arcmin); dotted: limit'),
+            ('wear', _wear, 'combined wear (µm), band ±2σ'),
+            ('remaining_life', _life, 'remaining life (h), band P10–P90')):
+        fig, ax = plt.subplots(figsize=(9, 4.5))
+        for joint, res in joints.items():
+            if stem == 'lost_motion':
+                draw(ax, joint, res, limit)
+            else:
+                draw(ax, joint, res)
+        ax.set_xlabel('operating hours (exposure)')
+        ax.set_ylabel(ylabel)
+        if stem == 'remaining_life':
+            ax.set_ylim(0.0, _life_top(joints.values()))
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        yield stem, fig
+
+
+def _fmt(value, spec):
+    return '–' if value is None or not math.isfinite(value) else format(value, spec)
+
+
+def _table(result):
+    head = ('joint', 'wear (µm)', 'true wear (µm)', 'lost motion (arcmin)',
+            'RUL P10 / P50 / P90 (h)', 'true RUL (h)', 'health', 'windows', 'messages',
+            'rejected')
+    rows = []
+    for joint, res in result.joints.items():
+        s = res.summary()
+        truth = res.truth[-1] if res.truth is not None and len(res.truth) else None
+        true_wear = truth[GROUND_TRUTH.fields.index('wear_m')] / UM if truth is not None \
+            else None
+        true_rul = truth[GROUND_TRUTH.fields.index('true_rul_s')] / HOUR if truth is not None \
+            else None
+        rul = ' / '.join(_fmt(s[k], ',.0f') for k in ('rul_p10_h', 'rul_p50_h', 'rul_p90_h'))
+        cells = (joint, f'{_fmt(s["wear_um"], ".3f")} ± {_fmt(s["wear_std_um"], ".3f")}',
+                 _fmt(true_wear, '.3f'), _fmt(s['lost_motion_arcmin'], '.3f'), rul,
+                 _fmt(true_rul, ',.0f'), res.levels[-1] if res.levels else 'STALE',
+                 str(len(res.features)), f'{s["messages"]:,}', str(s['rejected']))
+        rows.append('<tr>' + ''.join(f'<td>{html.escape(c)}</td>' for c in cells) + '</tr>')
+    return ('<table><tr>' + ''.join(f'<th>{html.escape(h)}</th>' for h in head) + '</tr>'
+            + ''.join(rows) + '</table>')
+
+
+def write_report(result, out_dir, limit=None):
+    """
+    Write the plots and the HTML page of one analysed bag.
+
+    Parameters
+    ----------
+    result : BagResult
+        Output of :func:`~reducer_twin.analysis.pipeline.analyze_bag`.
+    out_dir : str or os.PathLike
+        Directory for ``index.html`` and the PNGs (created if missing).
+    limit : float, optional
+        Lost-motion limit to draw [rad]; default the one of the remaining-life records.
+
+    Returns
+    -------
+    pathlib.Path
+        The HTML page.
+
+    Raises
+    ------
+    BagError
+        If the directory cannot be written.
+
+    """
+    out = Path(out_dir)
+    if limit is None:
+        limits = [r.life[-1][REMAINING_LIFE.fields.index('lost_motion_limit_rad')]
+                  for r in result.joints.values() if r.life is not None and len(r.life)]
+        limit = limits[0] if limits else 3.0 * ARCMIN
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        images = {}
+        plt = _pyplot()
+        for stem, fig in _figures(result, limit):
+            path = out / f'{stem}.png'
+            fig.savefig(path, dpi=100)
+            plt.close(fig)
+            images[stem] = base64.b64encode(path.read_bytes()).decode('ascii')
+        page = out / 'index.html'
+        page.write_text(_page(result, images), encoding='utf-8')
+    except OSError as err:
+        raise BagError(f'cannot write the report into {out}: {err}') from err
+    return page
+
+
+def _page(result, images):
+    title = f'reducer_twin analysis of {result.bag.name}'
+    notes = ''.join(f'<li>{html.escape(str(w))}</li>' for w in result.warnings)
+    sections = ''.join(
+        f'<h2>{html.escape(t)}</h2><p><img alt="{html.escape(t)}" src="data:image/png;base64,'
+        f'{images[stem]}"></p>' for stem, t in PLOTS if stem in images)
+    topics = f'<code>{html.escape(result.plan.link_topic)}</code>'
+    if result.plan.motor_topic:
+        topics += f' and <code>{html.escape(result.plan.motor_topic)}</code>'
+    parts = [
+        '<!DOCTYPE html>',
+        '<html lang="en"><head><meta charset="utf-8">',
+        f'<title>{html.escape(title)}</title>',
+        '<style>body{font-family:sans-serif;margin:2em;max-width:1000px}',
+        'table{border-collapse:collapse}',
+        'td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}',
+        'img{max-width:100%}</style></head><body>',
+        f'<h1>{html.escape(title)}</h1>',
+        f'<p>Bag: <code>{html.escape(str(result.bag))}</code>; derived bag: '
+        f'<code>{html.escape(str(result.out))}</code>; JointState {topics}; aging factor '
+        f'{result.aging_factor:g}; {result.messages:,} messages in {result.seconds:.2f} s.</p>',
+        _table(result),
+        f'<h2>Warnings</h2><ul>{notes}</ul>' if notes else '',
+        sections,
+        '</body></html>',
+        '']
+    return '\n'.join(parts)

@@ -1,0 +1,358 @@
+"""
+The per-joint stages of the offline analysis, and where the slow ones run.
+
+:class:`JointFront` is what ``encoder_ingest``'s spike rule and ``te_monitor`` do for one
+joint (TE extraction with the learnt encoder time offset, window analysis, TE batches);
+:class:`JointBack` is ``wear_estimator`` and ``life_publisher`` (Kalman step and the
+2000-sample remaining-life prediction per window, with the life publisher's diagnostic
+key/values). The back stages run in this process (:class:`LocalBacks`) or in a forked
+worker (:class:`WorkerBacks`) that takes window records while this process reads and
+analyses the next chunk; both give identical results, since each stage sees the same
+records in the same order.
+"""
+
+import numpy as np
+from reducer_twin.core.ingest import Pairer, SpikeFilter
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.pipeline import features_from_record, TimeOffsetCalibration
+from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
+from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+
+TE_BATCH_S = 0.1
+"""Stream seconds of TE per ``te`` message (the node sends 20 ms batches)."""
+
+ANALYSIS_PERIOD_S = 0.1
+"""The ``te_monitor`` analysis period: the piece size until the time offset is learnt."""
+
+CALIBRATION_WINDOWS = 20
+"""Windows fed in 0.1 s pieces at most while the time offset is not learnt yet."""
+
+TE_MAX_GAP_S = 0.05
+"""``te_monitor``'s ``max_gap_s``: the largest stamp gap TE extraction bridges [s]."""
+
+_ERROR = '!error'
+"""Marks a failure report of the worker (no ROS name starts with '!')."""
+
+
+def defer_filterpy_extras():
+    """
+    Keep a fresh process from importing the parts of filterpy the estimator does not use.
+
+    ``import filterpy.kalman`` runs ``filterpy/__init__.py``, which imports every
+    subpackage (``discrete_bayes`` pulls in ``scipy.ndimage``), and ``filterpy.kalman``
+    imports ``filterpy.stats`` (and ``scipy.stats``) only for ``logpdf``, which the wear
+    estimator never calls (it reads no likelihood): together 0.8 s to 2 s of the
+    command's start-up, a third of the whole analysis of a 1M-message bag. This
+    registers ``filterpy`` and ``filterpy.stats`` as their packages, not yet executed
+    (submodules still import normally), with a ``logpdf`` that loads the real one on
+    first use. The filter itself is the same code. Nothing is done once filterpy is
+    loaded, so it is a no-op in processes that already use it (tests, the nodes);
+    ``reducer-twin analyze`` calls it before the estimator is built.
+
+    Returns
+    -------
+    bool
+        True when the deferral was installed.
+
+    """
+    import importlib.util
+    import os
+    import sys
+    if any(name == 'filterpy' or name.startswith('filterpy.') for name in sys.modules):
+        return False
+    spec = importlib.util.find_spec('filterpy')
+    if spec is None or not spec.submodule_search_locations:
+        return False
+    package = importlib.util.module_from_spec(spec)
+    folder = os.path.join(list(spec.submodule_search_locations)[0], 'stats')
+    stats_spec = importlib.util.spec_from_file_location(
+        'filterpy.stats', os.path.join(folder, '__init__.py'),
+        submodule_search_locations=[folder])
+    if stats_spec is None:
+        return False
+    stats = importlib.util.module_from_spec(stats_spec)
+
+    def logpdf(*args, **kwargs):
+        from filterpy.stats.stats import logpdf as real
+        return real(*args, **kwargs)
+
+    stats.logpdf = logpdf
+    package.stats = stats
+    sys.modules['filterpy'] = package
+    sys.modules['filterpy.stats'] = stats
+    return True
+
+
+class JointFront:
+    """The ``te_monitor`` part of one joint, and the spike rule of ``encoder_ingest``."""
+
+    def __init__(self, joint, settings, aging_factor, motor_scale, keep_every):
+        params = settings.params
+        self.joint = joint
+        self.params = params
+        self.ratio = total_ratio(params.geometry)
+        self.motor_scale = motor_scale
+        self.spikes = SpikeFilter(self.ratio, settings.ingest)
+        self.pairer = Pairer(settings.ingest, motor_scale)
+        self.extractor = TEExtractor(self.ratio, max_gap_s=TE_MAX_GAP_S)
+        self.calibration = TimeOffsetCalibration(self.extractor)
+        self.analyzer = WindowAnalyzer(params, window_s=settings.window_s,
+                                       aging_factor=aging_factor)
+        self.unpaired = 0
+        self.samples = 0
+        self.windows = 0
+        self.period_ns = None
+        self.keep_every = max(1, int(keep_every))
+        self.report_te = []
+        self._te = []        # pending TE rows (t_ns, theta, te, torque), not yet a full batch
+        self._te_n = 0
+        self._kept = 0
+
+    def feed(self, t_ns, motor, link, effort, velocity):
+        """Spike rule, TE and windows of paired samples; return ``(windows, te_rows)``."""
+        keep = self.spikes.keep(motor, link)
+        if not keep.all():
+            t_ns, motor, link, effort, velocity = (a[keep] for a in
+                                                   (t_ns, motor, link, effort, velocity))
+        if t_ns.size == 0:
+            return [], None
+        if self.period_ns is None and t_ns.size > 16:
+            self.period_ns = float(np.median(np.diff(t_ns[:4096])))
+        self.samples += t_ns.size
+        windows, te_parts = [], []
+        piece = t_ns.size
+        if self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
+                self.period_ns:
+            piece = max(1, int(round(ANALYSIS_PERIOD_S * 1e9 / max(self.period_ns, 1.0))))
+        t_s = t_ns * 1e-9
+        start = 0
+        while start < t_ns.size:
+            if self.calibration.applied is not None or self.windows >= CALIBRATION_WINDOWS:
+                piece = t_ns.size
+            sl = slice(start, start + piece)
+            stream = self.extractor.update(t_s[sl], motor[sl], t_s[sl], link[sl])
+            found = self.analyzer.update(stream, effort[sl], velocity[sl])
+            for f in found:
+                self.calibration.observe(f)
+            self.windows += len(found)
+            windows += found
+            valid = stream.valid
+            te_parts.append(np.column_stack([t_ns[sl][valid], stream.output_angle[valid],
+                                             stream.te[valid], effort[sl][valid]]))
+            start += piece
+        rows = te_parts[0] if len(te_parts) == 1 else np.concatenate(te_parts)
+        self._keep_for_report(rows)
+        return windows, rows
+
+    def _keep_for_report(self, rows):
+        first = (-self._kept) % self.keep_every
+        self.report_te.append(rows[first::self.keep_every])
+        self._kept += rows.shape[0]
+
+    def flush(self):
+        """Close the last, partial window."""
+        found = self.analyzer.flush()
+        self.windows += len(found)
+        return found
+
+    def te_messages(self, rows, final=False):
+        """
+        Cut TE rows into messages of :data:`TE_BATCH_S` of stream.
+
+        Returns
+        -------
+        list of tuple
+            ``(log_times_ns, values[M, K, 4])`` groups of equal-length messages.
+
+        """
+        if rows is not None and rows.shape[0]:
+            self._te.append(rows)
+            self._te_n += rows.shape[0]
+        if not self._te_n:
+            return []
+        k = max(1, int(round(TE_BATCH_S * 1e9 / self.period_ns))) if self.period_ns else 100
+        if self._te_n < k and not final:
+            return []
+        pending = np.concatenate(self._te) if len(self._te) > 1 else self._te[0]
+        m = pending.shape[0] // k
+        out = []
+        if m:
+            block = pending[:m * k].reshape(m, k, 4)
+            out.append((block[:, -1, 0].astype(np.int64), te_values(block)))
+        rest = pending[m * k:]
+        if final and rest.shape[0]:
+            out.append((rest[-1:, 0].astype(np.int64), te_values(rest[None])))
+            rest = rest[:0]
+        self._te = [rest] if rest.shape[0] else []
+        self._te_n = rest.shape[0]
+        return out
+
+
+def te_values(block):
+    """TE rows with ns stamps to the ``te`` layout (stamps in seconds)."""
+    values = block.copy()
+    values[..., 0] *= 1e-9
+    return values
+
+
+class JointBack:
+    """
+    The ``wear_estimator`` and ``life_publisher`` part of one joint.
+
+    Parameters
+    ----------
+    joint : str
+        Joint name (also the reducer's ``hardware_id``).
+    params : ReducerParams
+        Reducer parameters.
+    life_config : LifeConfig
+        Limit and thresholds.
+
+    """
+
+    def __init__(self, joint, params, life_config):
+        from reducer_twin.core.pipeline import EstimatorStage, LifeStage
+        self.joint = joint
+        self.stage = EstimatorStage(params)
+        self.life = LifeStage(params, life_config)
+
+    def initial(self, stamp_s):
+        """Return the outputs the nodes publish when they start (no window yet)."""
+        wear = self.stage.record(stamp_s)
+        life, level, message = self.life.process(wear)
+        return self._outputs('start', wear, life, level, message, None)
+
+    def process(self, record):
+        """
+        Step the estimator and the life prediction with one ``te_features`` record.
+
+        Parameters
+        ----------
+        record : dict
+            The window's record.
+
+        Returns
+        -------
+        dict
+            ``status``, ``wear`` and ``life`` records, ``level``, ``message`` and the
+            diagnostic ``values`` (the life publisher's key/values).
+
+        """
+        features = features_from_record(record)
+        status = self.stage.process(features)
+        wear = self.stage.record(features.t_end)
+        self.life.observe_duty(features.duty)
+        life, level, message = self.life.process(wear)
+        return self._outputs(status, wear, life, level, message, record)
+
+    def _outputs(self, status, wear, life, level, message, record):
+        # The key/values of LifePublisher.summary() and its diagnostics, in that order.
+        values = {'wear_um': m_to_um(wear['wear_m']), 'wear_std_um': m_to_um(wear['wear_std_m']),
+                  'rate_scale': wear['rate_scale'],
+                  'lost_motion_arcmin': rad_to_arcmin(wear['lost_motion_rad']),
+                  'lost_motion_obs_arcmin': rad_to_arcmin(wear['lost_motion_obs_rad']),
+                  'rul_p10_h': life['p10_s'] / HOUR, 'rul_p50_h': life['p50_s'] / HOUR,
+                  'rul_p90_h': life['p90_s'] / HOUR,
+                  'rul_p90_censored': bool(life['p90_censored']),
+                  'catalogue_life_h': life['catalogue_life_s'] / HOUR,
+                  'exposure_h': wear['exposure_s'] / HOUR, 'updates': int(wear['updates']),
+                  'rejected_updates': int(wear['rejected'])}
+        if record is not None:
+            values['te_pp_arcmin'] = rad_to_arcmin(record['te_pp_rad'])
+        values['rejected_messages'] = 0
+        values['lost_motion_limit_arcmin'] = rad_to_arcmin(self.life.limit)
+        return {'status': status, 'wear': wear, 'life': life, 'level': level,
+                'message': message, 'values': values}
+
+
+class LocalBacks:
+    """Estimator and life stages in this process."""
+
+    def __init__(self, params, life_config):
+        self.params = params
+        self.life_config = life_config
+        self.backs = {}
+        self._done = []
+
+    def submit(self, joint, kind, items):
+        back = self.backs.get(joint)
+        if back is None:
+            back = self.backs[joint] = JointBack(joint, self.params, self.life_config)
+        if kind == 'start':
+            self._done.append((joint, [back.initial(items)]))
+        else:
+            self._done.append((joint, [back.process(r) for r in items]))
+
+    def poll(self):
+        done, self._done = self._done, []
+        return done
+
+    def close(self):
+        return self.poll()
+
+
+def _back_worker(inbox, outbox, params, life_config):
+    """Run the estimator and life stages on records sent by the analysing process."""
+    try:
+        local = LocalBacks(params, life_config)
+        while True:
+            item = inbox.get()
+            if item is None:
+                break
+            local.submit(*item)
+            for done in local.poll():
+                outbox.put(done)
+        outbox.put(None)
+    except BaseException as err:  # noqa: B902 - reported to the parent, which raises
+        import traceback
+        outbox.put((_ERROR, f'{type(err).__name__}: {err}\n{traceback.format_exc()}'))
+
+
+class WorkerBacks:
+    """Estimator and life stages in a forked worker process (same results as local)."""
+
+    def __init__(self, params, life_config):
+        import multiprocessing
+        ctx = multiprocessing.get_context('fork')
+        self._inbox = ctx.Queue()
+        self._outbox = ctx.Queue()
+        self._proc = ctx.Process(target=_back_worker, name='reducer-twin-stages',
+                                 args=(self._inbox, self._outbox, params, life_config),
+                                 daemon=True)
+        self._proc.start()
+
+    def submit(self, joint, kind, items):
+        self._inbox.put((joint, kind, items))
+
+    def _take(self, item):
+        if item[0] == _ERROR:
+            raise RuntimeError(f'the estimator worker failed: {item[1]}')
+        return item
+
+    def poll(self):
+        import queue
+        out = []
+        while True:
+            try:
+                item = self._outbox.get_nowait()
+            except queue.Empty:
+                return out
+            if item is None:  # pragma: no cover - only after close
+                return out
+            out.append(self._take(item))
+
+    def close(self):
+        self._inbox.put(None)
+        out = []
+        while True:
+            item = self._outbox.get()
+            if item is None:
+                break
+            out.append(self._take(item))
+        self._proc.join(timeout=10)
+        return out
+
+    def terminate(self):
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=5)
