@@ -1,0 +1,193 @@
+"""
+te_monitor over real DDS: encoder_pairs of a known TE in, TE batches and window features out.
+
+The pairs come from the core's joint simulator (robot profile with gravity
+load, 8 um of initial wear, aging factor 3.6e5 so that a 2 s window is 200
+operating hours), stamped from a wall-clock epoch and sent as the
+``encoder_ingest`` node sends them: ``encoder_pairs`` batches of 100 rows.
+"""
+
+import itertools
+import math
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
+from msg_adapters.ros import batch_array, from_multiarray, to_multiarray
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.simulator import JointSimulator, SimConfig
+from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.transmission_error import model_tables
+from reducer_twin.core.units import ARCMIN
+from reducer_twin.nodes.base import encoder_qos, joint_topic
+from reducer_twin.nodes.te_monitor import TEMonitor
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+pytestmark = pytest.mark.timeout(60, method='thread')
+
+PARAMS = ReducerParams()
+RATIO = 81.0
+AGING = 3.6e5
+SAMPLES = 8000
+_ids = itertools.count()
+
+RECEIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
+
+@pytest.fixture(scope='module')
+def simulated():
+    """8 s of a 1 kHz robot joint, as encoder_pairs rows with wall-clock stamps."""
+    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False,
+                                           aging_factor=AGING, initial_wear_m=8e-6, seed=4))
+    batch = sim.step(SAMPLES)
+    t0 = float(time.time() // 1 - 10.0)
+    rows = np.column_stack([t0 + batch.t, batch.motor_angle, batch.link_angle, batch.effort,
+                            batch.link_velocity])
+    return batch, rows
+
+
+class Monitor:
+    """A TEMonitor of a fresh joint, and a probe that feeds it and listens to it."""
+
+    def __init__(self, ros):
+        self.ros = ros
+        self.joint = f'wrist{next(_ids)}'
+        self.node = ros.add(TEMonitor(
+            f'te_monitor_{self.joint}', params=PARAMS, context=ros.context,
+            parameter_overrides=[
+                Parameter('joint', value=self.joint), Parameter('aging_factor', value=AGING),
+                Parameter('analysis_period_s', value=0.05),
+                Parameter('diagnostics_period_s', value=0.1)]))
+        self.probe = ros.probe()
+        self.pub = self.probe.publisher(joint_topic(self.joint, 'encoder_pairs'),
+                                        Float64MultiArray, encoder_qos())
+        self.te = self.probe.listen(joint_topic(self.joint, 'te'), Float64MultiArray,
+                                    RECEIVE_QOS)
+        self.features = self.probe.listen(joint_topic(self.joint, 'te_features'),
+                                          Float64MultiArray, RECEIVE_QOS)
+        self.diagnostics = self.probe.listen('/diagnostics', DiagnosticArray, RECEIVE_QOS)
+        ros.wait_matched(self.pub, self.node.te_pub, self.node.feat_pub)
+
+    def feed(self, rows, batch=100):
+        """Publish rows as encoder_pairs batches; spin until the node has taken them all."""
+        expected = self.node.samples + rows.shape[0]
+        for start in range(0, rows.shape[0], batch):
+            self.pub.publish(to_multiarray(PAIRED_SAMPLES, rows[start:start + batch]))
+            self.ros.executor.spin_once(timeout_sec=0.0)
+        self.ros.spin_until(lambda: self.node.samples >= expected,
+                            what=f'{expected} samples at the TE monitor')
+
+    def status(self, predicate):
+        """Spin until a /diagnostics status of this monitor satisfies ``predicate``."""
+        name = f'reducer_twin: {self.joint} transmission error'
+        found = []
+
+        def latest():
+            found[:] = [s for s in self.ros.statuses(self.diagnostics, name) if predicate(s)]
+            return bool(found)
+
+        self.ros.spin_until(latest, what=f'a diagnostics status {name!r}')
+        return found[-1]
+
+
+def test_te_batches_are_link_minus_motor_over_the_ratio(ros, simulated):
+    batch, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    ros.spin_until(lambda: sum(m.layout.dim[0].size for m in monitor.te) >= SAMPLES,
+                   what='every TE sample')
+    te = np.concatenate([batch_array(m, TE_BATCH) for m in monitor.te])
+    np.testing.assert_array_equal(te[:, 0], rows[:, 0])
+    np.testing.assert_array_equal(te[:, 1], rows[:, 2])
+    np.testing.assert_allclose(te[:, 2], rows[:, 2] - rows[:, 1] / RATIO, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(te[:, 3], rows[:, 3])
+    # It is the simulator's TE up to the encoders' noise, counts and 50 us sampling offset.
+    err = te[:, 2] - batch.true_te
+    assert np.std(err) < 0.3 * ARCMIN
+
+
+def test_windows_arrive_with_the_layout_fields_and_a_finite_lost_motion(ros, simulated):
+    batch, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    ros.spin_until(lambda: len(monitor.features) >= 3, what='three te_features windows')
+    records = [from_multiarray(m, TE_FEATURES) for m in monitor.features]
+    for rec in records:
+        assert list(rec) == list(TE_FEATURES.fields)
+        assert rec['window_start_s'] < rec['window_end_s']
+        assert rec['samples'] > 1000 and rec['te_pp_rad'] > 0.0
+        assert rec['duration_s'] == pytest.approx(rec['window_end_s'] - rec['window_start_s'],
+                                                  abs=2e-3)
+        assert rec['exposure_s'] == pytest.approx(AGING * rec['duration_s'], rel=1e-9)
+        assert rec['archard_increment_m'] > 0.0
+    finite = [r for r in records if math.isfinite(r['lost_motion_rad'])]
+    assert len(finite) >= 2, 'the robot cycle reverses its torque in most windows'
+    lost_motion = model_tables(PARAMS).lost_motion
+    for rec in finite:
+        k = int(np.searchsorted(rows[:, 0], 0.5 * (rec['window_start_s'] + rec['window_end_s'])))
+        truth = float(lost_motion(batch.true_wear[k]))
+        assert rec['lost_motion_rad'] == pytest.approx(truth, rel=0.05)
+        assert 0.0 < rec['lost_motion_std_rad'] < 0.1 * ARCMIN
+    assert monitor.node.windows == len(records)
+
+
+def test_windows_are_what_the_offline_analysis_gives_for_the_same_samples(ros, simulated):
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    ros.spin_until(lambda: len(monitor.features) >= 3, what='three te_features windows')
+    stream = compute_te(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2], RATIO, max_gap_s=0.05)
+    offline = WindowAnalyzer(PARAMS, aging_factor=AGING).update(stream, rows[:, 3], rows[:, 4])
+    live = [from_multiarray(m, TE_FEATURES) for m in monitor.features]
+    assert len(live) == len(offline)
+    for rec, f in zip(live, offline):
+        assert (rec['window_start_s'], rec['window_end_s']) == (f.t_start, f.t_end)
+        np.testing.assert_allclose(rec['te_pp_rad'], f.te_pp, rtol=1e-12)
+        np.testing.assert_allclose(rec['lost_motion_rad'], f.lost_motion, rtol=1e-6)
+        np.testing.assert_allclose(rec['exposure_s'], f.duty.exposure_s, rtol=1e-12)
+
+
+def test_diagnostics_report_samples_windows_and_lost_motion(ros, simulated):
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    status = monitor.status(lambda s: ros.key_values(s).get('windows', '0') not in ('0', '1'))
+    values = ros.key_values(status)
+    assert status.level == DiagnosticStatus.OK
+    assert status.hardware_id == monitor.joint
+    assert values['samples'] == str(SAMPLES)
+    assert values['rejected_messages'] == '0'
+    assert 0.5 < float(values['lost_motion_arcmin']) < 5.0
+    assert float(values['te_pp_arcmin']) > 0.0
+    assert 'latency_p99_ms' in values
+
+
+def bad_batches(rows):
+    """Messages on an encoder_pairs topic whose layout is not PAIRED_SAMPLES."""
+    wrong_label = to_multiarray(TE_BATCH, rows[:10, :4])
+    record = to_multiarray(TE_FEATURES, np.zeros(len(TE_FEATURES.fields)))
+    short = to_multiarray(PAIRED_SAMPLES, rows[:10])
+    short.data = short.data[:-1]
+    unlabelled = Float64MultiArray(data=rows[:10].ravel().tolist())
+    wrong_fields = to_multiarray(PAIRED_SAMPLES, rows[:10])
+    wrong_fields.layout.dim[1] = MultiArrayDimension(label=PAIRED_SAMPLES.label, size=4,
+                                                     stride=4)
+    return [wrong_label, record, short, unlabelled, wrong_fields]
+
+
+def test_bad_layouts_are_rejected_and_counted_and_the_monitor_carries_on(ros, simulated):
+    _, rows = simulated
+    monitor = Monitor(ros)
+    bad = bad_batches(rows)
+    for msg in bad:
+        monitor.pub.publish(msg)
+    monitor.feed(rows[:3000])
+    assert monitor.node.rejects.counts == {'bad_layout': len(bad)}
+    assert monitor.node.samples == 3000
+    status = monitor.status(lambda s: s.level == DiagnosticStatus.WARN)
+    assert ros.key_values(status)['rejected_messages'] == str(len(bad))
