@@ -110,6 +110,10 @@ class RosHarness:
         """Stop spinning ``node`` and destroy it (a node process that stops)."""
         self.executor.remove_node(node)
         self.nodes.remove(node)
+        # The EventsExecutor may still hold an event of the node (a timer that fired just
+        # before): let it run while the node's publishers are alive, then destroy the node.
+        for _ in range(3):
+            self.executor.spin_once(timeout_sec=0.0)
         node.destroy_node()
 
     def probe(self):

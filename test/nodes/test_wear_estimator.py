@@ -1,0 +1,279 @@
+"""
+wear_estimator over real DDS: te_features in, wear out, state persisted across restarts.
+
+Windows are synthetic ``te_features`` records (torque 60-120 % of rated at the
+paper's speed, 10 operating hours each, wear by ``wear.integrate_wear``,
+lost motion by the model with 0.05 arcmin of noise); every expected estimate
+is what :class:`~reducer_twin.core.pipeline.EstimatorStage` computes offline
+from the same windows, so the node must match it exactly.
+"""
+
+import itertools
+import math
+import subprocess
+
+from diagnostic_msgs.msg import DiagnosticArray
+from msg_adapters.layouts import record_values, TE_BATCH, TE_FEATURES, WEAR_ESTIMATE
+from msg_adapters.ros import from_multiarray, to_multiarray
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core import wear
+from reducer_twin.core.errors import StateFileError
+from reducer_twin.core.estimator import backup_path, decode_state, EstimatorConfig
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import duty_to_record, EstimatorStage, features_from_record
+from reducer_twin.core.te_extraction import DutySummary
+from reducer_twin.core.transmission_error import model_tables
+from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.wear_estimator import WearEstimatorNode
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+pytestmark = pytest.mark.timeout(60, method='thread')
+
+PARAMS = ReducerParams()
+EXPOSURE = 10.0 * HOUR
+WINDOW_S = 2.0
+_ids = itertools.count()
+
+RECEIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                         reliability=ReliabilityPolicy.RELIABLE)
+
+LATE_JOINER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+"""Transient local like the publisher (latest_qos), deep enough to keep every estimate."""
+
+
+@pytest.fixture(scope='module')
+def records():
+    """Forty te_features records of a reducer wearing at 0.8 x the model rate."""
+    rng = np.random.default_rng(11)
+    n = 40
+    torque = PARAMS.rating.rated_torque * rng.uniform(0.6, 1.2, n)
+    speed = np.full(n, wear.reference_speed(PARAMS))
+    exposure = np.full(n, EXPOSURE)
+    increment = wear.wear_rate(torque, speed, 0.0, PARAMS) * exposure
+    true_w = wear.integrate_wear(exposure, torque, speed, PARAMS, rate_scale=0.8)
+    z = model_tables(PARAMS).lost_motion(true_w) + rng.normal(0.0, 0.05 * ARCMIN, n)
+    out = []
+    for k in range(n):
+        rec = dict.fromkeys(TE_FEATURES.fields, math.nan)
+        rec.update({'window_start_s': 5000.0 + k * WINDOW_S,
+                    'window_end_s': 5000.0 + (k + 1) * WINDOW_S, 'samples': 2000.0,
+                    'lost_motion_rad': float(z[k]), 'lost_motion_std_rad': 0.05 * ARCMIN})
+        rec.update(duty_to_record(DutySummary(
+            WINDOW_S, EXPOSURE, float(increment[k]), float(torque[k]), float(speed[k]),
+            float(torque[k]), float(1.1 * torque[k]))))
+        out.append(rec)
+    return out
+
+
+def offline(records):
+    """Return the wear record an uninterrupted EstimatorStage gives after ``records``."""
+    stage = EstimatorStage(PARAMS)
+    for rec in records:
+        stage.process(features_from_record(rec))
+    return stage.record(records[-1]['window_end_s'])
+
+
+class Estimator:
+    """A WearEstimatorNode on a state directory, and a probe that feeds and hears it."""
+
+    def __init__(self, ros, state_dir, joint=None):
+        self.ros = ros
+        self.joint = joint or f'hip{next(_ids)}'
+        self.state = state_dir / f'{self.joint}.json'
+        self.node = self.start()
+        self.probe = ros.probe()
+        self.pub = self.probe.publisher(joint_topic(self.joint, 'te_features'),
+                                        Float64MultiArray, stream_qos())
+        self.wear = self.listen()
+        self.diagnostics = self.probe.listen('/diagnostics', DiagnosticArray, RECEIVE_QOS)
+        ros.wait_matched(self.pub)
+
+    def start(self):
+        """Start (or restart) the node on this joint's state directory."""
+        node = WearEstimatorNode(
+            f'wear_estimator_{self.joint}', params=PARAMS, context=self.ros.context,
+            parameter_overrides=[Parameter('joint', value=self.joint),
+                                 Parameter('state_dir', value=str(self.state.parent)),
+                                 Parameter('diagnostics_period_s', value=0.1)])
+        return self.ros.add(node)
+
+    def restart(self):
+        """Stop the node as a process that ends would, and start a new one on the same file."""
+        self.ros.remove(self.node)
+        self.node = self.start()
+        self.ros.wait_matched(self.pub)
+        return self.node
+
+    def listen(self):
+        """Subscribe to the wear topic (transient local); return the list of records."""
+        messages = self.probe.listen(joint_topic(self.joint, 'wear'), Float64MultiArray,
+                                     LATE_JOINER_QOS)
+        return _Records(messages)
+
+    def send(self, recs):
+        """Publish te_features records one by one; spin until the node stepped each."""
+        for rec in recs:
+            done = sum(self.node.statuses.values()) + 1
+            self.pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
+            self.ros.spin_until(lambda: sum(self.node.statuses.values()) >= done,
+                                what='the estimator to step a window')
+
+    def latest(self, records, stamp=None):
+        """
+        Spin until an estimate arrives (stamped ``stamp`` if given); return the newest.
+
+        The node publishes one estimate at start, after each window (a
+        replayed one included) and after a reset.
+        """
+        def arrived():
+            return len(records) and (stamp is None or records[-1]['stamp_s'] == stamp)
+        self.ros.spin_until(arrived, what=f'an estimate stamped {stamp}')
+        return records[-1]
+
+
+class _Records:
+    """Received wear messages, read as dicts."""
+
+    def __init__(self, messages):
+        self.messages = messages
+
+    def __len__(self):
+        return len(self.messages)
+
+    def __getitem__(self, k):
+        return from_multiarray(self.messages[k], WEAR_ESTIMATE)
+
+
+def same_estimate(a, b, skip=('stamp_s',)):
+    """Assert two wear records carry the same estimate (stamps aside), bit for bit."""
+    for field in WEAR_ESTIMATE.fields:
+        if field not in skip:
+            np.testing.assert_equal(a[field], b[field], err_msg=field)
+
+
+def test_features_in_give_the_offline_estimate_and_a_late_subscriber_gets_the_latest(
+        ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    first = est.latest(est.wear)
+    assert first['updates'] == 0 and first['wear_m'] == 0.0, 'a new reducer at start'
+    est.send(records[:10])
+    last = est.latest(est.wear, records[9]['window_end_s'])
+    assert len(est.wear) == 11, 'one estimate at start, one per window'
+    same_estimate(last, offline(records[:10]))
+    assert last['exposure_s'] == pytest.approx(10 * EXPOSURE)
+    late = est.listen()
+    latest = est.latest(late)
+    ros.spin_for(0.2)
+    assert len(late) == 1, 'transient local, depth 1: only the latest estimate'
+    same_estimate(latest, last)
+
+
+def test_the_state_file_is_replaced_atomically_after_every_window(ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    assert not est.state.exists(), 'nothing to save before the first window'
+    for k, rec in enumerate(records[:5]):
+        est.send([rec])
+        state = decode_state(est.state.read_bytes(), est.state)
+        assert state['t_end'] == rec['window_end_s']
+        assert state['exposure_s'] == pytest.approx((k + 1) * EXPOSURE)
+        if k:
+            previous = decode_state(backup_path(est.state).read_bytes())
+            assert previous['t_end'] == records[k - 1]['window_end_s']
+        leftovers = sorted(p.name for p in tmp_path.iterdir()
+                           if p.name not in (est.state.name, backup_path(est.state).name))
+        assert leftovers == [], 'no temporary file is left behind'
+
+
+def test_a_restarted_node_continues_the_estimate_and_skips_the_window_it_saw(
+        ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    est.send(records[:12])
+    before = est.latest(est.wear, records[11]['window_end_s'])
+    node = est.restart()
+    assert node.stage.restored_from == str(est.state)
+    resumed = est.latest(est.listen())
+    # The last observation is not state: a restarted node has none until its first window.
+    same_estimate(resumed, before, skip=('stamp_s', 'lost_motion_obs_rad'))
+    est.send(records[11:12])                       # the last window again, e.g. from a bag
+    assert node.statuses == {'replay': 1}
+    assert node.stage.estimator.exposure_s == pytest.approx(12 * EXPOSURE), \
+        'exposure is not counted twice'
+    est.send(records[12:20])
+    same_estimate(est.latest(est.wear, records[19]['window_end_s']), offline(records[:20]))
+
+
+def test_a_corrupt_state_file_falls_back_to_the_backup_copy(ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    est.send(records[:5])
+    est.ros.remove(est.node)
+    est.state.write_bytes(est.state.read_bytes()[:100])    # torn write by some other tool
+    node = est.node = est.start()
+    assert node.stage.restored_from == str(backup_path(est.state))
+    assert node.stage.estimator.exposure_s == pytest.approx(4 * EXPOSURE)
+    status = None
+
+    def restored():
+        nonlocal status
+        found = ros.statuses(est.diagnostics, f'reducer_twin: {est.joint} wear estimator')
+        status = found[-1] if found else None
+        return status is not None and ros.key_values(status)['restored_from'].endswith('.bak')
+
+    ros.spin_until(restored, what='a diagnostics status restored from the backup')
+    ros.wait_matched(est.pub)
+    est.send(records[4:8])                         # the lost window comes again: not a replay
+    assert node.statuses.get('replay', 0) == 0
+    same_estimate(node.stage.record(0.0), offline(records[:8]))
+
+
+def test_a_corrupt_state_file_without_backup_stops_the_node_naming_the_file(
+        ros, tmp_path, node_program):
+    state = tmp_path / 'knee.json'
+    state.write_text('{"format": "reducer_twin.wear_estimator.file", "sha')
+    with pytest.raises(StateFileError, match=str(state)):
+        WearEstimatorNode('wear_estimator_knee', params=PARAMS, context=ros.context,
+                          parameter_overrides=[Parameter('joint', value='knee'),
+                                               Parameter('state_file', value=str(state))])
+    result = subprocess.run(
+        [node_program('wear_estimator'), '--ros-args', '-p', 'joint:=knee',
+         '-p', f'state_file:={state}'], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1
+    assert 'Traceback' not in result.stderr
+    assert 'ERROR: ' in result.stderr and str(state) in result.stderr
+
+
+def test_the_reset_service_starts_a_new_reducer_and_keeps_the_history(ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    est.send(records[:10])
+    worn = est.latest(est.wear, records[9]['window_end_s'])
+    assert worn['wear_m'] > 0.1e-6
+    client = est.probe.create_client(Trigger, joint_topic(est.joint, 'reset'))
+    response = ros.call(client, Trigger.Request())
+    assert response.success
+    assert est.joint in response.message
+    ros.spin_until(lambda: est.wear[-1]['wear_m'] != worn['wear_m'],
+                   what='the estimate after the reset')
+    fresh = est.wear[-1]
+    assert fresh['wear_m'] == EstimatorConfig().initial_wear
+    assert fresh['updates'] == worn['updates'], 'counters are kept'
+    assert fresh['exposure_s'] == worn['exposure_s'], 'total exposure is kept'
+    state = decode_state(est.state.read_bytes())
+    assert state['events'][-1]['reason'] == 'maintenance: reducer replaced (reset service)'
+    assert state['exposure_since_reset_s'] == 0.0
+    est.send(records[10:11])                       # the new reducer runs on
+    est.latest(est.wear, records[10]['window_end_s'])
+    assert decode_state(est.state.read_bytes())['exposure_since_reset_s'] == EXPOSURE
+
+
+def test_a_message_of_another_layout_is_rejected_and_counted(ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    est.pub.publish(to_multiarray(TE_BATCH, np.zeros((3, 4))))
+    est.send(records[:1])
+    assert est.node.rejects.counts == {'bad_features': 1}
+    assert est.node.statuses == {'accepted': 1}
