@@ -1,0 +1,438 @@
+"""reducer-twin analyze: the live pipeline offline, derived bags read back by other libraries."""
+
+import json
+from pathlib import Path
+import shutil
+import sqlite3
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
+from msg_adapters.layouts import LAYOUTS, record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
+from msg_adapters.layouts import WEAR_ESTIMATE
+from msg_adapters.multiarray_cdr import decode_layout_batch
+import numpy as np
+import pytest
+from reducer_twin.analysis.bag import open_bag, write_bag_dir
+from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
+from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
+from reducer_twin.analysis.stages import TE_MAX_GAP_S
+from reducer_twin.cli import main
+from reducer_twin.core.errors import BagError
+from reducer_twin.core.ingest import pair_columns, SpikeFilter, StreamCleaner
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
+from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
+from rosbags.highlevel import AnyReader
+from rosbags.typesys import get_typestore, Stores
+
+REAL_BAGS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'rosbag2-jazzy'
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+AGING = 180_000.0
+# 3000 operating hours in 60 s of stream at 250 Hz; joint 2 wears twice as fast, both joints
+# under 1.2x rated gravity load (as the demo) so the wear is large enough to be seen.
+SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
+                      wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
+JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
+             'lost_motion_arcmin', 'messages', 'rejected'}
+DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
+DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
+             'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',
+             'catalogue_life_h', 'exposure_h', 'updates', 'rejected_updates', 'te_pp_arcmin',
+             'rejected_messages', 'lost_motion_limit_arcmin']
+
+
+@pytest.fixture(scope='module')
+def sim(tmp_path_factory):
+    """Simulate a bag; return it and the simulator's truth at its end."""
+    out = tmp_path_factory.mktemp('sim') / 'robot'
+    return out, simulate_bag(out, SPEC).truth
+
+
+@pytest.fixture(scope='module')
+def analysed(sim, tmp_path_factory):
+    """Analyse the simulated bag in this process."""
+    out = tmp_path_factory.mktemp('derived') / 'derived'
+    return analyze_bag(sim[0], out)
+
+
+def _run(argv, capsys):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def _errors(err):
+    return [line for line in err.splitlines() if line.startswith('ERROR:')]
+
+
+def _same_results(a, b):
+    assert list(a.joints) == list(b.joints)
+    for name in a.joints:
+        x, y = a.joints[name], b.joints[name]
+        np.testing.assert_array_equal(x.features, y.features)
+        np.testing.assert_array_equal(x.wear, y.wear)
+        np.testing.assert_array_equal(x.life, y.life)
+        assert x.summary() == y.summary()
+
+
+# --------------------------------------------------------------------------- results
+
+
+def test_the_json_has_the_issue_shape_and_the_estimate_approaches_the_truth(
+        sim, tmp_path, capsys):
+    code, out, err = _run(['analyze', sim[0], '--out', tmp_path / 'd', '--json'], capsys)
+    assert code == 0, err
+    data = json.loads(out)
+    assert set(data) == {'joints', 'messages_per_s'} and data['messages_per_s'] > 0
+    truth = sim[1]
+    for name in ('joint_1', 'joint_2'):
+        got = data['joints'][name]
+        assert set(got) == JSON_KEYS
+        assert got['messages'] == 15_000 and got['rejected'] == 0
+        # Wear within 10 % of the truth after 3000 h (the README's accuracy floor).
+        assert got['wear_um'] == pytest.approx(truth[name]['true_wear_um'], rel=0.10)
+        assert 0.0 < got['wear_std_um'] < 0.1 * got['wear_um']
+        assert got['rul_p10_h'] <= got['rul_p50_h'] <= got['rul_p90_h']
+        assert got['rul_p50_h'] == pytest.approx(truth[name]['true_rul_h'], rel=0.3)
+    # The joint that wears twice as fast is estimated more worn, with less life left.
+    assert data['joints']['joint_2']['wear_um'] > 1.5 * data['joints']['joint_1']['wear_um']
+    assert data['joints']['joint_2']['rul_p50_h'] < data['joints']['joint_1']['rul_p50_h']
+
+
+def test_the_derived_bag_reads_back_with_mcap_ros2_and_every_message_decodes(analysed):
+    root = analysed.out
+    assert (root / 'metadata.yaml').is_file()
+    files = sorted(root.glob('*.mcap'))
+    counts, labels = {}, {}
+    with open(files[0], 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        for schema, channel, _, msg in reader.iter_decoded_messages():
+            counts[channel.topic] = counts.get(channel.topic, 0) + 1
+            if schema.name == 'std_msgs/msg/Float64MultiArray':
+                labels.setdefault(channel.topic, set()).add(msg.layout.dim[-1].label)
+    expected = {f'/reducer_twin/{j}/{s}' for j in ('joint_1', 'joint_2') for s in DERIVED}
+    assert set(counts) == expected | {'/diagnostics'}
+    for joint, res in analysed.joints.items():
+        windows = len(res.features)
+        assert windows >= 25
+        assert counts[f'/reducer_twin/{joint}/te_features'] == windows
+        assert counts[f'/reducer_twin/{joint}/wear'] == windows + 1    # + the start record
+        assert counts[f'/reducer_twin/{joint}/remaining_life'] == windows + 1
+        # Every second of the 60 s stream, the last one at its end.
+        assert counts[f'/reducer_twin/{joint}/ground_truth'] == 60
+        for suffix in ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth'):
+            assert labels[f'/reducer_twin/{joint}/{suffix}'] == {LAYOUTS[suffix].label}
+    # Per window and joint one life status, and the ingest counts once at the end.
+    assert counts['/diagnostics'] == sum(len(r.wear) for r in analysed.joints.values()) + 1
+
+
+def test_the_derived_bag_reads_back_with_rosbags_and_carries_the_nodes_messages(analysed):
+    store = get_typestore(Stores.ROS2_JAZZY)
+    te_rows, statuses = 0, []
+    with AnyReader([analysed.out], default_typestore=store) as reader:
+        for connection, stamp, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == '/reducer_twin/joint_1/te':
+                te_rows += msg.layout.dim[0].size
+                assert msg.layout.dim[0].stride == msg.layout.dim[0].size * 4
+                assert abs(stamp - msg.data[-4] * 1e9) < 1e3   # logged at its last sample
+            elif connection.topic == '/diagnostics':
+                statuses += msg.status
+    # TE needs the motor angle where the link encoder sampled (50 us after its stamp): the
+    # very last sample has none.
+    assert 14_990 <= te_rows < 15_000
+    life = [s for s in statuses if s.name == 'reducer_twin: joint_2 reducer']
+    assert len(life) == len(analysed.joints['joint_2'].wear)
+    assert [v.key for v in life[-1].values] == DIAG_KEYS
+    assert life[-1].hardware_id == 'joint_2'
+    levels = {'OK': 0, 'WARN': 1, 'ERROR': 2}
+    assert life[-1].level == levels[analysed.joints['joint_2'].levels[-1]]
+    assert 'remaining life P10' in life[-1].message
+    ingest = [s for s in statuses if s.name.endswith('encoder ingest')]
+    assert [s.hardware_id for s in ingest] == ['joint_1', 'joint_2']
+
+
+def test_the_derived_topics_hold_the_stage_outputs(analysed):
+    with open_bag(analysed.out) as bag:
+        def records(topic, layout):
+            return decode_layout_batch(layout, [raw.payload(i) for _, raw in bag.iter_raw([topic])
+                                                for i in range(len(raw))])
+        for joint, res in analysed.joints.items():
+            np.testing.assert_array_equal(
+                records(f'/reducer_twin/{joint}/te_features', TE_FEATURES), res.features)
+            np.testing.assert_array_equal(records(f'/reducer_twin/{joint}/wear', WEAR_ESTIMATE),
+                                          res.wear)
+            np.testing.assert_array_equal(
+                records(f'/reducer_twin/{joint}/remaining_life', REMAINING_LIFE), res.life)
+            te = records(f'/reducer_twin/{joint}/te', TE_BATCH)
+            assert 14_990 <= te.shape[0] < 15_000 and np.all(np.diff(te[:, 0]) > 0)
+        assert bag.metadata[AGING_KEY] == repr(AGING)
+    summary = analysed.joints['joint_1'].summary()
+    assert summary['wear_um'] == pytest.approx(analysed.joints['joint_1'].wear[-1][1] * 1e6)
+
+
+def test_windows_before_the_time_offset_is_learnt_equal_a_te_monitor_run(sim, analysed):
+    """The core stages fed as the live nodes feed them give the same windows."""
+    params = ReducerParams()
+    ratio = total_ratio(params.geometry)
+    with open_bag(sim[0]) as bag:
+        js = bag.read_joint_states()['/joint_states']
+    cols = [js.names.index(n) for n in ('joint_2', 'joint_2_motor')]
+    cleaner, spikes = StreamCleaner(), SpikeFilter(ratio)
+    extractor = TEExtractor(ratio, max_gap_s=TE_MAX_GAP_S)
+    calibration = TimeOffsetCalibration(extractor)
+    analyzer = WindowAnalyzer(params, window_s=2.0, aging_factor=AGING)
+    live = []
+    for k in range(0, len(js), 25):     # te_monitor analyses every 0.1 s (25 samples)
+        part = slice(k, k + 25)
+        clean = cleaner.process(js.stamps_ns[part], js.position[part][:, cols],
+                                js.velocity[part][:, cols], js.effort[part][:, cols])
+        t_ns, motor, link, effort, velocity = pair_columns(clean, 0, 1)[0]
+        keep = spikes.keep(motor, link)
+        t = t_ns[keep] * 1e-9
+        stream = extractor.update(t, motor[keep], t, link[keep])
+        for f in analyzer.update(stream, effort[keep], velocity[keep]):
+            calibration.observe(f)
+            live.append(record_values(TE_FEATURES, features_record(f, params)))
+        if calibration.applied is not None:
+            break
+    offline = analysed.joints['joint_2'].features
+    assert calibration.applied is not None and len(live) >= 5
+    np.testing.assert_array_equal(np.array(live), offline[:len(live)])
+
+
+def test_the_estimator_worker_process_gives_identical_results(sim, analysed, tmp_path):
+    _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
+
+
+# --------------------------------------------------------------------------- inputs
+
+
+def test_compressed_chunks_and_a_bare_mcap_file_analyse_alike(analysed, tmp_path):
+    for compression in ('zstd', 'lz4'):
+        spec = SimulationSpec(**{**SPEC.__dict__, 'compression': compression})
+        simulate_bag(tmp_path / compression, spec)
+        _same_results(analyze_bag(tmp_path / compression, tmp_path / f'd_{compression}'),
+                      analysed)
+    bare = tmp_path / 'zstd' / 'zstd_0.mcap'
+    # The aging factor also travels in the MCAP file's own rosbag2 metadata record.
+    _same_results(analyze_bag(bare, tmp_path / 'd_bare'), analysed)
+
+
+def _joint_states(bag_dir):
+    with open_bag(bag_dir) as bag:
+        return bag.read_joint_states()['/joint_states']
+
+
+def test_a_split_bag_over_two_files_analyses_like_one_file(sim, analysed, tmp_path):
+    js = _joint_states(sim[0])
+    root = tmp_path / 'split'
+    root.mkdir()
+    summaries, topics = [], {}
+    for index, part in enumerate((slice(0, 7000), slice(7000, None))):
+        with McapBagWriter(root / f'split_{index}.mcap') as writer:
+            channel = writer.add_topic('/joint_states', JOINT_STATE)
+            buffer, offsets = encode_joint_states(js.stamps_ns[part], js.names,
+                                                  js.position[part], js.velocity[part],
+                                                  js.effort[part])
+            writer.write_batch(channel, js.stamps_ns[part], buffer, offsets)
+        summaries.append(writer.file_summary())
+        for topic in writer.topic_summaries():
+            topics.setdefault(topic['name'], dict(topic, count=0))['count'] += topic['count']
+    info = bag_metadata(list(topics.values()), summaries, {AGING_KEY: repr(AGING)})
+    (root / 'metadata.yaml').write_text(dump_yaml({'rosbag2_bagfile_information': info}))
+    result = analyze_bag(root, tmp_path / 'd')
+    assert not result.warnings
+    for name in analysed.joints:
+        np.testing.assert_array_equal(result.joints[name].features,
+                                      analysed.joints[name].features)
+        assert result.joints[name].summary() == analysed.joints[name].summary()
+
+
+def test_a_sqlite3_bag_with_integer_qos_becomes_an_mcap_bag(sim, analysed, tmp_path):
+    js = _joint_states(sim[0])
+    buffer, offsets = encode_joint_states(js.stamps_ns, js.names, js.position, js.velocity,
+                                          js.effort)
+    root = tmp_path / 'humble'
+    root.mkdir()
+    qos = ('- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n'
+           '    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n'
+           '    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n'
+           '    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false')
+    with sqlite3.connect(root / 'humble_0.db3') as db:
+        db.execute('CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT '
+                   'NOT NULL, serialization_format TEXT NOT NULL, offered_qos_profiles TEXT '
+                   'NOT NULL)')
+        db.execute('CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, '
+                   'timestamp INTEGER NOT NULL, data BLOB NOT NULL)')
+        db.execute('INSERT INTO topics VALUES (1, ?, ?, ?, ?)',
+                   ('/joint_states', JOINT_STATE, 'cdr', qos))
+        db.executemany('INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?, ?)',
+                       [(int(js.stamps_ns[i]), buffer[offsets[i]:offsets[i + 1]].tobytes())
+                        for i in range(len(js))])
+    # A bag of an older distribution has no aging factor: a real robot's, 1 (the default).
+    config = tmp_path / 'twin.yaml'
+    config.write_text(f'twin:\n  aging_factor: {AGING}\n')
+    result = analyze_bag(root / 'humble_0.db3', tmp_path / 'out',
+                         AnalysisSettings.from_config(config))
+    assert sorted(p.suffix for p in (tmp_path / 'out').iterdir()) == ['.mcap', '.yaml']
+    for name in analysed.joints:
+        np.testing.assert_array_equal(result.joints[name].features,
+                                      analysed.joints[name].features)
+    assert analyze_bag(root, tmp_path / 'out1').aging_factor == 1.0
+
+
+def test_split_link_and_motor_topics_are_paired_by_the_ingestion_rules(tmp_path):
+    spec = SimulationSpec(**{**SPEC.__dict__, 'layout': 'split', 'joints': 1,
+                             'wear_rate_scales': (1.0,)})
+    truth = simulate_bag(tmp_path / 'split', spec).truth['joint_1']
+    result = analyze_bag(tmp_path / 'split', tmp_path / 'd')
+    assert result.plan.motor_topic == '/motor_states'
+    summary = result.joints['joint_1'].summary()
+    assert summary['messages'] == 2 * 15_000 and summary['rejected'] == 0
+    assert summary['wear_um'] == pytest.approx(truth['true_wear_um'], rel=0.10)
+
+
+def test_motor_angles_already_divided_by_the_ratio_are_read_with_the_config(sim, analysed,
+                                                                            tmp_path):
+    js = _joint_states(sim[0])
+    position = js.position.copy()
+    ratio = total_ratio(ReducerParams().geometry)
+    position[:, 1::2] /= ratio
+    batch = JointStateBatch(js.stamps_ns, js.names, position, js.velocity, js.effort)
+    write_bag_dir(tmp_path / 'output_side', {'/joint_states': batch},
+                  custom_data={AGING_KEY: repr(AGING)})
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_angles: output\n')
+    result = analyze_bag(tmp_path / 'output_side', tmp_path / 'd',
+                         AnalysisSettings.from_config(config))
+    for name, res in result.joints.items():
+        assert res.summary()['wear_um'] == pytest.approx(
+            analysed.joints[name].summary()['wear_um'], rel=0.02)
+
+
+def test_the_config_chooses_joints_and_overrides_the_bags_aging_factor(sim, tmp_path, capsys):
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  joints: [joint_2]\n  aging_factor: 1.0\n'
+                      'life:\n  warn_s: 1.0e9\n  error_s: 1.0e8\n')
+    code, out, err = _run(['analyze', sim[0], '--out', tmp_path / 'd', '--config', config,
+                           '--json'], capsys)
+    assert code == 0, err
+    joints = json.loads(out)['joints']
+    assert list(joints) == ['joint_2']
+    # 60 s of wear exposure instead of 3000 h: no measurable wear.
+    assert joints['joint_2']['wear_um'] < 1.0
+
+
+def test_several_bags_get_their_own_outputs_and_a_nested_json(sim, analysed, tmp_path, capsys):
+    second = tmp_path / 'copy'
+    shutil.copytree(sim[0], second)
+    code, out, err = _run(['analyze', sim[0], second, '--out', tmp_path / 'all', '--jobs', '2',
+                           '--json', '--report', tmp_path / 'report'], capsys)
+    assert code == 0, err
+    data = json.loads(out)
+    assert set(data) == {'bags', 'messages_per_s'} and set(data['bags']) == {'robot', 'copy'}
+    for name in ('robot', 'copy'):
+        assert data['bags'][name]['out'] == str(tmp_path / 'all' / name)
+        assert (tmp_path / 'all' / name / 'metadata.yaml').is_file()
+        assert (tmp_path / 'report' / name / 'index.html').is_file()
+        for joint, res in analysed.joints.items():
+            assert data['bags'][name]['joints'][joint] == res.summary()
+
+
+# --------------------------------------------------------------------------- failures
+
+
+REAL = ['talker', 'wbag-split', 'cdr_test', 'topics_and_service_events', 'sqlite3-talker',
+        'talker/talker.mcap']
+FIRST_TOPIC = {'talker': '/topic (std_msgs/msg/String)', 'wbag-split': 'AAA (std_msgs/msg/String)',
+               'cdr_test': '/test_topic (test_msgs/msg/BasicTypes)',
+               'topics_and_service_events': '/test_service1/_service_event',
+               'sqlite3-talker': '/topic (std_msgs/msg/String)',
+               'talker/talker.mcap': '/rosout (rcl_interfaces/msg/Log)'}
+
+
+@pytest.mark.parametrize('name', REAL)
+def test_real_rosbag2_bags_without_joint_states_are_rejected_naming_their_topics(
+        name, tmp_path, capsys):
+    code, out, err = _run(['analyze', REAL_BAGS / name, '--out', tmp_path / 'o'], capsys)
+    assert code == 1
+    (line,) = _errors(err)
+    assert f'{REAL_BAGS / name}: no sensor_msgs/msg/JointState topic; found: ' in line
+    assert FIRST_TOPIC[name] in line
+    assert 'Traceback' not in err + out and not (tmp_path / 'o').exists()
+
+
+def test_a_bag_whose_joint_states_have_no_motor_entries_says_which_names_it_found(tmp_path):
+    batch = JointStateBatch(np.arange(50, dtype=np.int64) * 1_000_000, ('shoulder', 'elbow'),
+                            np.zeros((50, 2)), np.zeros((50, 2)), np.zeros((50, 2)))
+    write_bag_dir(tmp_path / 'arm', {'/arm/joint_states': batch})
+    with pytest.raises(BagError, match=r"no motor/link encoder pairs.*'shoulder', 'elbow'"):
+        analyze_bag(tmp_path / 'arm', tmp_path / 'd')
+
+
+def test_a_truncated_bag_is_analysed_up_to_the_damage_and_exits_1(sim, tmp_path, capsys):
+    damaged = tmp_path / 'cut'
+    shutil.copytree(sim[0], damaged)
+    mcap = damaged / 'robot_0.mcap'
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:int(len(data) * 0.6)])
+    code, out, err = _run(['analyze', damaged, '--out', tmp_path / 'd', '--json'], capsys)
+    assert code == 1 and 'Traceback' not in err
+    warnings = [line for line in err.splitlines() if line.startswith('WARNING:')]
+    assert any(f'{mcap}: reading stopped at byte' in line for line in warnings), err
+    joints = json.loads(out)['joints']
+    assert 0 < joints['joint_1']['messages'] < 15_000
+    with open_bag(tmp_path / 'd') as bag:
+        assert bag.topics['/reducer_twin/joint_1/te_features'].count > 0
+
+
+def _full(tmp_path):
+    path = tmp_path / 'full'
+    path.mkdir()
+    (path / 'keep.txt').write_text('x')
+    return path
+
+
+BAD_INPUTS = [
+    ('no bag', lambda t, b: ['analyze', '--out', t / 'o'], 2, 'BAG'),
+    ('missing bag', lambda t, b: ['analyze', t / 'nope', '--out', t / 'o'], 1, 'nope'),
+    ('--jobs 0', lambda t, b: ['analyze', b, '--out', t / 'o', '--jobs', '0'], 1, '--jobs'),
+    ('non-numeric --jobs', lambda t, b: ['analyze', b, '--out', t / 'o', '--jobs', 'x'], 2,
+     "'x'"),
+    ('non-empty --out', lambda t, b: ['analyze', b, '--out', _full(t)], 1, 'not empty'),
+    ('missing --config', lambda t, b: ['analyze', b, '--out', t / 'o', '--config',
+                                       t / 'none.yaml'], 1, 'none.yaml'),
+    ('unknown config key', lambda t, b: ['analyze', b, '--out', t / 'o', '--config',
+                                         _yaml(t, 'twin:\n  speed: 3\n')], 1, 'speed'),
+    ('bad aging factor', lambda t, b: ['analyze', b, '--out', t / 'o', '--config',
+                                       _yaml(t, 'twin:\n  aging_factor: -2\n')], 1,
+     'twin.aging_factor'),
+    ('missing configured joint', lambda t, b: ['analyze', b, '--out', t / 'o', '--config',
+                                               _yaml(t, 'twin:\n  joints: [wrist]\n')], 1,
+     "['wrist']"),
+]
+
+
+def _yaml(tmp_path, text):
+    path = tmp_path / 'bad.yaml'
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize('make, code, fragment', [row[1:] for row in BAD_INPUTS],
+                         ids=[row[0] for row in BAD_INPUTS])
+def test_bad_inputs_print_one_error_line_without_a_traceback(sim, tmp_path, capsys, make, code,
+                                                             fragment):
+    got, out, err = _run(make(tmp_path, sim[0]), capsys)
+    assert got == code
+    (line,) = _errors(err)
+    assert fragment in line, line
+    assert 'Traceback' not in err + out and out == ''

@@ -1,0 +1,56 @@
+"""The analysis report: PNG plots and one self-contained HTML page."""
+
+import base64
+import re
+
+import pytest
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.report import PLOTS, write_report
+from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+from reducer_twin.core.errors import BagError
+
+PNG = b'\x89PNG\r\n\x1a\n'
+
+
+@pytest.fixture(scope='module')
+def result(tmp_path_factory):
+    """Analyse a small simulated bag of two joints (ground truth included)."""
+    root = tmp_path_factory.mktemp('report')
+    spec = SimulationSpec(hours=1000.0, aging_factor=120_000.0, joints=2, rate_hz=200.0,
+                          seed=4, wear_rate_scales=(1.0, 1.5))
+    simulate_bag(root / 'bag', spec)
+    return analyze_bag(root / 'bag', root / 'derived')
+
+
+def test_the_report_has_every_plot_as_png_and_an_html_page_embedding_them(result, tmp_path):
+    page = write_report(result, tmp_path / 'r')
+    assert page == tmp_path / 'r' / 'index.html'
+    text = page.read_text(encoding='utf-8')
+    for stem, title in PLOTS:
+        png = (tmp_path / 'r' / f'{stem}.png').read_bytes()
+        assert png.startswith(PNG) and len(png) > 5000
+        assert title in text
+        # Self-contained: the page carries the same image, no link to a file.
+        assert base64.b64encode(png).decode('ascii') in text
+    assert not re.search(r'src="(?!data:)', text)
+    for joint in ('joint_1', 'joint_2'):
+        assert f'<td>{joint}</td>' in text
+    assert 'true wear' in text and 'aging factor 120000' in text
+
+
+def test_the_cli_writes_the_report_beside_the_derived_bag(result, tmp_path, capsys):
+    code = main(['analyze', str(result.bag), '--out', str(tmp_path / 'd'), '--report',
+                 str(tmp_path / 'rep')])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert f'report: {tmp_path / "rep" / "index.html"}' in out
+    assert sorted(p.name for p in (tmp_path / 'rep').iterdir()) == sorted(
+        ['index.html'] + [f'{stem}.png' for stem, _ in PLOTS])
+
+
+def test_a_report_directory_that_cannot_be_made_is_a_bag_error(result, tmp_path):
+    blocker = tmp_path / 'file'
+    blocker.write_text('x')
+    with pytest.raises(BagError, match='cannot write the report'):
+        write_report(result, blocker / 'sub')
