@@ -242,8 +242,9 @@ def _plot(history, summary, path, args):
         h = np.array([r['exposure_h'] for r in rows])
         w = np.array([r['wear_um'] for r in rows], dtype=float)
         s = np.array([r['wear_std_um'] for r in rows], dtype=float)
-        line, = ax_w.plot(h, w, label=f'{j} estimate')
-        ax_w.fill_between(h, w - 2 * s, w + 2 * s, color=line.get_color(), alpha=0.2)
+        line, = ax_w.plot(h, w, drawstyle='steps-post', label=f'{j} estimate (per window)')
+        ax_w.fill_between(h, w - 2 * s, w + 2 * s, step='post', color=line.get_color(),
+                          alpha=0.2)
         ax_w.plot(h, [r['true_wear_um'] for r in rows], '--', color=line.get_color(),
                   label=f'{j} truth')
         p50 = np.array([r['rul_p50_h'] for r in rows], dtype=float)
