@@ -281,6 +281,10 @@ def plan_joints(bag, settings):
             common = [n for n in names_of(link) if n in names_of(motor)]
             if common and 'motor' not in link.lower():
                 return _pick(bag, settings, link, motor, common, common)
+    if not any(names_of(t) for t in states):
+        problems = ''.join(f'; {w}' for w in bag.warnings)
+        raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
+                       f'{problems}')
     found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)
     raise BagError(f'{bag.path}: no motor/link encoder pairs: expected <joint> and '
                    f'<joint>{suffix} in one JointState message, or a motor JointState topic '
@@ -770,12 +774,14 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
     """
     settings = settings or AnalysisSettings()
     start = time.perf_counter()
-    backs = WorkerBacks(settings.params, settings.life) if stage_worker else \
-        LocalBacks(settings.params, settings.life)
+    backs = None
     try:
         with open_bag(path) as bag:
             plan = plan_joints(bag, settings)
             aging = _bag_aging_factor(bag, settings)
+            # Forked only now: a bag that cannot be analysed costs no process.
+            backs = WorkerBacks(settings.params, settings.life) if stage_worker else \
+                LocalBacks(settings.params, settings.life)
             custom = {'reducer_twin.source': str(Path(path).resolve()),
                       AGING_KEY: repr(float(aging)),
                       'reducer_twin.joints': ','.join(plan.joints)}
@@ -785,7 +791,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                 joints = run.run()
             warnings = list(bag.warnings)
     except BaseException:
-        if stage_worker:
+        if isinstance(backs, WorkerBacks):
             backs.terminate()
         raise
     return BagResult(Path(path), Path(out_dir), plan, joints, run.messages_read,

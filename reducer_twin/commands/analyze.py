@@ -11,9 +11,10 @@ alike in a viewer.
 Outputs: with one BAG, OUT is the derived bag and ``--report DIR`` the report; with
 several, each gets ``OUT/<bag name>/`` and ``DIR/<bag name>/``, and ``--json`` prints
 ``{"bags": {name: {"joints": ..., "messages_per_s": x, "out": path}}, "messages_per_s":
-total}``. Exit 1 when a bag has no JointState (the ERROR line names the topics found),
-cannot be read, or was truncated or corrupt: what was readable is still analysed and
-written, and a WARNING says at which byte reading stopped.
+total}`` (a bag that failed: ``{"error": message}``). Exit 1 when a bag has no
+JointState (the ERROR line names the topics found), cannot be read, or was truncated or
+corrupt: what was readable is still analysed and written, and a WARNING says at which
+byte reading stopped.
 """
 
 import math
@@ -124,11 +125,12 @@ def run(args):
     outs = [args.out] if single else [str(Path(args.out) / n) for n in names]
     results = _analyze_all(args, settings, outs)
     code = 0
-    summary = {}
+    summary, failed = {}, {}
     for bag, name in zip(args.bags, names):
         result = results[bag]
         if isinstance(result, Exception):
             sys.stderr.write(f'ERROR: {result}\n')
+            failed[name] = str(result)
             code = 1
             continue
         for warning in result.warnings:
@@ -150,8 +152,9 @@ def run(args):
             total = sum(r.messages for r in summary.values())
             seconds = sum(r.seconds for r in summary.values())
             rate = total / seconds if seconds > 0 else float('nan')
-            print_json({'bags': {n: {**r.as_json(), 'out': str(r.out)}
-                                 for n, r in summary.items()},
+            bags = {n: {**r.as_json(), 'out': str(r.out)} for n, r in summary.items()}
+            bags.update({n: {'error': text} for n, text in failed.items()})
+            print_json({'bags': {n: bags[n] for n in names},
                         'messages_per_s': rate if math.isfinite(rate) else None})
     else:
         for name, result in summary.items():

@@ -347,6 +347,19 @@ def test_several_bags_get_their_own_outputs_and_a_nested_json(sim, analysed, tmp
             assert data['bags'][name]['joints'][joint] == res.summary()
 
 
+def test_one_bad_bag_among_several_fails_alone(sim, tmp_path, capsys):
+    code, out, err = _run(['analyze', sim[0], REAL_BAGS / 'talker', '--out', tmp_path / 'all',
+                           '--json'], capsys)
+    assert code == 1
+    (line,) = _errors(err)
+    assert 'talker: no sensor_msgs/msg/JointState topic' in line
+    bags = json.loads(out)['bags']
+    assert list(bags) == ['robot', 'talker'] and 'found: ' in bags['talker']['error']
+    assert set(bags['robot']['joints']) == {'joint_1', 'joint_2'}
+    assert (tmp_path / 'all' / 'robot' / 'metadata.yaml').is_file()
+    assert not (tmp_path / 'all' / 'talker').exists()
+
+
 # --------------------------------------------------------------------------- failures
 
 
