@@ -181,10 +181,11 @@ class RosHarness:
         return {kv.key: kv.value for kv in status.values}
 
     def close(self):
-        """Destroy the nodes of the test and the executor."""
-        for node in list(self.nodes):
-            self.remove(node)
+        """Shut the executor down, then destroy the nodes: no callback runs after that."""
         self.executor.shutdown(timeout_sec=1.0)
+        for node in self.nodes:
+            node.destroy_node()
+        self.nodes = []
 
 
 def init_context(context=None):
@@ -205,6 +206,28 @@ def ros_context():
 def ros(ros_context):
     """Return a :class:`RosHarness` on the module's context; its nodes end with the test."""
     harness = RosHarness(ros_context)
+    yield harness
+    harness.close()
+
+
+@pytest.fixture(scope='module')
+def default_ros_context():
+    """
+    Initialise rclpy's global context for one test module.
+
+    For code that creates its nodes without a ``context`` argument, such as
+    ``twin_bringup.build_nodes``; the context is shut down (and the global
+    one reset) at the end of the module.
+    """
+    context = init_context()
+    yield context
+    rclpy.try_shutdown()
+
+
+@pytest.fixture(scope='module')
+def default_ros(default_ros_context):
+    """Return a :class:`RosHarness` on rclpy's global context, for the whole module."""
+    harness = RosHarness(default_ros_context)
     yield harness
     harness.close()
 
