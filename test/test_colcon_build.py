@@ -11,6 +11,7 @@ the underlay (the part ``/opt/ros/jazzy`` plays on a ROS machine).
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 
@@ -117,3 +118,33 @@ def test_installed_cli_prints_the_paper_tables_as_json(install_dir):
     result = run_installed(install_dir, [str(exe), 'paper', '--json'], timeout=120)
     assert result.returncode == 0, f'reducer-twin paper --json failed:\n{result.stderr}'
     assert 'table2' in json.loads(result.stdout)
+
+
+def test_installed_joint_simulator_runs_on_the_installed_params_file_until_ctrl_c(install_dir):
+    # What `ros2 run reducer_twin joint_simulator --ros-args --params-file ...` does.
+    exe = install_dir / PACKAGE / 'lib' / PACKAGE / 'joint_simulator'
+    params = install_dir / PACKAGE / 'share' / PACKAGE / 'config' / 'nodes.yaml'
+    env = dict(os.environ)
+    env.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+    # exec: the signal goes to the node program itself, as from a terminal's Ctrl-C.
+    proc = subprocess.Popen(
+        ['bash', '-c', '. "$0/setup.sh" && exec "$@"', str(install_dir), str(exe),
+         '--ros-args', '--params-file', str(params)],
+        cwd=install_dir, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        try:
+            proc.wait(timeout=3.0)
+        except subprocess.TimeoutExpired:
+            pass
+        alive = proc.poll() is None
+        if alive:
+            proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert alive, f'joint_simulator exited within 3 s (exit {proc.returncode}):\n{err}'
+    assert proc.returncode == 0, f'exit {proc.returncode} after SIGINT:\n{err}'
+    assert 'Traceback' not in err, err
+    assert "simulating 1 joint(s) ['joint_1'] at 1000 Hz" in out + err
