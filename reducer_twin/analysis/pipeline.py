@@ -606,7 +606,7 @@ class _Run:
             self._windows(joint, front.flush())
             for log_ns, values in front.te_messages(None, final=True):
                 self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
-        self._drain(self.backs.close())
+        self._drain(self.backs.finish())
         self._copy_truth()
         self._finish(chunks, link_clean, motor_clean)
         return self.results
@@ -667,15 +667,11 @@ class _Run:
     def _drain(self, done):
         for joint, outputs in done:
             self.back_out[joint] += outputs
-            log_ns = [_stamp_ns(o['wear']['stamp_s']) for o in outputs]
-            self.out.arrays(joint, 'wear', WEAR_ESTIMATE, log_ns,
-                            [record_values(WEAR_ESTIMATE, o['wear']) for o in outputs])
+            log_ns = [o['log_ns'] for o in outputs]
+            self.out.arrays(joint, 'wear', WEAR_ESTIMATE, log_ns, [o['wear'] for o in outputs])
             self.out.arrays(joint, 'remaining_life', REMAINING_LIFE, log_ns,
-                            [record_values(REMAINING_LIFE, o['life']) for o in outputs])
-            payloads = [encode_diagnostic_array(ns, [Status(
-                o['level'], f'reducer_twin: {joint} reducer', o['message'], joint,
-                o['values'])]) for ns, o in zip(log_ns, outputs)]
-            self.out.raw(self.out.diagnostics, log_ns, payloads)
+                            [o['life'] for o in outputs])
+            self.out.raw(self.out.diagnostics, log_ns, [o['diagnostics'] for o in outputs])
 
     def _copy_truth(self):
         topics = {topic: joint for joint, topic in self.truth_topics.items()}
@@ -720,8 +716,8 @@ class _Run:
                 counts.get(f'{side}_{r}', 0) for side, _ in sides for r in _REPAIRED
                 if r != 'clock_jump')
             outputs = self.back_out[joint]
-            res.wear = np.array([record_values(WEAR_ESTIMATE, o['wear']) for o in outputs])
-            res.life = np.array([record_values(REMAINING_LIFE, o['life']) for o in outputs])
+            res.wear = np.array([o['wear'] for o in outputs])
+            res.life = np.array([o['life'] for o in outputs])
             res.levels = [o['level'] for o in outputs]
             feats = self.features[joint]
             res.features = np.concatenate(feats) if feats else np.zeros(
@@ -755,8 +751,9 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         Topics, joints, aging factor, windows, thresholds.
     overwrite : bool
         Replace a bag already in ``out_dir``.
-    stage_worker : bool
-        Run the estimator and life stages in a forked worker process.
+    stage_worker : bool or WorkerBacks
+        Run the estimator and life stages in a forked worker process: a new one (True)
+        or the one given (forked early by the caller, reusable for the next bag).
 
     Returns
     -------
@@ -779,9 +776,11 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         with open_bag(path) as bag:
             plan = plan_joints(bag, settings)
             aging = _bag_aging_factor(bag, settings)
-            # Forked only now: a bag that cannot be analysed costs no process.
-            backs = WorkerBacks(settings.params, settings.life) if stage_worker else \
-                LocalBacks(settings.params, settings.life)
+            if isinstance(stage_worker, WorkerBacks):
+                backs = stage_worker
+            else:  # forked only now: a bag that cannot be analysed costs no process
+                backs = WorkerBacks() if stage_worker else LocalBacks()
+            backs.configure(settings.params, settings.life)
             custom = {'reducer_twin.source': str(Path(path).resolve()),
                       AGING_KEY: repr(float(aging)),
                       'reducer_twin.joints': ','.join(plan.joints)}
@@ -792,8 +791,10 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):
-            backs.terminate()
+            backs.terminate()   # it may hold work of this bag: never reused
         raise
+    if backs is not stage_worker:
+        backs.close()
     return BagResult(Path(path), Path(out_dir), plan, joints, run.messages_read,
                      time.perf_counter() - start, aging, warnings,
                      any(is_damage(w) for w in warnings))

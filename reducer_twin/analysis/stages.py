@@ -11,6 +11,8 @@ analyses the next chunk; both give identical results, since each stage sees the 
 records in the same order.
 """
 
+from msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
+from msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 import numpy as np
 from reducer_twin.core.ingest import Pairer, SpikeFilter
 from reducer_twin.core.kinematics import total_ratio
@@ -32,6 +34,10 @@ TE_MAX_GAP_S = 0.05
 
 _ERROR = '!error'
 """Marks a failure report of the worker (no ROS name starts with '!')."""
+
+_CONFIG = '!config'
+_FLUSH = '!flush'
+"""Control messages of the worker protocol."""
 
 
 def defer_filterpy_extras():
@@ -234,8 +240,9 @@ class JointBack:
         Returns
         -------
         dict
-            ``status``, ``wear`` and ``life`` records, ``level``, ``message`` and the
-            diagnostic ``values`` (the life publisher's key/values).
+            ``status``, ``log_ns`` (the window's end), ``wear`` and ``life`` record values
+            in layout order, ``level`` and the serialised ``/diagnostics`` message (the life
+            publisher's status with its key/values).
 
         """
         features = features_from_record(record)
@@ -261,20 +268,40 @@ class JointBack:
             values['te_pp_arcmin'] = rad_to_arcmin(record['te_pp_rad'])
         values['rejected_messages'] = 0
         values['lost_motion_limit_arcmin'] = rad_to_arcmin(self.life.limit)
-        return {'status': status, 'wear': wear, 'life': life, 'level': level,
-                'message': message, 'values': values}
+        # Encoded here: in a worker process this work leaves the reading process.
+        stamp_ns = int(round(float(wear['stamp_s']) * 1e9))
+        diagnostics = encode_diagnostic_array(stamp_ns, [Status(
+            level, f'reducer_twin: {self.joint} reducer', message, self.joint, values)])
+        return {'status': status, 'log_ns': stamp_ns, 'level': level,
+                'wear': record_values(WEAR_ESTIMATE, wear),
+                'life': record_values(REMAINING_LIFE, life), 'diagnostics': diagnostics}
 
 
 class LocalBacks:
-    """Estimator and life stages in this process."""
+    """
+    Estimator and life stages of every joint, in this process.
 
-    def __init__(self, params, life_config):
+    Parameters
+    ----------
+    params : ReducerParams, optional
+        Reducer parameters (or later through :meth:`configure`).
+    life_config : LifeConfig, optional
+        Limit and thresholds.
+
+    """
+
+    def __init__(self, params=None, life_config=None):
+        self.configure(params, life_config)
+
+    def configure(self, params, life_config):
+        """Start over for a new bag with these parameters."""
         self.params = params
         self.life_config = life_config
         self.backs = {}
         self._done = []
 
     def submit(self, joint, kind, items):
+        """Process ``'start'`` (a stamp [s]) or ``'windows'`` (``te_features`` records)."""
         back = self.backs.get(joint)
         if back is None:
             back = self.backs[joint] = JointBack(joint, self.params, self.life_config)
@@ -284,52 +311,81 @@ class LocalBacks:
             self._done.append((joint, [back.process(r) for r in items]))
 
     def poll(self):
+        """Return the outputs ready so far, ``[(joint, [outputs])]``."""
         done, self._done = self._done, []
         return done
 
-    def close(self):
+    def finish(self):
+        """Return the outputs of everything submitted."""
         return self.poll()
 
+    def close(self):
+        """Release nothing (the stages live in this process)."""
 
-def _back_worker(inbox, outbox, params, life_config):
+
+def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
-        local = LocalBacks(params, life_config)
+        # Warm up while the parent imports, opens the bag and reads the first chunk.
+        from filterpy.kalman import UnscentedKalmanFilter  # noqa: F401
+        from reducer_twin.core import estimator, life  # noqa: F401
+        local = LocalBacks()
         while True:
             item = inbox.get()
             if item is None:
                 break
-            local.submit(*item)
-            for done in local.poll():
-                outbox.put(done)
-        outbox.put(None)
+            if item[0] == _CONFIG:
+                local.configure(item[1], item[2])
+            elif item[0] == _FLUSH:
+                outbox.put((_FLUSH, None))
+            else:
+                local.submit(*item)
+                for done in local.poll():
+                    outbox.put(done)
     except BaseException as err:  # noqa: B902 - reported to the parent, which raises
         import traceback
         outbox.put((_ERROR, f'{type(err).__name__}: {err}\n{traceback.format_exc()}'))
 
 
 class WorkerBacks:
-    """Estimator and life stages in a forked worker process (same results as local)."""
+    """
+    Estimator and life stages in a forked worker process (the same results as local).
 
-    def __init__(self, params, life_config):
+    Fork it early (before the bag is opened): the worker imports filterpy while this
+    process gets ready. One worker serves bags one after the other
+    (:meth:`configure` ... :meth:`finish` per bag, :meth:`close` at the end).
+    """
+
+    def __init__(self):
         import multiprocessing
         ctx = multiprocessing.get_context('fork')
         self._inbox = ctx.Queue()
         self._outbox = ctx.Queue()
         self._proc = ctx.Process(target=_back_worker, name='reducer-twin-stages',
-                                 args=(self._inbox, self._outbox, params, life_config),
-                                 daemon=True)
+                                 args=(self._inbox, self._outbox), daemon=True)
         self._proc.start()
 
+    @property
+    def alive(self):
+        """Whether the worker process runs."""
+        return self._proc.is_alive()
+
+    def configure(self, params, life_config):
+        """Start over for a new bag with these parameters."""
+        self._inbox.put((_CONFIG, params, life_config))
+
     def submit(self, joint, kind, items):
+        """Send work (see :meth:`LocalBacks.submit`)."""
         self._inbox.put((joint, kind, items))
 
-    def _take(self, item):
+    @staticmethod
+    def _take(item):
         if item[0] == _ERROR:
             raise RuntimeError(f'the estimator worker failed: {item[1]}')
         return item
 
     def poll(self):
+        """Return the outputs ready so far, without waiting."""
         import queue
         out = []
         while True:
@@ -337,22 +393,27 @@ class WorkerBacks:
                 item = self._outbox.get_nowait()
             except queue.Empty:
                 return out
-            if item is None:  # pragma: no cover - only after close
-                return out
             out.append(self._take(item))
 
-    def close(self):
-        self._inbox.put(None)
+    def finish(self):
+        """Wait for the outputs of everything submitted and return them."""
+        self._inbox.put((_FLUSH,))
         out = []
         while True:
-            item = self._outbox.get()
-            if item is None:
-                break
-            out.append(self._take(item))
-        self._proc.join(timeout=10)
-        return out
+            item = self._take(self._outbox.get())
+            if item[0] == _FLUSH:
+                return out
+            out.append(item)
+
+    def close(self):
+        """Stop the worker."""
+        if self._proc.is_alive():
+            self._inbox.put(None)
+            self._proc.join(timeout=10)
+        self.terminate()
 
     def terminate(self):
+        """Stop the worker at once (after an error)."""
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join(timeout=5)

@@ -69,21 +69,23 @@ def _names(bags):
 
 
 def _use_stage_worker(choice, jobs):
-    """Whether the estimator and life stages get their own process."""
+    """Whether the estimator and life stages get their own process (bags one at a time)."""
+    if jobs != 1:
+        return False
     if choice != 'auto':
         return choice == 'yes'
-    return jobs == 1 and (os.cpu_count() or 1) >= 2
+    return (os.cpu_count() or 1) >= 2
 
 
-def _analyze_all(args, settings, outs):
+def _analyze_all(args, settings, outs, worker):
     from reducer_twin.analysis.pipeline import analyze_bag
     jobs = min(args.jobs, len(args.bags))
     results = {}
     if jobs == 1:
-        worker = _use_stage_worker(args.stage_process, jobs)
         for bag, out in zip(args.bags, outs):
+            stage = worker if worker is not None and worker.alive else worker is not None
             try:
-                results[bag] = analyze_bag(bag, out, settings, args.overwrite, worker)
+                results[bag] = analyze_bag(bag, out, settings, args.overwrite, stage)
             except ReducerTwinError as err:
                 results[bag] = err
         return results
@@ -113,17 +115,24 @@ def run(args):
     check_out_dir(args.out, args.overwrite)
     if args.report:
         check_out_dir(args.report, True, '--report')
-    from reducer_twin.analysis.pipeline import AnalysisSettings
-    from reducer_twin.analysis.stages import defer_filterpy_extras
-    settings = AnalysisSettings.from_config(args.config)
-    if args.compression != settings.compression:
-        from dataclasses import replace
-        settings = replace(settings, compression=args.compression)
+    from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
     defer_filterpy_extras()
-    single = len(args.bags) == 1
-    names = _names(args.bags)
-    outs = [args.out] if single else [str(Path(args.out) / n) for n in names]
-    results = _analyze_all(args, settings, outs)
+    # Forked before the rest is imported: the worker loads filterpy meanwhile.
+    jobs = min(args.jobs, len(args.bags))
+    worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) else None
+    try:
+        from reducer_twin.analysis.pipeline import AnalysisSettings
+        settings = AnalysisSettings.from_config(args.config)
+        if args.compression != settings.compression:
+            from dataclasses import replace
+            settings = replace(settings, compression=args.compression)
+        single = len(args.bags) == 1
+        names = _names(args.bags)
+        outs = [args.out] if single else [str(Path(args.out) / n) for n in names]
+        results = _analyze_all(args, settings, outs, worker)
+    finally:
+        if worker is not None:
+            worker.close()
     code = 0
     summary, failed = {}, {}
     for bag, name in zip(args.bags, names):

@@ -331,10 +331,13 @@ def test_the_config_chooses_joints_and_overrides_the_bags_aging_factor(sim, tmp_
     assert joints['joint_2']['wear_um'] < 1.0
 
 
-def test_several_bags_get_their_own_outputs_and_a_nested_json(sim, analysed, tmp_path, capsys):
+@pytest.mark.parametrize('how', [['--jobs', '2'], ['--stage-process', 'yes']],
+                         ids=['two processes', 'one after the other, one estimator worker'])
+def test_several_bags_get_their_own_outputs_and_a_nested_json(sim, analysed, tmp_path, capsys,
+                                                              how):
     second = tmp_path / 'copy'
     shutil.copytree(sim[0], second)
-    code, out, err = _run(['analyze', sim[0], second, '--out', tmp_path / 'all', '--jobs', '2',
+    code, out, err = _run(['analyze', sim[0], second, '--out', tmp_path / 'all', *how,
                            '--json', '--report', tmp_path / 'report'], capsys)
     assert code == 0, err
     data = json.loads(out)
