@@ -9,6 +9,7 @@ core's own message while the old value stays.
 """
 
 from dataclasses import fields, replace
+import os
 import signal
 import sys
 import time
@@ -21,9 +22,13 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.params import check_value, describe_range
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+"""Signals that stop a node program cleanly (Ctrl-C; what ``ros2 launch`` escalates to)."""
 
 ENCODER_DEPTH = 200
 """History depth of 1 kHz encoder streams (>= 100: a stalled reader loses old samples)."""
@@ -270,13 +275,34 @@ def make_executor():
         return SingleThreadedExecutor()
 
 
-def spin_until_shutdown(executor, context=None):
+class StopRequest:
     """
-    Spin until the context shuts down (Ctrl-C, SIGTERM, ``rclpy.shutdown``).
+    A signal handler that asks the spin loop to stop; a second signal kills at once.
 
-    ``EventsExecutor.spin()`` stays in C++ and never sees the shutdown that
-    rclpy's signal handler makes: a node would ignore Ctrl-C. Spinning in
-    slices of 0.2 s lets the loop notice it.
+    Installed for SIGINT and SIGTERM by :func:`run_nodes` in place of rclpy's
+    handlers, which shut the context down from another thread while a
+    callback may be publishing (it then fails with "publisher's context is
+    invalid"). Here the loop stops first, then the nodes are destroyed and
+    the context shut down, in order.
+    """
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self, signum, frame):
+        """Record the request; on a repeated one, die by the signal's default action."""
+        if self.signum is not None:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
+        self.signum = signum
+
+
+def spin_until_shutdown(executor, context=None, stop=None):
+    """
+    Spin until a stop is requested or the context shuts down.
+
+    ``EventsExecutor.spin()`` stays in C++ and never returns for a signal:
+    spinning in slices of 0.2 s lets the loop notice one.
 
     Parameters
     ----------
@@ -284,17 +310,22 @@ def spin_until_shutdown(executor, context=None):
         Executor with the nodes added.
     context : rclpy.context.Context, optional
         Context to watch (default: the global one).
+    stop : StopRequest, optional
+        Checked between slices.
 
     """
     context = context or rclpy.get_default_context()
     never = Future()
-    while context.ok():
+    while context.ok() and (stop is None or stop.signum is None):
         executor.spin_until_future_complete(never, timeout_sec=0.2)
 
 
 def run_nodes(factory, args=None):
     """
     Run nodes built by ``factory`` until shutdown; the body of every ``main()``.
+
+    Ctrl-C (SIGINT) and SIGTERM stop the spin loop; then the nodes are
+    destroyed and the context shut down.
 
     Parameters
     ----------
@@ -309,11 +340,9 @@ def run_nodes(factory, args=None):
         Exit code: 0 on a clean shutdown, 1 on an invalid parameter.
 
     """
-    # Ctrl-C stops the nodes through rclpy's handler, which shuts the context down (then
-    # spin_until_shutdown returns); Python's own KeyboardInterrupt would land in whatever
-    # callback runs and print its stack, so the Python-level handler does nothing.
-    previous = signal.signal(signal.SIGINT, _ignore_signal)
-    rclpy.init(args=args)
+    stop = StopRequest()
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
         made = factory()
@@ -322,7 +351,7 @@ def run_nodes(factory, args=None):
         for node in nodes:
             executor.add_node(node)
         quiet_gc()
-        spin_until_shutdown(executor)
+        spin_until_shutdown(executor, stop=stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (ReducerTwinError, ParameterException) as err:
@@ -336,14 +365,11 @@ def run_nodes(factory, args=None):
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
     return 0
-
-
-def _ignore_signal(signum, frame):
-    """Python-level SIGINT handler of the node programs: rclpy's handler does the work."""
 
 
 __all__ = ['Node', 'SpecParameters', 'RejectCounter', 'encoder_qos', 'stream_qos',
            'latest_qos', 'diagnostics_qos', 'joint_topic', 'make_executor', 'run_nodes',
-           'spin_until_shutdown']
+           'spin_until_shutdown', 'StopRequest']
