@@ -212,6 +212,39 @@ def test_the_estimator_worker_process_gives_identical_results(sim, analysed, tmp
     _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
 
 
+ESTIMATE_IN_A_FRESH_PROCESS = """
+import json, sys
+from reducer_twin.analysis.stages import defer_filterpy_extras, JointBack
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.pipeline import LifeConfig
+deferred = defer_filterpy_extras() if sys.argv[1] == 'defer' else False
+back = JointBack('j', ReducerParams(), LifeConfig())
+records = json.loads(sys.stdin.read())
+out = [back.process(r)['wear'] for r in records]
+json.dump({'deferred': deferred, 'wear': out,
+           'loaded': [m for m in ('scipy.stats', 'scipy.ndimage') if m in sys.modules]},
+          sys.stdout)
+"""
+
+
+def test_deferring_filterpys_unused_imports_changes_no_estimate(analysed):
+    import subprocess
+    import sys
+    records = [dict(zip(TE_FEATURES.fields, row.tolist()))
+               for row in analysed.joints['joint_1'].features[:8]]
+    runs = {}
+    for mode in ('defer', 'plain'):
+        done = subprocess.run([sys.executable, '-c', ESTIMATE_IN_A_FRESH_PROCESS, mode],
+                              input=json.dumps(records), capture_output=True, text=True,
+                              timeout=120, check=True)
+        runs[mode] = json.loads(done.stdout)
+    assert runs['defer']['deferred'] and runs['defer']['loaded'] == []
+    assert runs['plain']['loaded'] == ['scipy.stats', 'scipy.ndimage']
+    assert runs['defer']['wear'] == runs['plain']['wear']
+    np.testing.assert_array_equal(np.array(runs['plain']['wear']),
+                                  analysed.joints['joint_1'].wear[1:9])
+
+
 # --------------------------------------------------------------------------- inputs
 
 
