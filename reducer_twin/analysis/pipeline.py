@@ -15,19 +15,23 @@ The same core objects the live nodes run, in the same order, on whole arrays:
 * ``wear_estimator`` and ``life_publisher``: :class:`~reducer_twin.core.pipeline.
   EstimatorStage` and :class:`~reducer_twin.core.pipeline.LifeStage` per window.
 
-The derived bag carries what the nodes publish, in their layouts:
-``/reducer_twin/<joint>/te`` (TE batches; :data:`TE_BATCH_S` of stream per message
-instead of the node's 20 ms), ``te_features``, ``wear`` and ``remaining_life`` per
-window, ``/diagnostics`` (the life publisher's status per window and joint, and the
-ingest counts at the end), and the input's ``ground_truth`` topics when it has them.
+JointState messages are taken in file order, as ``encoder_ingest`` takes them in arrival
+order (rosbag2 writes in receive order); the ingestion rules drop and count what comes
+out of order. The derived bag carries what the nodes publish, in their layouts:
+``/reducer_twin/<joint>/te`` (TE batches, ``TE_BATCH_S`` = 0.1 s of stream per message
+instead of the node's 20 ms), ``te_features``, ``wear`` and ``remaining_life`` per window,
+``/diagnostics`` (the life publisher's status per window and joint, and the ingest
+counts at the end), and the input's ``ground_truth`` topics when it has them.
 Log times are the stamps of the data a message was computed from.
 
 Differences from a live run, on purpose: TE messages are longer; until the encoder time
-offset is learnt (or for :data:`CALIBRATION_WINDOWS` windows) the stream is fed in
+offset is learnt (or for ``CALIBRATION_WINDOWS`` windows) the stream is fed in
 0.1 s pieces as the node's analysis timer does, then in large chunks, so a calibration
 that is learnt late applies from the next chunk; the last, partial window is analysed
 (a node that stops drops it); the estimator starts from a new reducer and keeps no state
-file.
+file. The TE extractor finds no motor angle for the last link sample of each piece it is
+given once the time offset applies (the link encoder samples 50 µs after its stamp):
+the node loses one sample per 0.1 s analysis, this analysis one per chunk.
 
 Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
 window) can run in a forked worker process while this process reads, cleans and
