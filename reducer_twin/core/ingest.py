@@ -50,6 +50,12 @@ PERIOD_STEPS = 16
 REASONS = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump', 'gap', 'wrap')
 """Reasons a stream sample is dropped or repaired (per encoder stream)."""
 
+VALUE_REASONS = ('non_finite', 'wrap')
+"""The rules that act on one column's values (the others act on whole rows)."""
+
+WRAP_PERIODS = 3
+"""Neighbours further apart than this many nominal periods are not tested for a wrap."""
+
 SPIKE_REASONS = ('spike', 'step')
 """Reasons a sample is dropped or repaired, in the order of the table above."""
 
@@ -153,6 +159,8 @@ class StreamCleaner:
         self._segment = 0
         self._unwrap = None     # per-column unwrap offset [rad]
         self._raw_last = None   # per-column last finite raw value
+        self._wrap_prev = None  # (stamp, segment) of the last row seen by the wrap rule
+        self.column_counts = None   # per-column counts of the value rules
         self._ndim = None
 
     def process(self, t_ns, position, velocity=None, effort=None):
@@ -205,9 +213,12 @@ class StreamCleaner:
         self._count_missing(t)
         finite = np.isfinite(pos)
         self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
+        if self.column_counts is None:
+            self.column_counts = {r: np.zeros(pos.shape[1], np.int64) for r in VALUE_REASONS}
+        self.column_counts['non_finite'] += pos.shape[0] - np.count_nonzero(finite, axis=0)
         pos = np.where(finite, pos, np.nan)
         t, pos, vel, eff, seg = self._order(t, pos, vel, eff)
-        pos = self._unwrap_positions(pos)
+        pos = self._unwrap_positions(pos, t, seg)
         self.accepted += t.size
         out = CleanStream(t, pos, vel, eff, seg)
         return _squeeze(out) if one_d else out
@@ -245,11 +256,33 @@ class StreamCleaner:
                 self.missing += int(round(d / period) - 1)
             d_prev = ti
         self._raw_prev_t = stamps[-1]
+        self._wrap_prev = (stamps[-1], self._segment)
         self._last_t = self._max_t = stamps[-1]
         self._raw_last = pos[-1].copy()
         self.accepted += len(stamps)
         return CleanStream(t, pos + self._unwrap, vel, eff,
                            np.full(len(stamps), self._segment, dtype=np.int64))
+
+    def counts_for(self, columns):
+        """
+        Return the counts of some columns: row rules whole, value rules of those columns.
+
+        Parameters
+        ----------
+        columns : sequence of int
+            Column indices (e.g. the link and motor columns of one joint).
+
+        Returns
+        -------
+        dict
+            Reason to count.
+
+        """
+        out = dict(self.counts)
+        if self.column_counts is not None:
+            for reason, per_column in self.column_counts.items():
+                out[reason] = int(per_column[list(columns)].sum())
+        return out
 
     def _count_missing(self, t):
         """Count samples missing from the stream (stamp holes at the nominal period)."""
@@ -328,14 +361,27 @@ class StreamCleaner:
         self._last_t, self._max_t, self._segment = last, max_t, segment
         return t[keep], pos[keep], vel[keep], eff[keep], seg[keep]
 
-    def _unwrap_positions(self, pos):
-        """Unwrap jumps of about 2·pi between finite neighbours (within and across calls)."""
+    def _unwrap_positions(self, pos, t, seg):
+        """
+        Unwrap jumps of about 2·pi between close neighbours (within and across calls).
+
+        Only neighbours of one segment and at most :data:`WRAP_PERIODS` nominal
+        periods apart are compared: across a longer hole a fast motor may move
+        about a whole turn, and the turn count is restored downstream by
+        keeping the TE continuous.
+        """
         n, k = pos.shape
         if self._unwrap is None:
             self._unwrap = np.zeros(k)
             self._raw_last = np.full(k, np.nan)
         if n == 0:
             return pos
+        prev_t, prev_seg = self._wrap_prev if self._wrap_prev else (t[0], seg[0])
+        dt = np.diff(t, prepend=prev_t)
+        span = (WRAP_PERIODS * self.period_ns if self.period_ns
+                else self.config.max_gap_s * 1e9)
+        close = ((dt <= span) & (seg == np.concatenate([[prev_seg], seg[:-1]])))[:, None]
+        self._wrap_prev = (int(t[-1]), int(seg[-1]))
         finite = np.isfinite(pos)
         # Forward-fill each column so a dropped value does not hide a wrap.
         rows = np.where(finite, np.arange(n)[:, None], -1)
@@ -347,8 +393,9 @@ class StreamCleaner:
         turns = np.round(d / (2.0 * math.pi))
         # A real move of pi in one sample is impossible at any robot speed; a jump of
         # about a whole turn is an encoder wrapping.
-        wrapped = (np.abs(d) > math.pi) & (np.abs(d - turns * 2.0 * math.pi) < 0.5)
+        wrapped = close & (np.abs(d) > math.pi) & (np.abs(d - turns * 2.0 * math.pi) < 0.5)
         self.counts['wrap'] += int(np.count_nonzero(wrapped))
+        self.column_counts['wrap'] += np.count_nonzero(wrapped, axis=0)
         offset = self._unwrap - np.cumsum(np.where(wrapped, turns, 0.0), axis=0) * 2.0 * math.pi
         self._raw_last = np.where(np.isfinite(filled[-1]), filled[-1], self._raw_last)
         self._unwrap = offset[-1].copy()

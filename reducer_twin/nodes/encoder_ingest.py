@@ -190,10 +190,10 @@ class EncoderIngest(Node):
         result = {}
         for k, (joint, out) in enumerate(self.outputs.items()):
             c = {}
-            sides = (('link', self.link), ('motor', self.motor)) if self.split else (
-                ('stream', self.link),)
-            for side, cleaner in sides:
-                for reason, count in cleaner.counts.items():
+            sides = ((('link', self.link, [k]), ('motor', self.motor, [k])) if self.split
+                     else (('stream', self.link, [2 * k, 2 * k + 1]),))
+            for side, cleaner, columns in sides:
+                for reason, count in cleaner.counts_for(columns).items():
                     c[f'{side}_{reason}'] = count
                 c[f'{side}_missing'] = cleaner.missing
             c['unpaired'] = out.pairer.unpaired

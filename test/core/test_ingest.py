@@ -584,7 +584,7 @@ def test_no_interpolation_across_a_gap_of_the_motor_stream():
     t_motor = t_link[::2]
     hole = (t_motor > T0 + 150 * MS) & (t_motor < T0 + 230 * MS)   # 80 ms: a new segment
     cleaner = StreamCleaner()
-    # A slow joint: the motor turns 1.6 rad during the gap (see the xfail below for fast).
+    # A slow joint: the motor turns 1.6 rad during the gap (a fast one: the next test).
     motor = clean(t_motor[~hole], motor_at(t_motor[~hole], speed=20.0), cleaner)
     assert cleaner.counts['gap'] == 1
     pairer = Pairer()
@@ -599,9 +599,6 @@ def test_no_interpolation_across_a_gap_of_the_motor_stream():
                                rtol=0, atol=1e-9)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'known defect, reported: the wrap rule compares neighbours across a gap (and across '
-    'holes of tens of ms), where a fast multi-turn motor moves by about a whole turn'))
 def test_a_fast_multi_turn_motor_is_not_unwrapped_across_a_gap():
     # 81 rad/s at the motor (1 rad/s at the link), 80 ms gap: the motor moves 6.48 rad,
     # within 0.5 rad of a turn, and the cleaner takes it for an encoder wrap.

@@ -228,9 +228,6 @@ def test_nan_positions_glitches_and_holes_are_dropped_and_counted(ros):
     assert 'dropped or repaired' in status.message
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    'known defect, reported: in the combined form all joints share one StreamCleaner, so '
-    'counts() gives every joint the non_finite/wrap/... counts of the whole message'))
 def test_non_finite_counts_belong_to_the_joint_that_had_them(ros):
     robot = Robot(ros)
     j1, j2 = robot.joints
