@@ -34,8 +34,9 @@ given once the time offset applies (the link encoder samples 50 µs after its st
 the node loses one sample per 0.1 s analysis, this analysis one per chunk.
 
 Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
-window) can run in a forked worker process while this process reads, cleans and
-analyses the next chunk (``stage_worker=True``); results are identical.
+window) can run in a forked worker process while this process cleans and analyses the
+next chunk (``stage_worker=True``), and the bag can be read and decoded a few chunks
+ahead by a second forked process (``reader_process=True``); results are identical.
 """
 
 from dataclasses import dataclass, field
@@ -53,7 +54,7 @@ from msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
 from msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
 import numpy as np
 from reducer_twin.analysis.bag import BagDirWriter, open_bag
-from reducer_twin.analysis.mcap_io import DEFAULT_QOS
+from reducer_twin.analysis.mcap_io import DEFAULT_QOS, ReadWarning
 from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
@@ -71,6 +72,8 @@ REPORT_TE_POINTS = 20_000
 """TE samples per joint kept for the report plots (evenly thinned)."""
 
 _REPAIRED = ('non_finite', 'duplicate', 'out_of_order', 'clock_jump')
+
+_END, _ERROR = '!end', '!error'
 
 
 # --------------------------------------------------------------------------- settings
@@ -344,6 +347,65 @@ class _Chunks:
             yield {t: concat_batches(p) if p else None for t, p in parts.items()}
 
 
+def _read_worker(chunks, queue):
+    """Read and decode the chunks in a forked process; end with the counts and warnings."""
+    try:
+        for chunk in chunks:
+            queue.put(chunk)
+        queue.put((_END, {'messages': chunks.messages, 'malformed': chunks.malformed,
+                          'first_problem': chunks.first_problem,
+                          'warnings': list(chunks.bag.warnings)}))
+    except BaseException as err:  # noqa: B902 - reported to the parent, which raises
+        import traceback
+        queue.put((_ERROR, f'{type(err).__name__}: {err}\n{traceback.format_exc()}'))
+
+
+class _ForkedChunks:
+    """
+    The chunks of :class:`_Chunks`, read and decoded by a forked process.
+
+    The reading process runs a few chunks ahead (a bounded queue); the chunks, their
+    order and the counts are the same as when read here. Its read warnings are added to
+    this process's bag at the end.
+    """
+
+    def __init__(self, chunks):
+        import multiprocessing
+        ctx = multiprocessing.get_context('fork')
+        self.bag = chunks.bag
+        self.messages = chunks.messages
+        self.malformed = chunks.malformed
+        self.first_problem = chunks.first_problem
+        self._queue = ctx.Queue(maxsize=3)
+        self._proc = ctx.Process(target=_read_worker, name='reducer-twin-reader',
+                                 args=(chunks, self._queue), daemon=True)
+        self._proc.start()
+
+    def __iter__(self):
+        while True:
+            item = self._queue.get()
+            if isinstance(item, dict):
+                yield item
+                continue
+            kind, payload = item
+            if kind == _ERROR:
+                raise RuntimeError(f'the bag reading process failed: {payload}')
+            self.messages = payload['messages']
+            self.malformed = payload['malformed']
+            self.first_problem = payload['first_problem']
+            for warning in payload['warnings']:
+                if warning not in self.bag.warnings:
+                    self.bag.warnings.append(warning)
+            break
+        self._proc.join(timeout=10)
+
+    def terminate(self):
+        """Stop the reading process (after an error)."""
+        if self._proc.is_alive():
+            self._proc.terminate()
+            self._proc.join(timeout=5)
+
+
 def _columns(batch, names):
     """Position, velocity and effort columns of the given names (NaN where absent)."""
     index = {n: k for k, n in enumerate(batch.names)}
@@ -562,8 +624,9 @@ def _stamp_ns(t_s):
 class _Run:
     """The analysis of one opened bag."""
 
-    def __init__(self, bag, plan, settings, writer, backs, aging):
+    def __init__(self, bag, plan, settings, writer, backs, aging, chunks):
         self.bag = bag
+        self.chunks = chunks
         self.plan = plan
         self.settings = settings
         self.backs = backs
@@ -587,8 +650,7 @@ class _Run:
 
     def run(self):
         plan = self.plan
-        topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
-        chunks = _Chunks(self.bag, topics, CHUNK_MESSAGES)
+        chunks = self.chunks
         link_clean = StreamCleaner(self.settings.ingest)
         motor_clean = StreamCleaner(self.settings.ingest) if plan.motor_topic else None
         link_names = [x for j, m in zip(plan.joints, plan.motor_names) for x in (j, m)] \
@@ -697,6 +759,11 @@ class _Run:
     def _finish(self, chunks, link_clean, motor_clean):
         plan = self.plan
         self.messages_read = sum(chunks.messages.values())
+        for topic, count in chunks.malformed.items():
+            if count:   # as Bag.read_joint_states reports them
+                self.bag.warnings.append(ReadWarning(
+                    str(self.bag.path), None, f'{count} malformed JointState message(s) on '
+                    f'{topic} skipped; the first: {chunks.first_problem.get(topic)}'))
         statuses = []
         last_ns = 0
         for joint, front in self.fronts.items():
@@ -741,7 +808,8 @@ class _Run:
                          [encode_diagnostic_array(last_ns, statuses)])
 
 
-def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False):
+def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False,
+                reader_process=False):
     """
     Analyse one rosbag2 recording and write the derived bag.
 
@@ -758,6 +826,8 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
     stage_worker : bool or WorkerBacks
         Run the estimator and life stages in a forked worker process: a new one (True)
         or the one given (forked early by the caller, reusable for the next bag).
+    reader_process : bool
+        Read and decode the bag in a forked process, a few chunks ahead.
 
     Returns
     -------
@@ -775,7 +845,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
     """
     settings = settings or AnalysisSettings()
     start = time.perf_counter()
-    backs = None
+    backs = chunks = None
     try:
         with open_bag(path) as bag:
             plan = plan_joints(bag, settings)
@@ -785,17 +855,23 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
             else:  # forked only now: a bag that cannot be analysed costs no process
                 backs = WorkerBacks() if stage_worker else LocalBacks()
             backs.configure(settings.params, settings.life)
+            topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
+            chunks = _Chunks(bag, topics, CHUNK_MESSAGES)
+            if reader_process:   # forked before the writer opens its file and threads
+                chunks = _ForkedChunks(chunks)
             custom = {'reducer_twin.source': str(Path(path).resolve()),
                       AGING_KEY: repr(float(aging)),
                       'reducer_twin.joints': ','.join(plan.joints)}
             with BagDirWriter(out_dir, compression=settings.compression, custom_data=custom,
                               overwrite=overwrite) as writer:
-                run = _Run(bag, plan, settings, writer, backs, aging)
+                run = _Run(bag, plan, settings, writer, backs, aging, chunks)
                 joints = run.run()
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):
             backs.terminate()   # it may hold work of this bag: never reused
+        if isinstance(chunks, _ForkedChunks):
+            chunks.terminate()
         raise
     if backs is not stage_worker:
         backs.close()

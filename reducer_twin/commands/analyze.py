@@ -50,8 +50,9 @@ def add_parser(sub):
     p.add_argument('--overwrite', action='store_true',
                    help='replace derived bags already in --out')
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
-                   help='run the estimator and life stages in a second process beside the '
-                        'reading one (auto: with --jobs 1 on a machine of 2 or more cores)')
+                   help='run the estimator and life stages, and the bag reading, in '
+                        'processes of their own beside the analysing one (auto: one bag at '
+                        'a time on a machine of 2 or more cores)')
     p.set_defaults(run=run)
 
 
@@ -85,7 +86,8 @@ def _analyze_all(args, settings, outs, worker):
         for bag, out in zip(args.bags, outs):
             stage = worker if worker is not None and worker.alive else worker is not None
             try:
-                results[bag] = analyze_bag(bag, out, settings, args.overwrite, stage)
+                results[bag] = analyze_bag(bag, out, settings, args.overwrite, stage,
+                                           reader_process=worker is not None)
             except ReducerTwinError as err:
                 results[bag] = err
         return results

@@ -208,8 +208,37 @@ def test_windows_before_the_time_offset_is_learnt_equal_a_te_monitor_run(sim, an
     np.testing.assert_array_equal(np.array(live), offline[:len(live)])
 
 
-def test_the_estimator_worker_process_gives_identical_results(sim, analysed, tmp_path):
+def test_the_worker_and_reader_processes_give_identical_results(sim, analysed, tmp_path):
     _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
+    _same_results(analyze_bag(sim[0], tmp_path / 'r', stage_worker=True, reader_process=True),
+                  analysed)
+
+
+@pytest.mark.parametrize('reader_process', [False, True], ids=['one process', 'reader process'])
+def test_malformed_joint_states_are_skipped_counted_and_reported(sim, tmp_path, reader_process):
+    js = _joint_states(sim[0])
+    buffer, offsets = encode_joint_states(js.stamps_ns, js.names, js.position, js.velocity,
+                                          js.effort)
+    payloads = [buffer[a:b].tobytes() for a, b in zip(offsets[:-1], offsets[1:])]
+    for k in (100, 5000, 9000):
+        payloads[k] = payloads[k][:30]          # cut inside the joint names
+    bounds = np.concatenate([[0], np.cumsum([len(x) for x in payloads])])
+    root = tmp_path / 'bad'
+    root.mkdir()
+    with McapBagWriter(root / 'bad_0.mcap') as writer:
+        channel = writer.add_topic('/joint_states', JOINT_STATE)
+        writer.write_batch(channel, js.stamps_ns, b''.join(payloads), bounds)
+    info = bag_metadata(writer.topic_summaries(), [writer.file_summary()],
+                        {AGING_KEY: repr(AGING)})
+    (root / 'metadata.yaml').write_text(dump_yaml({'rosbag2_bagfile_information': info}))
+    result = analyze_bag(root, tmp_path / 'd', stage_worker=reader_process,
+                         reader_process=reader_process)
+    summary = result.joints['joint_1'].summary()
+    assert summary['messages'] == 15_000 - 3 and summary['rejected'] >= 3
+    assert result.joints['joint_1'].counts['malformed_messages'] == 3
+    assert not result.damaged
+    (warning,) = [str(w) for w in result.warnings if 'malformed' in str(w)]
+    assert '3 malformed JointState message(s) on /joint_states skipped' in warning
 
 
 ESTIMATE_IN_A_FRESH_PROCESS = """
