@@ -444,7 +444,23 @@ class SpikeFilter:
             True for samples that are not spikes.
 
         """
-        te = link - motor / self.ratio
+        return self.keep_te(link - motor / self.ratio)
+
+    def keep_te(self, te):
+        """
+        Return the mask of samples to keep, given their TE.
+
+        Parameters
+        ----------
+        te : ndarray
+            TE ``link - motor/i`` of paired samples [rad].
+
+        Returns
+        -------
+        ndarray of bool
+            True for samples that are not spikes.
+
+        """
         n = te.size
         keep = np.ones(n, dtype=bool)
         if n == 0:
@@ -475,6 +491,68 @@ class SpikeFilter:
                 rejected = x
         self._last, self._rejected = last, rejected
         return keep
+
+
+class SpikeFilterBank:
+    """
+    :class:`SpikeFilter` for several joints at once (one column each).
+
+    The common case, no jump anywhere, costs a few array operations for all
+    joints together; a column with a suspect goes through its own filter.
+
+    Parameters
+    ----------
+    ratio : float
+        Reduction ratio ``i``.
+    columns : int
+        Number of joints.
+    config : IngestConfig
+        Thresholds.
+
+    """
+
+    def __init__(self, ratio, columns, config=None):
+        self.ratio = float(ratio)
+        self.filters = [SpikeFilter(ratio, config) for _ in range(columns)]
+        self.threshold = self.filters[0].threshold
+
+    def keep(self, motor, link, valid):
+        """
+        Return the mask of paired samples to keep.
+
+        Parameters
+        ----------
+        motor, link : ndarray, shape (N, K)
+            Motor (input) and link angles [rad].
+        valid : ndarray of bool, shape (N, K)
+            Which entries are paired samples at all.
+
+        Returns
+        -------
+        ndarray of bool, shape (N, K)
+            ``valid`` without the spikes.
+
+        """
+        with np.errstate(invalid='ignore'):
+            te = link - motor / self.ratio
+        filters = self.filters
+        if valid.all() and all(f._rejected is None for f in filters):
+            last = np.array([te[0, k] if f._last is None else f._last
+                             for k, f in enumerate(filters)])
+            jumps = np.abs(np.diff(te, axis=0, prepend=last[None, :])) > self.threshold
+            if not jumps.any():
+                for f, x in zip(filters, te[-1].tolist()):
+                    f._last = x
+                return valid
+        keep = valid.copy()
+        for k, f in enumerate(filters):
+            rows = np.flatnonzero(valid[:, k])
+            keep[rows, k] = f.keep_te(te[rows, k])
+        return keep
+
+    def counts(self, k):
+        """Return the spike/step counts of joint ``k``."""
+        return dict(self.filters[k].counts)
 
 
 def _squeeze(stream):

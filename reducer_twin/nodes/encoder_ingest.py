@@ -23,7 +23,7 @@ from msg_adapters.ros import JointStatePicker, stamp_to_ns
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import IngestConfig, pair_columns, Pairer, SpikeFilter
+from reducer_twin.core.ingest import IngestConfig, Pairer, SpikeFilter, SpikeFilterBank
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
@@ -73,6 +73,8 @@ class EncoderIngest(Node):
         # Combined form: one cleaner, columns link_1, motor_1, link_2, motor_2, ...
         self.link = StreamCleaner(cfg)
         self.motor = StreamCleaner(cfg) if self.split else None
+        self.scale = scale
+        self.spikes = SpikeFilterBank(ratio, len(self.joints), cfg)
         self.outputs = {}
         for joint in self.joints:
             out = _JointOutput(joint, cfg, scale, ratio)
@@ -157,26 +159,40 @@ class EncoderIngest(Node):
                     out.pairer.add_motor(clean_motor.column(k))
                 self._publish(out, out.pairer.pop())
         elif clean_link is not None and len(clean_link):
-            stamp_s = clean_link.t_ns * 1e-9
-            for k, out in enumerate(self.outputs.values()):
-                cols, unpaired = pair_columns(clean_link, 2 * k, 2 * k + 1, out.motor_scale)
-                out.pairer.unpaired += unpaired
-                if cols[0].size:
-                    t = stamp_s if cols[0].size == stamp_s.size else cols[0] * 1e-9
-                    self._send(out, np.column_stack((t,) + cols[1:]))
+            self._pair_all(clean_link)
+
+    def _pair_all(self, clean):
+        """Pair, despike and publish every joint of a combined-form batch at once."""
+        link = clean.position[:, 0::2]
+        motor = clean.position[:, 1::2] * self.scale
+        link_ok, motor_ok = np.isfinite(link), np.isfinite(motor)
+        paired = link_ok & motor_ok
+        keep = self.spikes.keep(motor, link, paired)
+        n, j = link.shape
+        rows = np.empty((n, j, 5))
+        rows[:, :, 0] = (clean.t_ns * 1e-9)[:, None]
+        rows[:, :, 1] = motor
+        rows[:, :, 2] = link
+        rows[:, :, 3] = clean.effort[:, 0::2]
+        rows[:, :, 4] = clean.velocity[:, 0::2]
+        all_kept = keep.all()
+        unpaired = np.count_nonzero(link_ok ^ motor_ok, axis=0) if not paired.all() else None
+        for k, out in enumerate(self.outputs.values()):
+            if unpaired is not None:
+                out.pairer.unpaired += int(unpaired[k])
+            joint_rows = rows[:, k, :] if all_kept else rows[keep[:, k], k, :]
+            if joint_rows.shape[0]:
+                out.published += joint_rows.shape[0]
+                out.publisher.publish(out.message.fill(joint_rows))
 
     def _publish(self, out, pairs):
         if len(pairs):
-            self._send(out, pairs.as_rows())
-
-    def _send(self, out, rows):
-        keep = out.spikes.keep(rows[:, 1], rows[:, 2])
-        if not keep.all():
+            rows = pairs.as_rows()
+            keep = out.spikes.keep(rows[:, 1], rows[:, 2])
             rows = rows[keep]
-            if rows.shape[0] == 0:
-                return
-        out.published += rows.shape[0]
-        out.publisher.publish(out.message.fill(rows))
+            if rows.shape[0]:
+                out.published += rows.shape[0]
+                out.publisher.publish(out.message.fill(rows))
 
     def _flush_stale(self):
         if self._raw_since is None:
@@ -197,7 +213,7 @@ class EncoderIngest(Node):
                     c[f'{side}_{reason}'] = count
                 c[f'{side}_missing'] = cleaner.missing
             c['unpaired'] = out.pairer.unpaired
-            c.update(out.spikes.counts)
+            c.update(out.spikes.counts if self.split else self.spikes.counts(k))
             c['published'] = out.published
             result[joint] = c
         return result
