@@ -766,13 +766,15 @@ class _Run:
                     f'{topic} skipped; the first: {chunks.first_problem.get(topic)}'))
         statuses = []
         last_ns = 0
-        for joint, front in self.fronts.items():
+        for k, (joint, front) in enumerate(self.fronts.items()):
             res = self.results[joint]
             counts = {}
-            sides = (('stream', link_clean),) if motor_clean is None else (
-                ('link', link_clean), ('motor', motor_clean))
-            for side, cleaner in sides:
-                for reason, count in cleaner.counts.items():
+            # As encoder_ingest counts them: row rules of the whole stream, value rules of
+            # this joint's columns.
+            sides = (('stream', link_clean, [2 * k, 2 * k + 1]),) if motor_clean is None else (
+                ('link', link_clean, [k]), ('motor', motor_clean, [k]))
+            for side, cleaner, columns in sides:
+                for reason, count in cleaner.counts_for(columns).items():
                     counts[f'{side}_{reason}'] = int(count)
                 counts[f'{side}_missing'] = int(cleaner.missing)
             counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
@@ -784,7 +786,7 @@ class _Run:
             res.messages = chunks.messages[plan.link_topic] + (
                 chunks.messages[plan.motor_topic] if plan.motor_topic else 0)
             res.rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
-                counts.get(f'{side}_{r}', 0) for side, _ in sides for r in _REPAIRED
+                counts.get(f'{side}_{r}', 0) for side, _, _ in sides for r in _REPAIRED
                 if r != 'clock_jump')
             outputs = self.back_out[joint]
             res.wear = np.array([o['wear'] for o in outputs])

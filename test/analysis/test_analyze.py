@@ -380,6 +380,19 @@ def test_motor_angles_already_divided_by_the_ratio_are_read_with_the_config(sim,
             analysed.joints[name].summary()['wear_um'], rel=0.02)
 
 
+def test_dropped_samples_count_for_the_joint_that_had_them(sim, tmp_path):
+    js = _joint_states(sim[0])
+    position = js.position.copy()
+    position[1000:1010, js.names.index('joint_2')] = np.nan
+    batch = JointStateBatch(js.stamps_ns, js.names, position, js.velocity, js.effort)
+    write_bag_dir(tmp_path / 'nan', {'/joint_states': batch},
+                  custom_data={AGING_KEY: repr(AGING)})
+    result = analyze_bag(tmp_path / 'nan', tmp_path / 'd')
+    assert result.joints['joint_1'].summary()['rejected'] == 0
+    assert result.joints['joint_2'].counts['stream_non_finite'] == 10
+    assert result.joints['joint_2'].summary()['rejected'] >= 10
+
+
 def test_the_config_chooses_joints_and_overrides_the_bags_aging_factor(sim, tmp_path, capsys):
     config = tmp_path / 'twin.yaml'
     config.write_text('twin:\n  joints: [joint_2]\n  aging_factor: 1.0\n'
