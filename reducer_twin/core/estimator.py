@@ -731,21 +731,7 @@ class WearEstimator:
             If the file cannot be written.
 
         """
-        path = Path(path)
-        data = encode_state(self.state_dict())
-        backup = backup_path(path)
-        try:
-            if path.exists():
-                previous = path.read_bytes()
-                try:
-                    decode_state(previous, path)
-                except StateFileError:
-                    pass  # never replace a good backup by a corrupt primary
-                else:
-                    _atomic_write(backup, previous)
-            _atomic_write(path, data)
-        except OSError as err:
-            raise StateFileError(f'cannot write estimator state to {path}: {err}') from err
+        write_state_file(path, encode_state(self.state_dict()))
 
     @classmethod
     def load(cls, path, params, config=None):
@@ -947,6 +933,39 @@ def decode_state(data, path='<bytes>'):
             f'{path}: checksum mismatch, sha256 of the state must be '
             f'{wrapper.get("sha256")!r}, got {digest!r} (file corrupt or edited)')
     return state
+
+
+def write_state_file(path, data):
+    """
+    Write encoded state bytes atomically, keeping the previous good file as ``.bak``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Destination file.
+    data : bytes
+        Output of :func:`encode_state`.
+
+    Raises
+    ------
+    StateFileError
+        If the file cannot be written.
+
+    """
+    path = Path(path)
+    backup = backup_path(path)
+    try:
+        if path.exists():
+            previous = path.read_bytes()
+            try:
+                decode_state(previous, path)
+            except StateFileError:
+                pass  # never replace a good backup by a corrupt primary
+            else:
+                _atomic_write(backup, previous)
+        _atomic_write(path, data)
+    except OSError as err:
+        raise StateFileError(f'cannot write estimator state to {path}: {err}') from err
 
 
 def _atomic_write(path, data):

@@ -168,6 +168,49 @@ def features_record(f, params):
     return rec
 
 
+class StateWriter:
+    """
+    Write estimator state files on one background thread, in order.
+
+    The state is snapshotted (encoded) by the caller at once; only the file
+    work (backup, temporary file, fsync, rename) runs on the thread, so a
+    1 kHz executor never waits for the disk. A write that fails is kept as
+    :attr:`error` and counted; the next one is tried as usual.
+
+    """
+
+    def __init__(self):
+        import queue
+        import threading
+        self._queue = queue.Queue()
+        self.error = None
+        self.failures = 0
+        self.written = 0
+        self._thread = threading.Thread(target=self._run, name='state-writer', daemon=True)
+        self._thread.start()
+
+    def submit(self, path, data):
+        """Queue ``data`` (encoded state) for ``path``."""
+        self._queue.put((path, data))
+
+    def flush(self):
+        """Wait until every queued state is written."""
+        self._queue.join()
+
+    def _run(self):
+        from .estimator import write_state_file
+        while True:
+            path, data = self._queue.get()
+            try:
+                write_state_file(path, data)
+                self.written += 1
+            except StateFileError as err:
+                self.error = err
+                self.failures += 1
+            finally:
+                self._queue.task_done()
+
+
 class EstimatorStage:
     """
     Kalman wear estimation with persistence, one reducer.
@@ -183,6 +226,9 @@ class EstimatorStage:
         written atomically after every window.
     log : callable, optional
         Called with one line of text for notable events (restore, reset).
+    background_save : bool
+        Write the state file on a :class:`StateWriter` thread (live nodes)
+        instead of in :meth:`process` (offline, tests).
 
     Raises
     ------
@@ -192,10 +238,11 @@ class EstimatorStage:
 
     """
 
-    def __init__(self, params, config=None, state_path=None, log=None):
+    def __init__(self, params, config=None, state_path=None, log=None, background_save=False):
         from .estimator import backup_path, load_with_fallback, WearEstimator
         self.params = params
         self.state_path = Path(state_path) if state_path else None
+        self.writer = StateWriter() if (background_save and self.state_path) else None
         self.log = log or (lambda text: None)
         self.last_observation = float('nan')
         self.skipped_replays = 0
@@ -247,9 +294,23 @@ class EstimatorStage:
             return 'replay'
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
-        if self.state_path:
-            self.estimator.save(self.state_path)
+        self.save()
         return result.status
+
+    def save(self):
+        """Persist the state now, or queue it for the writer thread."""
+        if not self.state_path:
+            return
+        if self.writer is None:
+            self.estimator.save(self.state_path)
+            return
+        from .estimator import encode_state
+        self.writer.submit(self.state_path, encode_state(self.estimator.state_dict()))
+
+    def flush(self):
+        """Wait until the queued state files are written (a no-op without a writer)."""
+        if self.writer is not None:
+            self.writer.flush()
 
     def reset(self, reason):
         """
@@ -262,8 +323,8 @@ class EstimatorStage:
 
         """
         self.estimator.reset(reason)
-        if self.state_path:
-            self.estimator.save(self.state_path)
+        self.save()
+        self.flush()
         self.log(f'estimator reset: {reason}')
 
     def record(self, stamp_s):

@@ -73,7 +73,7 @@ class WearEstimatorNode(Node):
             path = Path(state_file) if state_file else (
                 Path(state_dir) if state_dir else default_state_dir()) / f'{joint}.json'
         self.stage = EstimatorStage(self.params, self.est_params.value, path,
-                                    log=self.get_logger().info)
+                                    log=self.get_logger().info, background_save=True)
         self.rejects = RejectCounter(self)
         self.statuses = {}
         self.pub = self.create_publisher(Float64MultiArray, joint_topic(joint, 'wear'),
@@ -95,6 +95,10 @@ class WearEstimatorNode(Node):
         self.statuses[status] = self.statuses.get(status, 0) + 1
         self._publish(features.t_end)
 
+    def close(self):
+        """Write the last queued state before the node goes away."""
+        self.stage.flush()
+
     def _on_reset(self, request, response):
         self.stage.reset('maintenance: reducer replaced (reset service)')
         self._publish()
@@ -113,9 +117,15 @@ class WearEstimatorNode(Node):
                   'rate_scale': est.rate_scale, 'updates': est.updates,
                   'rejected_updates': est.rejected, 'replayed_windows': self.stage.skipped_replays,
                   'rejected_messages': self.rejects.total,
+                  'state_writes_failed': (self.stage.writer.failures
+                                          if self.stage.writer else 0),
                   'state_file': str(self.stage.state_path or 'none'),
                   'restored_from': self.stage.restored_from or 'new reducer'}
         level = 'OK' if self.rejects.total == 0 else 'WARN'
+        writer = self.stage.writer
+        if writer is not None and writer.error is not None:
+            level = 'ERROR'
+            values['state_write_error'] = str(writer.error)
         self.diag_pub.publish(diagnostic_array(
             self.get_clock().now().nanoseconds,
             [diagnostic_status(f'reducer_twin: {self.joint} wear estimator', self.joint, level,

@@ -305,3 +305,30 @@ def test_life_config_error_above_warn_names_both_thresholds():
 def test_a_non_finite_wear_record_raises_invalid_input(worn_record):
     with pytest.raises(InvalidInput):
         LifeStage(PARAMS).process({**worn_record, 'wear_m': math.inf})
+
+
+def test_a_background_writer_saves_the_same_state_in_order(windows, tmp_path):
+    path = tmp_path / 'bg.json'
+    stage = EstimatorStage(PARAMS, state_path=path, background_save=True)
+    run(stage, windows[:10])
+    stage.flush()
+    saved = decode_state(path.read_bytes(), path)
+    assert saved == stage.estimator.state_dict()
+    assert stage.writer.written == 10 and stage.writer.failures == 0
+
+
+def test_a_failing_background_write_is_counted_and_the_stage_keeps_running(windows, tmp_path):
+    path = tmp_path / 'state' / 'bg.json'
+    stage = EstimatorStage(PARAMS, state_path=path, background_save=True)
+    run(stage, windows[:3])
+    stage.flush()
+    # The directory vanishes and a file takes its name (a full or broken disk).
+    for f in path.parent.iterdir():
+        f.unlink()
+    path.parent.rmdir()
+    path.parent.write_text('not a directory')
+    run(stage, windows[3:6])
+    stage.flush()
+    assert stage.writer.failures == 3
+    assert isinstance(stage.writer.error, StateFileError)
+    assert math.isfinite(stage.estimator.wear)

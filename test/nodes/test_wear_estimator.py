@@ -106,6 +106,7 @@ class Estimator:
 
     def restart(self):
         """Stop the node as a process that ends would, and start a new one on the same file."""
+        self.node.stage.flush()
         self.ros.remove(self.node)
         self.node = self.start()
         self.ros.wait_matched(self.pub)
@@ -124,6 +125,8 @@ class Estimator:
             self.pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
             self.ros.spin_until(lambda: sum(self.node.statuses.values()) >= done,
                                 what='the estimator to step a window')
+            # The node writes its state on a writer thread, in order; wait for it.
+            self.node.stage.flush()
 
     def latest(self, records, stamp=None):
         """
