@@ -41,6 +41,16 @@ from .wear import wear_rate
 
 TWO_PI = 2.0 * math.pi
 
+CLOCK_RESET_S = 60.0
+"""
+A stamp this far [s] or more behind the newest one means the clock was reset.
+
+Sim time reset, or a long bag played again: the stream starts over at that sample
+(:class:`TEExtractor` and :class:`WindowAnalyzer` restart there). A stamp less far
+back is a replay or a late sample, left out as before. The wear estimator tells a
+replayed window from a reset by the same horizon (:data:`.pipeline.CLOCK_RESET_S`).
+"""
+
 _MODEL_SIGMA = 3e-6
 """
 Model error of one bin's hysteresis width [rad] (0.6 arcsec), added in quadrature.
@@ -147,6 +157,63 @@ def _usable(t, angle):
     ordered = tf > previous
     keep = finite & ordered
     return keep, int(np.count_nonzero(~finite)), int(np.count_nonzero(finite & ~ordered))
+
+
+def _clock_resets(t, newest=None):
+    """
+    Return the indices where the stamp falls :data:`CLOCK_RESET_S` behind the newest.
+
+    Parameters
+    ----------
+    t : ndarray
+        Stamps [s] (NaN ignored).
+    newest : float, optional
+        Newest stamp before ``t``.
+
+    Returns
+    -------
+    list of int
+        Each index starts a new stream; the newest stamp restarts there.
+
+    """
+    out, start = [], 0
+    while start < t.size:
+        head = np.nan if newest is None else newest
+        before = np.fmax.accumulate(np.concatenate([[head], t[start:-1]]))
+        back = np.flatnonzero(t[start:] <= before - CLOCK_RESET_S)
+        if back.size == 0:
+            break
+        start += int(back[0])
+        out.append(start)
+        newest = None
+    return out
+
+
+def _pieces(n, cuts):
+    """Slices of ``range(n)`` cut at ``cuts``."""
+    bounds = [0, *cuts, n]
+    return [slice(a, b) for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _join(streams):
+    """Concatenate the TE streams of consecutive pieces of one chunk."""
+    first = streams[0]
+    if len(streams) == 1:
+        return first
+    counts = {name: sum(getattr(s, name) for s in streams) for name in (
+        'motor_nonfinite', 'motor_unordered', 'link_nonfinite', 'link_unordered',
+        'link_uncovered', 'turn_corrections')}
+    return TEStream(*(np.concatenate([getattr(s, name) for s in streams])
+                      for name in ('t', 'te', 'output_angle', 'valid')),
+                    first.max_gap_s, **counts)
+
+
+def _slice(stream, sl):
+    """Return the samples ``sl`` of a TE stream (counts kept whole)."""
+    return TEStream(stream.t[sl], stream.te[sl], stream.output_angle[sl], stream.valid[sl],
+                    stream.max_gap_s, stream.motor_nonfinite, stream.motor_unordered,
+                    stream.link_nonfinite, stream.link_unordered, stream.link_uncovered,
+                    stream.turn_corrections)
 
 
 def _unwrap(t, angle, max_gap):
@@ -313,7 +380,10 @@ class TEExtractor:
     last valid TE, so a TE whose constant sits near ``±pi/i`` (an encoder
     zero offset) does not jump by ``2·pi/i`` between chunks. Angles should be
     multi-turn across chunks (as ros2_control reports them): the turn count
-    of a wrapped link encoder is not carried from one chunk to the next.
+    of a wrapped link encoder is not carried from one chunk to the next. A
+    chunk whose stamps jump back by :data:`CLOCK_RESET_S` or more (the clock
+    was reset) is computed in pieces from there, so that the samples after the
+    reset are not taken for late ones.
 
     Parameters
     ----------
@@ -349,12 +419,43 @@ class TEExtractor:
             As :func:`compute_te`.
 
         """
+        pieces = self._pieces(t_motor, t_link)
+        if pieces is not None:
+            try:
+                tm, am, tl, al = (np.asarray(a, dtype=float)
+                                  for a in (t_motor, motor_angle, t_link, link_angle))
+            except (TypeError, ValueError):
+                pieces = None   # compute_te says what is wrong
+        if pieces is None:
+            return self._compute(t_motor, motor_angle, t_link, link_angle)
+        return _join([self._compute(tm[m], am[m], tl[k], al[k]) for m, k in pieces])
+
+    def _compute(self, t_motor, motor_angle, t_link, link_angle):
         stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,
                             self.max_gap_s, self.link_time_offset_s, self.last_te)
         kept = np.flatnonzero(stream.valid)
         if kept.size:
             self.last_te = float(stream.te[kept[-1]])
         return stream
+
+    @staticmethod
+    def _pieces(t_motor, t_link):
+        """``(motor slice, link slice)`` pieces between clock resets, or None (no reset)."""
+        try:
+            tm = np.asarray(t_motor, dtype=float)
+            tl = np.asarray(t_link, dtype=float)
+        except (TypeError, ValueError):
+            return None     # compute_te says what is wrong
+        if tm.ndim != 1 or tl.ndim != 1:
+            return None
+        cuts_l = _clock_resets(tl)
+        if not cuts_l:
+            return None
+        cuts_m = cuts_l if tm.shape == tl.shape and np.array_equal(tm, tl) else (
+            _clock_resets(tm))
+        if len(cuts_m) != len(cuts_l):
+            return None     # the streams disagree about the reset: as before, no pieces
+        return list(zip(_pieces(tm.size, cuts_m), _pieces(tl.size, cuts_l)))
 
 
 def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
@@ -612,6 +713,7 @@ class WindowAnalyzer:
         self._last_t = None
         self._aliased = False
         self.ignored_samples = 0
+        self.clock_resets = 0
 
     def update(self, stream, effort, velocity):
         """
@@ -636,6 +738,13 @@ class WindowAnalyzer:
         InvalidInput
             If effort or velocity does not match the stream's length.
 
+        Notes
+        -----
+        Samples stamped no later than the newest one seen are left out
+        (``ignored_samples``), unless they lie :data:`CLOCK_RESET_S` or more
+        back: the clock was reset, so the partial window is closed (as at a gap)
+        and the stream starts over there (``clock_resets``).
+
         """
         effort = np.asarray(effort, dtype=float)
         velocity = np.asarray(velocity, dtype=float)
@@ -643,6 +752,20 @@ class WindowAnalyzer:
             raise InvalidInput(
                 f'effort and velocity must match the {stream.t.size} TE samples, got '
                 f'shapes {effort.shape} and {velocity.shape}')
+        resets = _clock_resets(np.where(stream.valid, stream.t, np.nan), self._last_t)
+        if resets:
+            found = []
+            for k, sl in enumerate(_pieces(stream.t.size, resets)):
+                if k:
+                    found += self._emit(final=True)
+                    self._last_t = None
+                    self.clock_resets += 1
+                found += self._update(_slice(stream, sl), effort[sl], velocity[sl])
+            return found
+        return self._update(stream, effort, velocity)
+
+    def _update(self, stream, effort, velocity):
+        """Feed a chunk without a clock reset."""
         use = stream.valid & np.isfinite(effort) & np.isfinite(velocity)
         if self._last_t is not None:
             use &= stream.t > self._last_t

@@ -372,3 +372,62 @@ def test_a_chunked_extractor_with_a_time_offset_loses_no_sample():
     error = np.concatenate(errors)
     # Encoder resolution and noise leave ~0.22 arcsec RMS (bench); 0.5 arcsec bounds it.
     assert np.std(error) < 0.5 * ARCSEC
+
+
+# -- clock resets -----------------------------------------------------------------------------
+
+def _restamped(b, cut, shift_s):
+    """Return the stamps of ``b`` with those from sample ``cut`` on moved by ``shift_s``."""
+    t = b.t.copy()
+    t[cut:] += shift_s
+    return t
+
+
+@pytest.mark.parametrize('chunk', [500, 12000], ids=['node-sized chunks', 'one chunk'])
+def test_a_clock_reset_far_back_restarts_the_windows_instead_of_dropping_the_samples(chunk):
+    # Sim time reset 100 s back at 4.8 s (beyond CLOCK_RESET_S): the samples after it are
+    # new data, as the wear estimator takes windows ending that far back; the same samples
+    # with stamps moved forward 10 s (a pause) are the reference.
+    _, b = simulated(samples=12000, exact=False)
+    cut = 4800
+    windows = {}
+    for shift in (-100.0, 10.0):
+        t = _restamped(b, cut, shift)
+        extractor, analyzer = TEExtractor(RATIO), WindowAnalyzer(PARAMS)
+        feats = []
+        for k in range(0, t.size, chunk):
+            sl = slice(k, k + chunk)
+            stream = extractor.update(t[sl], b.motor_angle[sl], t[sl], b.link_angle[sl])
+            assert stream.valid.all(), 'no sample is taken for a late one'
+            feats += analyzer.update(stream, b.effort[sl], b.link_velocity[sl])
+        windows[shift] = feats + analyzer.flush()
+        assert analyzer.ignored_samples == 0
+        assert analyzer.clock_resets == (1 if shift < 0 else 0)
+    reset, pause = windows[-100.0], windows[10.0]
+    assert [f.samples for f in reset] == [f.samples for f in pause]
+    assert sum(f.duty.exposure_s for f in reset) == pytest.approx(
+        sum(f.duty.exposure_s for f in pause))
+    np.testing.assert_allclose([f.lost_motion for f in reset], [f.lost_motion for f in pause],
+                               rtol=1e-9)
+    assert [round(f.t_end - p.t_end, 6) for f, p in zip(reset, pause)][-1] == -110.0
+
+
+def test_a_jump_back_shorter_than_the_reset_horizon_is_a_replay_and_left_out():
+    # A bag looped 4.8 s back: the replayed samples are ignored until the stamps pass the
+    # newest seen, so no window is made twice (the estimator would skip them as replays).
+    _, b = simulated(samples=12000, exact=False)
+    cut = 4800
+    t = np.concatenate([b.t[:cut], b.t])
+    idx = np.concatenate([np.arange(cut), np.arange(b.t.size)])
+    extractor, analyzer = TEExtractor(RATIO), WindowAnalyzer(PARAMS)
+    looped, late = [], 0
+    for k in range(0, t.size, 500):
+        sl = slice(k, k + 500)
+        stream = extractor.update(t[sl], b.motor_angle[idx[sl]], t[sl], b.link_angle[idx[sl]])
+        late += stream.link_unordered
+        looped += analyzer.update(stream, b.effort[idx[sl]], b.link_velocity[idx[sl]])
+    looped += analyzer.flush()
+    assert analyzer.clock_resets == 0
+    assert late + analyzer.ignored_samples == cut
+    once = analyse(b)
+    assert [f.t_end for f in looped] == [f.t_end for f in once]
