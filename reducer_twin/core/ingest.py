@@ -285,13 +285,22 @@ class StreamCleaner:
         return out
 
     def _count_missing(self, t):
-        """Count samples missing from the stream (stamp holes at the nominal period)."""
+        """
+        Count samples missing from the stream (stamp holes at the nominal period).
+
+        Holes are measured from the newest stamp so far (since the last clock
+        jump): a sample that arrives late, and is dropped as out of order, leaves
+        one hole, not one before it and another after it.
+        """
         if t.size == 0:
             return
         prev = t[0] if self._raw_prev_t is None else self._raw_prev_t
-        d = np.diff(t, prepend=prev)
+        if t[0] >= prev and (t.size < 2 or bool((np.diff(t) > 0).all())):
+            d = np.diff(t, prepend=prev)
+            self._raw_prev_t = int(t[-1])
+        else:
+            d, self._raw_prev_t = self._steps_past_newest(t, int(prev))
         d = d[d > 0]
-        self._raw_prev_t = int(t[-1])
         if self.period_ns is None:
             # Steps seen before the period is known are kept, and their holes counted once
             # it is: the count and the period do not depend on how the stream is chunked.
@@ -303,6 +312,18 @@ class StreamCleaner:
             self._diffs = []
         holes = d[(d > 1.5 * self.period_ns) & (d < self.config.max_gap_s * 1e9 * 200)]
         self.missing += int(np.sum(np.round(holes / self.period_ns) - 1))
+
+    def _steps_past_newest(self, t, newest):
+        """Return the steps by which stamps pass the newest one, and the newest stamp."""
+        jump_ns = int(self.config.clock_jump_s * 1e9)
+        steps = []
+        for tk in t.tolist():
+            if tk <= newest - jump_ns:     # the clock was reset: the stream starts over
+                newest = tk
+            elif tk > newest:
+                steps.append(tk - newest)
+                newest = tk
+        return np.array(steps, dtype=np.int64), newest
 
     def flush(self):
         """

@@ -131,6 +131,20 @@ def test_an_out_of_order_stamp_is_dropped_and_counted():
     assert cleaner.counts['clock_jump'] == 0
 
 
+@pytest.mark.parametrize('sizes', [[1], [3], [300]])
+def test_two_samples_that_arrive_swapped_leave_one_hole_counted_once(sizes):
+    # The later one arrives first; the earlier one, out of order, is dropped: one sample
+    # is gone from the stream, one hole (not a hole before it and another after it).
+    t, pos = ramp(300)
+    order = np.arange(300)
+    order[[150, 151]] = [151, 150]
+    cleaner = StreamCleaner()
+    out = in_chunks(cleaner, t[order], pos[order], sizes)
+    np.testing.assert_array_equal(out.t_ns, np.delete(t, 150))
+    assert cleaner.counts['out_of_order'] == 1
+    assert cleaner.missing == 1
+
+
 def test_a_clock_jump_back_restarts_the_stream_in_a_new_segment_and_keeps_the_samples():
     t1, p1 = ramp(30)
     t2 = t1 - 5 * 1_000_000_000          # 5 s back: a bag played in a loop
