@@ -29,9 +29,9 @@ offset is learnt (or for ``CALIBRATION_WINDOWS`` windows) the stream is fed in
 0.1 s pieces as the node's analysis timer does, then in large chunks, so a calibration
 that is learnt late applies from the next chunk; the last, partial window is analysed
 (a node that stops drops it); the estimator starts from a new reducer and keeps no state
-file. The TE extractor finds no motor angle for the last link sample of each piece it is
-given once the time offset applies (the link encoder samples 50 µs after its stamp):
-the node loses one sample per 0.1 s analysis, this analysis one per chunk.
+file. Once the time offset applies, the motor angle of each piece's last link sample is
+extrapolated over the offset (the link encoder samples 50 µs after its stamp), so no
+sample is lost at piece boundaries, live or offline.
 
 Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
