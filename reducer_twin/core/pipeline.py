@@ -439,7 +439,18 @@ class LifeStage:
         self.duty = None
 
     def observe_duty(self, duty):
-        """Keep the latest duty summary for the catalogue life."""
+        """
+        Keep the latest duty summary for the catalogue life.
+
+        A window without operation (no duration: a single sample closed by a gap
+        or a clock reset) has no mean speed or torque and says nothing about the
+        duty: the previous summary stays.
+        """
+        if duty is not None and not (
+                getattr(duty, 'duration_s', 1.0) > 0.0
+                and np.isfinite(getattr(duty, 'mean_speed', np.nan))
+                and np.isfinite(getattr(duty, 'cubic_mean_torque', np.nan))):
+            return
         self.duty = duty
 
     def process(self, wear_record):

@@ -10,6 +10,7 @@ test_estimator.py, as the live chain delivers it).
 
 import json
 import math
+from types import SimpleNamespace
 
 from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
@@ -271,6 +272,24 @@ def test_a_reducer_beyond_the_limit_is_an_error_with_no_life_left(worn_record):
 def test_the_catalogue_life_needs_a_duty(worn_record):
     record, _, _ = LifeStage(PARAMS).process(worn_record)
     assert math.isnan(record['catalogue_life_s'])
+
+
+def test_a_window_without_operation_leaves_the_catalogue_life_on_the_previous_duty(
+        windows, worn_record):
+    # One sample closed by a gap: no duration, so the duty means are NaN (0/0). It must
+    # neither stop the remaining life (InvalidInput from the catalogue formula) nor erase
+    # the duty seen so far.
+    stage = LifeStage(PARAMS)
+    stage.observe_duty(windows[-1].duty)
+    before, _, _ = stage.process(worn_record)
+    empty = SimpleNamespace(duration_s=0.0, exposure_s=0.0, archard_increment=0.0,
+                            mean_abs_torque=math.nan, mean_abs_speed=math.nan,
+                            cubic_mean_torque=math.nan, mean_speed=math.nan,
+                            max_abs_torque=700.0)
+    stage.observe_duty(empty)
+    after, _, _ = stage.process(worn_record)
+    assert after == before
+    assert math.isfinite(after['catalogue_life_s'])
 
 
 def test_predictions_are_repeatable_for_the_same_record(windows, worn_record):
