@@ -139,7 +139,7 @@ def _spin(executor, nodes, joints, args, history):
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.02)
         for te in nodes['te'].values():
-            te._analyze()
+            te.analyze_now()
         end = time.monotonic() + 0.5
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.02)
@@ -169,7 +169,7 @@ def _record(nodes, joints, history):
             'rul_p10_h': s['rul_p10_h'] if s else float('nan'),
             'rul_p50_h': s['rul_p50_h'] if s else float('nan'),
             'rul_p90_h': s['rul_p90_h'] if s else float('nan'),
-            'true_rul_h': nodes['simulator'].sims[joints.index(j)].true_rul_s() / HOUR})
+            'true_rul_h': tr.true_rul_s / HOUR})
 
 
 def _summary(nodes, joints, _rows):
@@ -180,7 +180,6 @@ def _summary(nodes, joints, _rows):
         s = nodes['life'][j].summary() or {}
         tr = truth[j]
         c = counts[j]
-        sim = nodes['simulator'].sims[k]
         dropped = sum(v for key, v in c.items() if key.endswith('_missing')) + c['unpaired']
         repaired = sum(v for key, v in c.items()
                        if key.split('_', 1)[-1] in ('non_finite', 'duplicate', 'out_of_order',
@@ -199,7 +198,7 @@ def _summary(nodes, joints, _rows):
             'true_lost_motion_arcmin': rad_to_arcmin(tr.lost_motion),
             'te_pp_arcmin': s.get('te_pp_arcmin', nan),
             'rul_p10_h': s.get('rul_p10_h', nan), 'rul_p50_h': s.get('rul_p50_h', nan),
-            'rul_p90_h': s.get('rul_p90_h', nan), 'true_rul_h': sim.true_rul_s() / HOUR,
+            'rul_p90_h': s.get('rul_p90_h', nan), 'true_rul_h': tr.true_rul_s / HOUR,
             'catalogue_life_h': s.get('catalogue_life_h', nan),
             'level': s.get('level', 'STALE'), 'updates': s.get('updates', 0),
             'samples': nodes['te'][j].samples, 'windows': nodes['te'][j].windows,

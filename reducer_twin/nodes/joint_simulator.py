@@ -13,6 +13,9 @@ life) goes to ``/reducer_twin/<joint>/ground_truth``.
 """
 
 from dataclasses import fields
+import threading
+import time
+from types import SimpleNamespace
 
 from msg_adapters.layouts import GROUND_TRUTH, record_values
 from msg_adapters.ros import make_joint_state, to_multiarray
@@ -21,9 +24,10 @@ from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
+from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
 from reducer_twin.nodes.base import encoder_qos, joint_topic, latest_qos, Node
-from reducer_twin.nodes.base import run_nodes, SpecParameters
+from reducer_twin.nodes.base import run_nodes, SpecParameters, WORKER
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
@@ -79,9 +83,23 @@ class JointSimulatorNode(Node):
         self.start_ns = None   # set at the first tick: the stream starts when spinning does
         self.sent = 0
         self._block = None
+        self._block_truth = None
         self._block_start = 0
+        self._names = (self.names if self.split
+                       else [x for n in self.names for x in (n, n + '_motor')])
+        self._pending_block = WORKER.submit(self._make_block)
         self.max_catch_up = int(plain['max_catch_up'])
-        self.create_timer(1.0 / self.rate_hz, self._tick)
+        self._stop = threading.Event()
+        if plain['own_thread']:
+            # A robot controller publishes on its own clock, not when the twin's executor
+            # has time: a dedicated thread keeps the stream's timing independent of the load
+            # the twin puts on the executor of the same process.
+            self._thread = threading.Thread(target=self._run, name='joint-simulator',
+                                            daemon=True)
+            self._thread.start()
+        else:
+            self._thread = None
+            self.create_timer(1.0 / self.rate_hz, self._tick)
         self.create_timer(plain['truth_period_s'], self._publish_truth)
         self.get_logger().info(
             f'simulating {len(self.sims)} joint(s) {self.names} at {self.rate_hz:g} Hz, '
@@ -101,6 +119,8 @@ class JointSimulatorNode(Node):
                                   'instead of the period-mean table (< 0.1 arcsec apart)'),
             'truth_period_s': (1.0, 'period of the ground-truth topics [s]'),
             'max_catch_up': (50, 'most samples published in one late timer tick'),
+            'own_thread': (False, 'publish from a thread of its own instead of an executor '
+                                  'timer (measured slower here: the GIL is shared)'),
         }
         out = {}
         for name, (default, doc) in specs.items():
@@ -114,7 +134,8 @@ class JointSimulatorNode(Node):
             raise InvalidParameter(f"joints must be distinct names, got {out['joints']!r}")
         return out
 
-    def _next_block(self):
+    def _make_block(self):
+        """Simulate the next block of samples (on the worker thread)."""
         n = max(1, int(round(BLOCK_S * self.rate_hz)))
         batches = [s.step(n) for s in self.sims]
         t = batches[0].t
@@ -123,7 +144,7 @@ class JointSimulatorNode(Node):
             motor = np.stack([b.motor_angle for b in batches], axis=1)
             vel = np.stack([b.link_velocity for b in batches], axis=1)
             eff = np.stack([b.effort for b in batches], axis=1)
-            self._block = (t, link, vel, eff, motor)
+            samples = (t, link, vel, eff, motor)
         else:
             pos = np.empty((n, 2 * len(batches)))
             vel = np.full((n, 2 * len(batches)), np.nan)
@@ -131,10 +152,36 @@ class JointSimulatorNode(Node):
             for k, b in enumerate(batches):
                 pos[:, 2 * k], pos[:, 2 * k + 1] = b.link_angle, b.motor_angle
                 vel[:, 2 * k], eff[:, 2 * k] = b.link_velocity, b.effort
-            self._block = (t, pos, vel, eff, None)
+            samples = (t, pos, vel, eff, None)
+        truth = [(b.true_wear, b.exposure_s) for b in batches]
+        return samples, truth
+
+    def _next_block(self):
+        # The block after this one is prepared on the worker while this one is published.
+        self._block, self._block_truth = self._pending_block.result()
+        self._pending_block = WORKER.submit(self._make_block)
         self._block_start = self.sent
-        self._names = (self.names if self.split
-                       else [x for n in self.names for x in (n, n + '_motor')])
+
+    def _run(self):
+        """Publish every sample at its time, until the node closes (own thread)."""
+        period = 1.0 / self.rate_hz
+        while not self._stop.is_set():
+            try:
+                self._tick()
+            except Exception as err:  # context shut down under us: stop quietly
+                if not self._stop.is_set():
+                    self.get_logger().error(f'simulator stopped: {err!r}')
+                return
+            if self.start_ns is None:
+                continue
+            next_s = (self.start_ns * 1e-9 + self.sent * period) - time.time()
+            self._stop.wait(max(next_s, 0.0))
+
+    def close(self):
+        """Stop the publishing thread (before the node is destroyed)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
 
     def _tick(self):
         now = self.get_clock().now().nanoseconds
@@ -156,22 +203,44 @@ class JointSimulatorNode(Node):
 
     def _publish_truth(self):
         stamp_s = self.get_clock().now().nanoseconds * 1e-9
-        for sim, pub in zip(self.sims, self.truth_pubs):
-            tr = sim.truth()
+        for (name, tr), sim, pub in zip(self.truth().items(), self.sims, self.truth_pubs):
             rec = {'stamp_s': stamp_s, 'wear_m': tr.wear, 'lost_motion_rad': tr.lost_motion,
                    'exposure_s': tr.exposure_s, 'wear_rate_scale': tr.wear_rate_scale,
                    'aging_factor': sim.config.aging_factor, 'limit_time_s': tr.limit_time_s,
-                   'true_rul_s': sim.true_rul_s()}
+                   'true_rul_s': tr.true_rul_s}
             pub.publish(to_multiarray(GROUND_TRUTH, record_values(GROUND_TRUTH, rec)))
 
     def truth(self):
-        """Return ``{joint: SimTruth}`` (for the demo and tests)."""
-        return {s.config.name: s.truth() for s in self.sims}
+        """
+        Return the truth at the last published sample, per joint (demo, tests, topic).
+
+        Returns
+        -------
+        dict
+            ``{joint: SimpleNamespace(wear, lost_motion, exposure_s,
+            wear_rate_scale, limit_time_s, true_rul_s)}`` in SI units.
+
+        """
+        tables = model_tables(self.params)
+        i = max(self.sent - 1 - self._block_start, 0)
+        out = {}
+        for k, sim in enumerate(self.sims):
+            if self._block_truth is None:
+                wear, exposure = sim.config.initial_wear_m, 0.0
+            else:
+                wear_arr, exposure_arr = self._block_truth[k]
+                wear, exposure = float(wear_arr[i]), float(exposure_arr[i])
+            limit = sim.limit_time_s
+            out[sim.config.name] = SimpleNamespace(
+                wear=wear, lost_motion=float(tables.lost_motion(wear)), exposure_s=exposure,
+                wear_rate_scale=sim.config.wear_rate_scale, limit_time_s=limit,
+                true_rul_s=limit - exposure)
+        return out
 
     def describe(self):
         """Return a one-line summary of the simulated joints."""
-        parts = [f'{n}: LM {s.truth().lost_motion / ARCMIN:.2f} arcmin'
-                 for n, s in zip(self.names, self.sims)]
+        parts = [f'{n}: LM {tr.lost_motion / ARCMIN:.2f} arcmin'
+                 for n, tr in self.truth().items()]
         return '; '.join(parts)
 
 

@@ -33,7 +33,7 @@ from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
-from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos
+from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WORKER
 from std_msgs.msg import Float64MultiArray
 
 LATENCY_KEEP = 200_000
@@ -143,14 +143,28 @@ class TEMonitor(Node):
         self._latency_n += lat.size
 
     def _analyze(self):
+        """Hand the accumulated samples to the worker thread (the executor must not wait)."""
         if not self._pending:
             return
         rows, self._pending = np.concatenate(self._pending), []
+        WORKER.submit(self._analyze_rows, rows)
+
+    def analyze_now(self):
+        """Analyse what has accumulated and wait for it (end of a demo, tests)."""
+        self._analyze()
+        WORKER.submit(lambda: None).result()
+
+    def _analyze_rows(self, rows):
+        """Run TE extraction and the window analysis; publish completed windows (worker)."""
         try:
             stream = self.extractor.update(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2])
             windows = self.analyzer.update(stream, rows[:, 3], rows[:, 4])
         except InvalidInput as err:
             self.rejects.reject('bad_samples', str(err))
+            return
+        except Exception as err:  # a worker's failure must be seen, not vanish in a future
+            self.get_logger().error(f'{self.joint}: window analysis failed: {err!r}')
+            self.rejects.reject('analysis_error', repr(err))
             return
         for f in windows:
             if self.calibration.observe(f):
