@@ -31,7 +31,6 @@ setup(
         'scipy',
         'filterpy',
         'mcap',
-        'rosbags',
         'lz4',
         "backports.zstd; python_version < '3.14'",
         'pyyaml',
@@ -40,6 +39,7 @@ setup(
     ],
     extras_require={
         'test': [
+            'rosbags',
             'pytest',
             'pytest-timeout',
             'hypothesis',
