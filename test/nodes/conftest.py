@@ -175,6 +175,17 @@ class RosHarness:
         """Return the statuses called ``name`` in received DiagnosticArrays, oldest first."""
         return [s for m in messages for s in m.status if s.name == name]
 
+    def wait_status(self, messages, name, predicate=lambda s: True):
+        """Spin until a received status called ``name`` satisfies ``predicate``; return it."""
+        found = []
+
+        def latest():
+            found[:] = [s for s in self.statuses(messages, name) if predicate(s)]
+            return bool(found)
+
+        self.spin_until(latest, what=f'a diagnostics status {name!r}')
+        return found[-1]
+
     @staticmethod
     def key_values(status):
         """Return the key/values of a DiagnosticStatus as a dict of strings."""

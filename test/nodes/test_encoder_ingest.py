@@ -151,14 +151,7 @@ class Robot:
     def status(self, joint, predicate=lambda s: True):
         """Spin until a /diagnostics status of this node's ``joint`` satisfies ``predicate``."""
         name = f'reducer_twin: {joint} encoder ingest'
-        found = []
-
-        def latest():
-            found[:] = [s for s in self.ros.statuses(self.diagnostics, name) if predicate(s)]
-            return bool(found)
-
-        self.ros.spin_until(latest, what=f'a diagnostics status {name!r}')
-        return found[-1]
+        return self.ros.wait_status(self.diagnostics, name, predicate)
 
 
 def expected_stamps_s(robot, ks):

@@ -109,14 +109,7 @@ class Life:
     def status(self, predicate=lambda s: True):
         """Spin until a /diagnostics status of this reducer satisfies ``predicate``."""
         name = f'reducer_twin: {self.joint} reducer'
-        found = []
-
-        def latest():
-            found[:] = [s for s in self.ros.statuses(self.diagnostics, name) if predicate(s)]
-            return bool(found)
-
-        self.ros.spin_until(latest, what=f'a diagnostics status {name!r}')
-        return found[-1]
+        return self.ros.wait_status(self.diagnostics, name, predicate)
 
 
 def test_remaining_life_percentiles_are_ordered_and_finite(ros, estimate):

@@ -85,14 +85,7 @@ class Monitor:
     def status(self, predicate):
         """Spin until a /diagnostics status of this monitor satisfies ``predicate``."""
         name = f'reducer_twin: {self.joint} transmission error'
-        found = []
-
-        def latest():
-            found[:] = [s for s in self.ros.statuses(self.diagnostics, name) if predicate(s)]
-            return bool(found)
-
-        self.ros.spin_until(latest, what=f'a diagnostics status {name!r}')
-        return found[-1]
+        return self.ros.wait_status(self.diagnostics, name, predicate)
 
 
 def test_te_batches_are_link_minus_motor_over_the_ratio(ros, simulated):
