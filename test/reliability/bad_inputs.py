@@ -196,7 +196,7 @@ def _short_position(s):
 
 def _unknown_joints(s):
     m = s.message(AT)
-    return _replace(s, AT, Message('link', m.stamp_ns, ('gripper', 'gripper_motor'),
+    return _replace(s, AT, Message('link', m.stamp_ns, ('gripper', 'tool_changer'),
                                    m.position, m.velocity, m.effort))
 
 
