@@ -18,7 +18,7 @@ import time
 from types import SimpleNamespace
 
 from msg_adapters.layouts import GROUND_TRUTH, record_values
-from msg_adapters.ros import make_joint_state, to_multiarray
+from msg_adapters.ros import JointStateMessage, to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidParameter
@@ -33,6 +33,9 @@ from std_msgs.msg import Float64MultiArray
 
 BLOCK_S = 0.1
 """Samples are generated this far ahead, vectorised."""
+
+PUBLISH_LOG = 1 << 20
+"""Samples whose (stamp, publish time) are kept, ns (a ring; for latency benchmarks)."""
 
 
 class JointSimulatorNode(Node):
@@ -82,11 +85,14 @@ class JointSimulatorNode(Node):
                            for n in self.names]
         self.start_ns = None   # set at the first tick: the stream starts when spinning does
         self.sent = 0
+        self.publish_log = np.zeros((PUBLISH_LOG, 2), dtype=np.int64)
         self._block = None
         self._block_truth = None
         self._block_start = 0
         self._names = (self.names if self.split
                        else [x for n in self.names for x in (n, n + '_motor')])
+        self._link_msg = JointStateMessage(self._names)
+        self._motor_msg = JointStateMessage(self.names)
         self._pending_block = WORKER.submit(self._make_block)
         self.max_catch_up = int(plain['max_catch_up'])
         self._stop = threading.Event()
@@ -195,9 +201,11 @@ class JointSimulatorNode(Node):
             t, pos, vel, eff, motor = self._block
             i = self.sent - self._block_start
             stamp = self.start_ns + int(round(t[i] * 1e9))
-            self.pub.publish(make_joint_state(stamp, self._names, pos[i], vel[i], eff[i]))
+            self.pub.publish(self._link_msg.fill(stamp, pos[i], vel[i], eff[i]))
             if self.split:
-                self.motor_pub.publish(make_joint_state(stamp, self.names, motor[i]))
+                self.motor_pub.publish(self._motor_msg.fill(stamp, motor[i]))
+            k = self.sent % PUBLISH_LOG
+            self.publish_log[k, 0], self.publish_log[k, 1] = stamp, time.time_ns()
             self.sent += 1
             budget -= 1
 
@@ -236,6 +244,34 @@ class JointSimulatorNode(Node):
                 wear_rate_scale=sim.config.wear_rate_scale, limit_time_s=limit,
                 true_rul_s=limit - exposure)
         return out
+
+    def publish_times(self, stamps_ns):
+        """
+        Return when the samples with these stamps were published [ns] (0 if unknown).
+
+        Parameters
+        ----------
+        stamps_ns : array_like of int
+            Header stamps of published samples.
+
+        Returns
+        -------
+        ndarray of int64
+            Wall-clock publish times.
+
+        """
+        n = min(self.sent, PUBLISH_LOG)
+        log = self.publish_log[:n]
+        order = np.argsort(log[:, 0], kind='stable')
+        keys, times = log[order, 0], log[order, 1]
+        if n == 0:
+            return np.zeros(np.shape(stamps_ns), dtype=np.int64)
+        # Stamps that travelled as float seconds are off by a fraction of a microsecond.
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        hi = np.clip(np.searchsorted(keys, stamps), 0, n - 1)
+        lo = np.clip(hi - 1, 0, n - 1)
+        idx = np.where(np.abs(keys[lo] - stamps) < np.abs(keys[hi] - stamps), lo, hi)
+        return np.where(np.abs(keys[idx] - stamps) < 1000, times[idx], 0)
 
     def describe(self):
         """Return a one-line summary of the simulated joints."""

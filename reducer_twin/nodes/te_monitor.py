@@ -79,7 +79,8 @@ class TEMonitor(Node):
         self._pending = []
         self._te_rows = []
         self._te_msg = BatchPublisherMessage(TE_BATCH)
-        self._latency = np.zeros(LATENCY_KEEP)
+        self._stamps = np.zeros(LATENCY_KEEP)     # sample stamps [s]
+        self._arrival = np.zeros(LATENCY_KEEP)    # when their TE was computed [s]
         self._latency_n = 0
         self.samples = 0
         self.windows = 0
@@ -132,15 +133,16 @@ class TEMonitor(Node):
         rows = np.concatenate([b[1] for b in batches])
         te = np.concatenate([b[2] for b in batches])
         arrival = np.repeat([b[0] for b in batches], [b[1].shape[0] for b in batches])
-        self._record_latency(arrival - rows[:, 0])
+        self._record_latency(rows[:, 0], arrival)
         self.te_pub.publish(self._te_msg.fill(
             np.column_stack([rows[:, 0], rows[:, 2], te, rows[:, 3]])))
 
-    def _record_latency(self, lat):
+    def _record_latency(self, stamps, arrival):
         k = self._latency_n % LATENCY_KEEP
-        m = min(lat.size, LATENCY_KEEP - k)
-        self._latency[k:k + m] = lat[:m]
-        self._latency_n += lat.size
+        m = min(stamps.size, LATENCY_KEEP - k)
+        self._stamps[k:k + m] = stamps[:m]
+        self._arrival[k:k + m] = arrival[:m]
+        self._latency_n += stamps.size
 
     def _analyze(self):
         """Hand the accumulated samples to the worker thread (the executor must not wait)."""
@@ -181,7 +183,13 @@ class TEMonitor(Node):
 
     def latency_samples(self):
         """Return the kept stamp-to-TE latencies [s]."""
-        return self._latency[:min(self._latency_n, LATENCY_KEEP)].copy()
+        n = min(self._latency_n, LATENCY_KEEP)
+        return self._arrival[:n] - self._stamps[:n]
+
+    def latency_records(self):
+        """Return ``(stamps [s], TE times [s])`` of the kept samples."""
+        n = min(self._latency_n, LATENCY_KEEP)
+        return self._stamps[:n].copy(), self._arrival[:n].copy()
 
     def flush_latency(self):
         """Publish the pending TE batch now so its latencies are counted."""
@@ -200,7 +208,7 @@ class TEMonitor(Node):
         n = min(self._latency_n, LATENCY_KEEP)
         if n == 0:
             return {'count': 0, 'p50': float('nan'), 'p99': float('nan'), 'max': float('nan')}
-        lat = self._latency[:n]
+        lat = self._arrival[:n] - self._stamps[:n]
         return {'count': self._latency_n, 'p50': float(np.percentile(lat, 50)),
                 'p99': float(np.percentile(lat, 99)), 'max': float(lat.max())}
 
