@@ -1,0 +1,218 @@
+"""
+Soak benchmark: the 6-joint, 1 kHz bringup with the simulator, for ten minutes.
+
+Runs what ``twin_bringup`` runs with ``twin.simulate`` (simulator, encoder_ingest and,
+per joint, te_monitor, wear_estimator and life_publisher; one process, real DDS, the
+set-up of ``bench_live_chain.py``) and prints, for issue 6 ("sustained load, with
+nothing lost"):
+
+* samples dropped (missing at ingest, unpaired) and messages rejected by any node,
+  counted after the start-up (``--settle-s``), and samples published but not analysed;
+* process CPU in cores, per 30 s interval and overall;
+* resident memory every 30 s, and its growth after the first minute
+  (``--warmup-s``), once the caches are warm: the first minute fills the model
+  tables, the import caches and the executor's pools. The nodes' fixed-size
+  latency rings (``te_monitor``: 200 k samples per joint; the simulator's publish
+  log), allocated zero-filled but resident only once written, are written through
+  at the start, so that their filling is not taken for growth;
+* estimator state files written (and whether each file on disk decodes), windows
+  analysed, and whether every node survived: still making progress in the last
+  interval, nothing raised out of a callback.
+
+Floors (issue 6): zero drops, memory growth <= 5 MB.
+
+Usage: ``python bench/bench_soak.py [--joints 6] [--duration-s 600] [--warmup-s 60]``
+"""
+
+import argparse
+import os
+from pathlib import Path
+import resource
+import tempfile
+import time
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')
+os.environ.setdefault('ROS_DOMAIN_ID', str(40 + os.getpid() % 50))
+
+
+def rss_mb():
+    """Return the resident set size of this process [MB]."""
+    with open('/proc/self/statm') as fh:
+        return int(fh.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 1e6
+
+
+def cpu_s():
+    """Return the CPU time of this process so far (user + system) [s]."""
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
+
+
+def touch_rings(nodes):
+    """
+    Write through the nodes' large fixed-size numpy buffers; return their size [MB].
+
+    ``np.zeros`` memory becomes resident only when written: a ring that fills over
+    minutes would look like a leak. Written once here, before the first sample.
+    """
+    import numpy as np
+    total = 0
+    for node in nodes:
+        for value in vars(node).values():
+            if isinstance(value, np.ndarray) and value.nbytes >= 1 << 20:
+                value.fill(0)
+                total += value.nbytes
+    return total / 1e6
+
+
+class Progress:
+    """Counters of every node, to tell that each one keeps working."""
+
+    def __init__(self, nodes, joints):
+        self.nodes = nodes
+        self.joints = joints
+
+    def snapshot(self):
+        """Return the counters that grow while a node works."""
+        n = self.nodes
+        counts = n['ingest'].counts()
+        snap = {'simulator': n['simulator'].sent}
+        for j in self.joints:
+            snap[f'encoder_ingest {j}'] = counts[j]['published']
+            snap[f'te_monitor {j}'] = n['te'][j].samples
+            snap[f'wear_estimator {j}'] = sum(n['estimator'][j].statuses.values())
+            life = n['life'][j].last
+            snap[f'life_publisher {j}'] = 0.0 if life is None else life[0]['stamp_s']
+        return snap
+
+    def dropped(self):
+        """Return the samples lost (missing, unpaired) and the messages refused, by kind."""
+        n = self.nodes
+        counts = n['ingest'].counts()
+        out = {'missing': 0, 'unpaired': 0, 'rejected messages': n['ingest'].rejects.total}
+        for j in self.joints:
+            out['missing'] += sum(v for k, v in counts[j].items() if k.endswith('_missing'))
+            out['unpaired'] += counts[j]['unpaired']
+            out['rejected messages'] += (n['te'][j].rejects.total
+                                         + n['estimator'][j].rejects.total
+                                         + n['life'][j].rejects.total)
+        return out
+
+
+def main():
+    """Run the soak and print its figures."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
+    ap.add_argument('--joints', type=int, default=6)
+    ap.add_argument('--duration-s', type=float, default=600.0,
+                    help='whole run, warm-up included [s] (default 600)')
+    ap.add_argument('--warmup-s', type=float, default=60.0,
+                    help='memory growth is measured after this [s] (default 60)')
+    ap.add_argument('--settle-s', type=float, default=5.0,
+                    help='drops are counted after this start-up [s] (default 5)')
+    ap.add_argument('--sample-s', type=float, default=30.0,
+                    help='interval of the RSS and CPU samples [s] (default 30)')
+    args = ap.parse_args()
+    import numpy as np
+    import rclpy
+    from reducer_twin.core.errors import StateFileError
+    from reducer_twin.core.estimator import decode_state
+    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
+
+    joints = [f'joint_{k + 1}' for k in range(args.joints)]
+    state_dir = Path(tempfile.mkdtemp(prefix='bench-soak-'))
+    config = load_config(None)
+    config['twin'].update({'joints': joints, 'aging_factor': 36000.0, 'simulate': True,
+                           'state_dir': str(state_dir)})
+    rclpy.init(args=['--ros-args', '--log-level', 'warn'])
+    nodes = build_nodes(config)
+    flat = all_nodes(nodes)
+    executor = make_executor()
+    for node in flat:
+        executor.add_node(node)
+    rings = touch_rings(flat)
+    quiet_gc()
+    sim = nodes['simulator']
+    progress = Progress(nodes, joints)
+    failure = None
+
+    start = time.monotonic()
+    marks = sorted({args.settle_s, args.warmup_s,
+                    *np.arange(args.sample_s, args.duration_s, args.sample_s).tolist(),
+                    args.duration_s})
+    samples = []            # (t, rss, cpu, sent, windows, dropped, snapshot)
+    for mark in marks:
+        try:
+            while time.monotonic() - start < mark:
+                executor.spin_once(timeout_sec=0.05)
+        except Exception as err:   # noqa: B902 - a node that raised did not survive
+            failure = f'{type(err).__name__}: {err}'
+            break
+        samples.append((time.monotonic() - start, rss_mb(), cpu_s(), sim.sent,
+                        sum(te.windows for te in nodes['te'].values()),
+                        progress.dropped(), progress.snapshot()))
+
+    end = samples[-1]
+    settled = next(s for s in samples if s[0] >= args.settle_s)
+    warm = next(s for s in samples if s[0] >= args.warmup_s)
+    wall = end[0] - settled[0]
+    cpu = (end[2] - settled[2]) / wall
+    dropped = {k: end[5][k] - settled[5][k] for k in end[5]}
+    sent = end[3] - settled[3]
+    growth = end[1] - warm[1]
+    after = [s for s in samples if s[0] >= args.warmup_s]
+    slope = (np.polyfit([s[0] / 60.0 for s in after], [s[1] for s in after], 1)[0]
+             if len(after) >= 3 else float('nan'))
+    # The robot stops; what is in flight drains; then every sample the simulator published
+    # must have been paired by ingest and analysed by its TE monitor.
+    previous = samples[-2][6] if len(samples) > 1 else {}
+    stalled = [name for name, value in end[6].items() if value <= previous.get(name, -1)]
+    executor.remove_node(sim)
+    drain = time.monotonic() + 2.0
+    while time.monotonic() < drain:
+        executor.spin_once(timeout_sec=0.05)
+    lost = sum(sim.sent - nodes['te'][j].samples for j in joints)
+    writers = [nodes['estimator'][j].stage.writer for j in joints]
+    for j in joints:
+        nodes['estimator'][j].stage.flush()
+    written = sum(w.written for w in writers if w is not None)
+    write_failures = sum(w.failures for w in writers if w is not None)
+    readable = 0
+    for j in joints:
+        path = state_dir / f'{j}.json'
+        try:
+            decode_state(path.read_bytes(), path)
+            readable += 1
+        except (OSError, StateFileError):
+            pass
+
+    print(f'soak: {args.joints} joints x {sim.rate_hz:g} Hz for {end[0]:.0f} s, one process, '
+          f'{type(executor).__name__}; drops counted after {args.settle_s:g} s, memory '
+          f'growth after {args.warmup_s:g} s')
+    print('     t [s]   RSS [MB]   CPU [cores]   ticks/s   windows   dropped')
+    for prev, cur in zip(samples, samples[1:]):
+        dt = cur[0] - prev[0]
+        print(f'  {cur[0]:8.0f}   {cur[1]:8.1f}   {(cur[2] - prev[2]) / dt:11.2f}   '
+              f'{(cur[3] - prev[3]) / dt:7.0f}   {cur[4]:7d}   {sum(cur[5].values()):7d}')
+    print(f'  ticks published      {sent} in {wall:.0f} s ({sent / wall:.0f}/s; '
+          f'{args.joints * sent / wall:.0f} samples/s)')
+    print(f'  samples dropped      {dropped["missing"] + dropped["unpaired"]} (missing '
+          f'{dropped["missing"]}, unpaired {dropped["unpaired"]}); rejected messages '
+          f'{dropped["rejected messages"]}; of the {sim.sent * args.joints} samples '
+          f'simulated, not analysed after the robot stopped: {lost}   (floor: 0)')
+    print(f'  CPU                  {cpu:.2f} cores')
+    print(f'  RSS                  {settled[1]:.1f} MB at {settled[0]:.0f} s, {warm[1]:.1f} MB '
+          f'at {warm[0]:.0f} s, {end[1]:.1f} MB at {end[0]:.0f} s: growth after '
+          f'{warm[0]:.0f} s {growth:+.1f} MB, trend {slope:+.2f} MB/min   (floor: <= 5 MB)')
+    print(f'  fixed rings written through at start: {rings:.1f} MB')
+    print(f'  windows analysed     {end[4]}; estimator state files written {written} '
+          f'({write_failures} failed), {readable}/{args.joints} files on disk decode')
+    survived = failure is None and not stalled
+    print(f'  every node survived  {"yes" if survived else "NO"}'
+          + (f' (raised: {failure})' if failure else '')
+          + (f' (no progress in the last interval: {stalled})' if stalled else ''))
+    rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
