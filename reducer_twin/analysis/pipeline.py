@@ -556,9 +556,12 @@ def is_damage(warning):
 
     """
     text = warning.message
+    # A file cut short (no footer), storage files missing, or fewer messages than the
+    # metadata counts: messages were lost even where everything left is readable.
     return warning.offset is not None or any(
         key in text for key in ('reading stopped', 'corrupt', 'skipping that file',
-                                'without a data end'))
+                                'without a data end', 'no footer', 'do not exist',
+                                'but the storage files hold', 'but no storage file holds'))
 
 
 # --------------------------------------------------------------------------- the run

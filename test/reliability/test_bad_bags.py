@@ -258,10 +258,6 @@ DAMAGED = [
      r'byte \d+ of \d+', 'some'),
     pytest.param(
         'a file cut in its summary', _cut(0.9999), 1, r'WARNING: .*robot_0\.mcap: ', 'all',
-        marks=pytest.mark.xfail(strict=True, reason=(
-            'analyze exits 0 for an MCAP file cut inside its summary section (every '
-            'message readable, a "no footer" WARNING); the README promises exit 1 for a '
-            'truncated bag - for the owner of analyze (issue 5) to decide which holds')),
         id='a file cut in its summary'),
     ('an empty file', lambda root: _mcap(root).write_bytes(b''), 1,
      r'^ERROR: .*robot_0\.mcap is empty \(0 bytes\)', 'none'),
@@ -280,18 +276,14 @@ DAMAGED = [
         lambda root: _edit_metadata(root, '    - robot_0.mcap\n',
                                     '    - robot_0.mcap\n    - robot_1.mcap\n'),
         1, r"WARNING: .*metadata\.yaml lists 1 file\(s\) that do not exist: \['robot_1\.mcap'\]",
-        'all', marks=pytest.mark.xfail(strict=True, reason=(
-            'analyze exits 0 when metadata.yaml lists a storage file that is missing: its '
-            'messages are lost but the bag is not reported damaged (a WARNING only)')),
+        'all',
         id='metadata listing a file that is missing'),
     pytest.param(
         'metadata counting more messages than the files hold',
         lambda root: _edit_metadata(root, '      message_count: 6000\n',
                                     '      message_count: 7000\n'),
         1, r'WARNING: .*metadata lists 7000 messages on /joint_states, but the storage files '
-        r'hold 6000', 'all', marks=pytest.mark.xfail(strict=True, reason=(
-            'analyze exits 0 when metadata.yaml counts more messages than the files hold '
-            '(messages lost, a WARNING only)')),
+        r'hold 6000', 'all',
         id='metadata counting more messages than the files hold'),
 ]
 
