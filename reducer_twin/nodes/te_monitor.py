@@ -36,8 +36,8 @@ from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, N
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WORKER
 from std_msgs.msg import Float64MultiArray
 
-LATENCY_KEEP = 200_000
-"""Latency samples kept for the statistics (a ring)."""
+LATENCY_KEEP = 1 << 17
+"""Latency samples kept for the statistics (a ring of 2 MB per joint)."""
 
 
 class TEMonitor(Node):
@@ -79,8 +79,11 @@ class TEMonitor(Node):
         self._pending = []
         self._te_rows = []
         self._te_msg = BatchPublisherMessage(TE_BATCH)
-        self._stamps = np.zeros(LATENCY_KEEP)     # sample stamps [s]
-        self._arrival = np.zeros(LATENCY_KEEP)    # when their TE was computed [s]
+        # Rings filled now: np.zeros would commit pages as they fill, a slow RSS growth.
+        self._stamps = np.empty(LATENCY_KEEP)     # sample stamps [s]
+        self._arrival = np.empty(LATENCY_KEEP)    # when their TE was computed [s]
+        self._stamps.fill(0.0)
+        self._arrival.fill(0.0)
         self._latency_n = 0
         self.samples = 0
         self.windows = 0
