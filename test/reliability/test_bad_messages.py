@@ -134,11 +134,14 @@ class Chain:
                             what=f'{published} encoder pairs published ({self.ingest.counts()})')
         self.ros.spin_until(lambda: te.samples >= self.ingest.counts()[joint]['published'],
                             what='every pair at the TE monitor')
-        te._analyze()       # what the timer would do next: the last complete windows
+        te.analyze_now()    # what the timer would do next, and wait for the analysis
 
         def settled():
+            # Every window stepped, the probe heard every estimate (one on start and one
+            # per window: the estimator's count runs ahead of what DDS has delivered), and
+            # the remaining life of the last one.
             stepped = sum(est.statuses.values())
-            if stepped < te.windows or not self.wear:
+            if stepped < te.windows or len(self.wear) < 1 + stepped:
                 return False
             last = from_multiarray(self.wear[-1], WEAR_ESTIMATE)['stamp_s']
             return bool(self.remaining) and from_multiarray(
