@@ -480,8 +480,9 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
                    & (tq <= tm[-1] + extrapolate_s))
     ok = bridged | on0 | on1
     with np.errstate(divide='ignore', invalid='ignore'):
+        # Where frac is not finite (coinciding stamps) ``ok`` is False: the value is unused.
         frac = np.where(on0 | on1, 0.0, (tq - tm[i0]) / (tm[i1] - tm[i0]))
-    motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
+        motor_at = np.where(on1 & ~on0, am[i1], am[i0] + frac * (am[i1] - am[i0]))
     # A run id per query: the motor run it reads from; a bridged gap always starts a new one.
     base = run_m if run_m is not None else np.zeros(tm.size, dtype=np.int64)
     run_at = np.where(on1 & ~on0, base[i1], base[i0])
