@@ -48,6 +48,29 @@ def cpu_s():
     return ru.ru_utime + ru.ru_stime
 
 
+def allocated_mb():
+    """
+    Return the memory glibc's malloc has handed out and not got back [MB], or NaN.
+
+    Unlike the RSS, it leaves out the free memory the allocator keeps in its heaps
+    (fragmentation, returned to the system only by ``malloc_trim``).
+    """
+    import ctypes
+
+    class MallInfo2(ctypes.Structure):
+        _fields_ = [(name, ctypes.c_size_t) for name in (
+            'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks',
+            'uordblks', 'fordblks', 'keepcost')]
+
+    try:
+        mallinfo2 = ctypes.CDLL('libc.so.6').mallinfo2
+    except (OSError, AttributeError):
+        return float('nan')
+    mallinfo2.restype = MallInfo2
+    info = mallinfo2()
+    return (info.uordblks + info.hblkhd) / 1e6
+
+
 def touch_rings(nodes):
     """
     Write through the nodes' large fixed-size numpy buffers; return their size [MB].
@@ -140,7 +163,7 @@ def main():
     marks = sorted({args.settle_s, args.warmup_s,
                     *np.arange(args.sample_s, args.duration_s, args.sample_s).tolist(),
                     args.duration_s})
-    samples = []            # (t, rss, cpu, sent, windows, dropped, snapshot)
+    samples = []            # (t, rss, cpu, sent, windows, dropped, snapshot, allocated)
     for mark in marks:
         try:
             while time.monotonic() - start < mark:
@@ -150,7 +173,7 @@ def main():
             break
         samples.append((time.monotonic() - start, rss_mb(), cpu_s(), sim.sent,
                         sum(te.windows for te in nodes['te'].values()),
-                        progress.dropped(), progress.snapshot()))
+                        progress.dropped(), progress.snapshot(), allocated_mb()))
 
     end = samples[-1]
     settled = next(s for s in samples if s[0] >= args.settle_s)
@@ -204,6 +227,9 @@ def main():
     print(f'  RSS                  {settled[1]:.1f} MB at {settled[0]:.0f} s, {warm[1]:.1f} MB '
           f'at {warm[0]:.0f} s, {end[1]:.1f} MB at {end[0]:.0f} s: growth after '
           f'{warm[0]:.0f} s {growth:+.1f} MB, trend {slope:+.2f} MB/min   (floor: <= 5 MB)')
+    print(f'  malloc in use        {warm[7]:.1f} MB at {warm[0]:.0f} s, {end[7]:.1f} MB at '
+          f'{end[0]:.0f} s ({end[7] - warm[7]:+.1f} MB; the RSS also counts the free memory '
+          f'the allocator keeps)')
     print(f'  fixed rings written through at start: {rings:.1f} MB')
     print(f'  windows analysed     {end[4]}; estimator state files written {written} '
           f'({write_failures} failed), {readable}/{args.joints} files on disk decode')
