@@ -28,6 +28,17 @@ def rss_mb():
         return int(fh.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 1e6
 
 
+def cpu_ticks():
+    """Return this machine's (busy, steal) CPU time [s] from /proc/stat, or None."""
+    try:
+        with open('/proc/stat') as fh:
+            f = [int(x) for x in fh.readline().split()[1:]]
+    except (OSError, ValueError):
+        return None
+    hz = os.sysconf('SC_CLK_TCK')
+    return (sum(f[:3]) + sum(f[4:7])) / hz, f[7] / hz
+
+
 def main():
     """Run the benchmark and print its figures."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
@@ -63,10 +74,12 @@ def main():
     sent0 = sim.sent
     rss0 = rss_mb()
     ru0 = resource.getrusage(resource.RUSAGE_SELF)
+    machine0 = cpu_ticks()
     t0 = time.monotonic()
     spin_for(args.duration_s)
     wall = time.monotonic() - t0
     ru1 = resource.getrusage(resource.RUSAGE_SELF)
+    machine1 = cpu_ticks()
     counts1 = nodes['ingest'].counts()
     cpu = (ru1.ru_utime - ru0.ru_utime + ru1.ru_stime - ru0.ru_stime) / wall
     sent = sim.sent - sent0
@@ -101,6 +114,12 @@ def main():
           f'ms, p99 {np.percentile(lat, 99):.2f} ms; simulator lateness p99 '
           f'{np.percentile(late, 99):.2f} ms')
     print(f'  windows analysed     {windows}; RSS {rss0:.0f} -> {rss_mb():.0f} MB')
+    if machine0 and machine1:
+        cores = os.cpu_count() or 1
+        print(f'  machine              {cores} cores busy '
+              f'{(machine1[0] - machine0[0]) / wall / cores:.0%} (this process and '
+              f'the rest), stolen by the hypervisor '
+              f'{(machine1[1] - machine0[1]) / wall / cores:.1%}')
     rclpy.try_shutdown()
 
 

@@ -8,10 +8,13 @@ range, and a set-parameters callback rejects an invalid value with the
 core's own message while the old value stays.
 """
 
+from concurrent.futures import Future as TaskFuture
 from dataclasses import fields, replace
 import os
+import queue
 import signal
 import sys
+import threading
 import time
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -29,6 +32,9 @@ from reducer_twin.core.params import check_value, describe_range
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 """Signals that stop a node program cleanly (Ctrl-C; what ``ros2 launch`` escalates to)."""
+
+LISTENERS_PERIOD_S = 0.5
+"""How often composed nodes check whether a topic they may skip has subscribers [s]."""
 
 ENCODER_DEPTH = 200
 """History depth of 1 kHz encoder streams (>= 100: a stalled reader loses old samples)."""
@@ -260,17 +266,79 @@ def quiet_gc():
     sys.setswitchinterval(0.0005)
 
 
-def _worker():
-    from concurrent.futures import ThreadPoolExecutor
-    return ThreadPoolExecutor(max_workers=1, thread_name_prefix='reducer-twin-worker')
+class BackgroundWorker:
+    """
+    One thread that runs background work in submission order, in short turns.
+
+    Window analysis, estimator and remaining-life updates and simulator
+    blocks are each a few milliseconds of Python. Run on the executor thread
+    they stall the 1 kHz streams; run back to back on another thread they
+    hold the interpreter lock for tens of milliseconds at a time (the windows
+    of all joints complete together), and the executor, which takes the lock
+    again for every message, falls behind. This worker rests after every
+    task for ``rest_ratio`` times as long as the task ran (at most
+    ``max_rest_s``), so the executor always gets the interpreter back within
+    one task and catches up before the next.
+
+    Parameters
+    ----------
+    rest_ratio : float
+        Rest after a task, relative to its duration.
+    max_rest_s : float
+        Longest rest [s].
+
+    """
+
+    def __init__(self, rest_ratio=1.0, max_rest_s=0.005):
+        self.rest_ratio = float(rest_ratio)
+        self.max_rest_s = float(max_rest_s)
+        self._queue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name='reducer-twin-worker',
+                                        daemon=True)
+        self._thread.start()
+
+    def submit(self, fn, *args, **kwargs):
+        """
+        Queue ``fn(*args, **kwargs)``; return a future of its result.
+
+        Returns
+        -------
+        concurrent.futures.Future
+            Holds the result, or the exception the call raised.
+
+        """
+        future = TaskFuture()
+        self._queue.put((future, fn, args, kwargs))
+        return future
+
+    def wait_idle(self, timeout=None):
+        """Wait until everything submitted so far has run (end of a demo, tests)."""
+        self.submit(lambda: None).result(timeout)
+
+    def _run(self):
+        while True:
+            future, fn, args, kwargs = self._queue.get()
+            if not future.set_running_or_notify_cancel():
+                continue
+            start = time.perf_counter()
+            try:
+                result = fn(*args, **kwargs)
+            except BaseException as err:  # noqa: B902 - handed to whoever waits on it
+                future.set_exception(err)
+            else:
+                future.set_result(result)
+            rest = min((time.perf_counter() - start) * self.rest_ratio, self.max_rest_s)
+            if rest > 0.0:
+                time.sleep(rest)
 
 
-WORKER = _worker()
+WORKER = BackgroundWorker()
 """
-One background thread per process for work that must not stall the executor.
+The process's background worker (see :class:`BackgroundWorker`).
 
-Window analysis and simulator block generation run here in order; the
-executor thread keeps only the light, latency-critical callbacks.
+Window analysis, estimator and remaining-life updates and simulator block
+generation run here in order; the executor thread keeps only the light,
+latency-critical callbacks.
 """
 
 

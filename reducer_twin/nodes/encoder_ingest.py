@@ -14,6 +14,13 @@ rules (:mod:`reducer_twin.core.ingest`); clean, time-aligned samples are
 published per joint on ``/reducer_twin/<joint>/encoder_pairs``
 (``Float64MultiArray``, layout ``encoder_pairs``) in small batches
 (``batch_period_s``), and counts go to ``/diagnostics``.
+
+Composed with the TE monitors in one process (``twin_bringup``), the batches
+are handed to them directly (:meth:`EncoderIngest.attach`), as rclcpp's
+intra-process communication does for composed nodes; the topic is then
+published only while something outside subscribes to it (a recorder, a
+monitor in another process), which saves a serialisation and a DDS hop per
+batch and joint.
 """
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -27,7 +34,8 @@ from reducer_twin.core.ingest import IngestConfig, Pairer, SpikeFilter, SpikeFil
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
+from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
+from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -44,6 +52,16 @@ class _JointOutput:
         self.published = 0
         self.publisher = None
         self.message = BatchPublisherMessage(PAIRED_SAMPLES)
+        self.sinks = []
+        self.listened = True
+
+    def emit(self, rows):
+        """Hand ``rows`` to the in-process consumers; publish them if anyone subscribes."""
+        self.published += rows.shape[0]
+        for sink in self.sinks:
+            sink(rows)
+        if self.listened or not self.sinks:
+            self.publisher.publish(self.message.fill(rows))
 
 
 class EncoderIngest(Node):
@@ -97,6 +115,7 @@ class EncoderIngest(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
         self.create_timer(max(p['batch_period_s'] * 5, 0.01), self._flush_stale)
+        self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
 
     def _declare_plain(self):
         specs = {
@@ -108,7 +127,8 @@ class EncoderIngest(Node):
             'motor_angles': ('raw', "'raw' (input side) or 'output' (divided by the ratio)"),
             'gear_ratio': (0.0, 'total ratio; <= 0 takes it from the RV-80E geometry (81)'),
             'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription'),
-            'batch_period_s': (0.002, 'longest time a sample waits to be published [s]'),
+            'batch_period_s': (0.002, 'longest time a sample waits to be published [s]; 0: '
+                                      'every controller message at once'),
             'diagnostics_period_s': (1.0, 'period of /diagnostics [s]'),
         }
         out = {}
@@ -118,9 +138,9 @@ class EncoderIngest(Node):
         if out['motor_angles'] not in ('raw', 'output'):
             raise InvalidParameter(
                 f"motor_angles must be 'raw' or 'output', got {out['motor_angles']!r}")
-        if not 0.0 < out['batch_period_s'] <= 1.0:
+        if not 0.0 <= out['batch_period_s'] <= 1.0:
             raise InvalidParameter(
-                f"batch_period_s must be in (0, 1] s, got {out['batch_period_s']!r}")
+                f"batch_period_s must be in [0, 1] s, got {out['batch_period_s']!r}")
         if not out['joints'] or any(not j for j in out['joints']):
             raise InvalidParameter(f"joints must be non-empty names, got {out['joints']!r}")
         return out
@@ -182,8 +202,7 @@ class EncoderIngest(Node):
                 out.pairer.unpaired += int(unpaired[k])
             joint_rows = rows[:, k, :] if all_kept else rows[keep[:, k], k, :]
             if joint_rows.shape[0]:
-                out.published += joint_rows.shape[0]
-                out.publisher.publish(out.message.fill(joint_rows))
+                out.emit(np.ascontiguousarray(joint_rows))
 
     def _publish(self, out, pairs):
         if len(pairs):
@@ -191,8 +210,36 @@ class EncoderIngest(Node):
             keep = out.spikes.keep(rows[:, 1], rows[:, 2])
             rows = rows[keep]
             if rows.shape[0]:
-                out.published += rows.shape[0]
-                out.publisher.publish(out.message.fill(rows))
+                out.emit(rows)
+
+    def attach(self, joint, sink):
+        """
+        Hand the clean pairs of ``joint`` to an in-process consumer.
+
+        Parameters
+        ----------
+        joint : str
+            One of the ingested joints.
+        sink : callable
+            Called with each batch, an ``(n, 5)`` array in the
+            ``encoder_pairs`` layout (stamp [s], motor and link angle [rad],
+            effort [N*m], link velocity [rad/s]). It must not keep a
+            reference it later modifies: the array is not copied.
+
+        Raises
+        ------
+        InvalidParameter
+            If ``joint`` is not ingested by this node.
+
+        """
+        if joint not in self.outputs:
+            raise InvalidParameter(f'joint {joint!r} is not ingested here; joints: '
+                                   f'{list(self.outputs)}')
+        self.outputs[joint].sinks.append(sink)
+
+    def _check_listeners(self):
+        for out in self.outputs.values():
+            out.listened = out.publisher.get_subscription_count() > 0
 
     def _flush_stale(self):
         if self._raw_since is None:

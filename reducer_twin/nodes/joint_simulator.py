@@ -95,7 +95,7 @@ class JointSimulatorNode(Node):
                        else [x for n in self.names for x in (n, n + '_motor')])
         self._link_msg = JointStateMessage(self._names)
         self._motor_msg = JointStateMessage(self.names)
-        self._pending_block = WORKER.submit(self._make_block)
+        self._pending_block = self._submit_block()
         self.max_catch_up = int(plain['max_catch_up'])
         self._stop = threading.Event()
         if plain['own_thread']:
@@ -142,10 +142,14 @@ class JointSimulatorNode(Node):
             raise InvalidParameter(f"joints must be distinct names, got {out['joints']!r}")
         return out
 
-    def _make_block(self):
-        """Simulate the next block of samples (on the worker thread)."""
+    def _submit_block(self):
+        """Queue the next block of every joint on the worker, one task per joint."""
         n = max(1, int(round(BLOCK_S * self.rate_hz)))
-        batches = [s.step(n) for s in self.sims]
+        return [WORKER.submit(s.step, n) for s in self.sims]
+
+    def _assemble(self, batches):
+        """Arrange per-joint blocks as the published arrays."""
+        n = batches[0].t.size
         t = batches[0].t
         if self.split:
             link = np.stack([b.link_angle for b in batches], axis=1)
@@ -166,8 +170,9 @@ class JointSimulatorNode(Node):
 
     def _next_block(self):
         # The block after this one is prepared on the worker while this one is published.
-        self._block, self._block_truth = self._pending_block.result()
-        self._pending_block = WORKER.submit(self._make_block)
+        self._block, self._block_truth = self._assemble(
+            [f.result() for f in self._pending_block])
+        self._pending_block = self._submit_block()
         self._block_start = self.sent
 
     def _run(self):

@@ -23,6 +23,7 @@ from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeSta
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
+from reducer_twin.nodes.base import WORKER
 from std_msgs.msg import Float64MultiArray
 
 
@@ -66,28 +67,54 @@ class LifePublisher(Node):
         self.create_timer(period, self._publish_diagnostics)
 
     def _reconfig(self, config):
-        duty = self.stage.duty
-        self.stage = LifeStage(self.params, config)
-        self.stage.observe_duty(duty)
+        def apply():
+            duty = self.stage.duty
+            self.stage = LifeStage(self.params, config)
+            self.stage.observe_duty(duty)
+        # The stage lives on the worker; swap it there, between two assessments.
+        WORKER.submit(apply).result()
 
     def _on_features(self, msg):
         try:
             rec = from_multiarray(msg, TE_FEATURES)
-            self.stage.observe_duty(features_from_record(rec).duty)
+            duty = features_from_record(rec).duty
         except InvalidInput as err:
             self.rejects.reject('bad_features', str(err))
             return
         self.last_features = rec
+        WORKER.submit(self._observe_duty, duty)
+
+    def _observe_duty(self, duty):
+        try:
+            self.stage.observe_duty(duty)
+        except InvalidInput as err:
+            self.rejects.reject('bad_features', str(err))
 
     def _on_wear(self, msg):
         try:
             wear = from_multiarray(msg, WEAR_ESTIMATE)
+        except InvalidInput as err:
+            self.rejects.reject('bad_wear', str(err))
+            return
+        WORKER.submit(self._assess, wear)
+
+    def _assess(self, wear):
+        """Sample the remaining life of one estimate and publish it (on the worker)."""
+        try:
             record, level, message = self.stage.process(wear)
         except InvalidInput as err:
             self.rejects.reject('bad_wear', str(err))
             return
+        except Exception as err:  # a worker's failure must be seen, not vanish in a future
+            self.get_logger().error(f'{self.joint}: remaining-life update failed: {err!r}')
+            self.rejects.reject('life_error', repr(err))
+            return
         self.last = (wear, record, level, message)
         self.pub.publish(to_multiarray(REMAINING_LIFE, record_values(REMAINING_LIFE, record)))
+
+    def wait_idle(self):
+        """Wait until the estimates received so far have been assessed (demo end, tests)."""
+        WORKER.wait_idle()
 
     def summary(self):
         """

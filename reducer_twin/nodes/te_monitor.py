@@ -11,6 +11,10 @@ streams), and published in batches on ``/reducer_twin/<joint>/te``. Every
 window is published on ``/reducer_twin/<joint>/te_features`` (paper Table 5
 figures, lost motion, order amplitudes, duty).
 
+In ``twin_bringup`` the ingest node of the same process hands the pairs
+over directly (:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE
+batches are published only while something subscribes to them.
+
 The link encoder's time offset is learnt from the first windows and then
 compensated (:class:`~reducer_twin.core.pipeline.TimeOffsetCalibration`).
 The node also measures how long samples take from their stamp to their TE
@@ -32,7 +36,8 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic, Node
+from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
+from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WORKER
 from std_msgs.msg import Float64MultiArray
 
@@ -50,12 +55,17 @@ class TEMonitor(Node):
         ROS node name.
     params : ReducerParams, optional
         Reducer parameters.
+    subscribe : bool, optional
+        Subscribe to the joint's ``encoder_pairs`` topic (default). False
+        when an ``encoder_ingest`` of the same process feeds
+        :meth:`take_pairs` directly; the TE batches are then published only
+        while they have subscribers.
     **kwargs
         Passed to :class:`rclpy.node.Node`.
 
     """
 
-    def __init__(self, node_name='te_monitor', params=None, **kwargs):
+    def __init__(self, node_name='te_monitor', params=None, subscribe=True, **kwargs):
         super().__init__(node_name, **kwargs)
         p = self._declare_plain()
         self.params = params or ReducerParams()
@@ -71,8 +81,12 @@ class TEMonitor(Node):
         self.feat_pub = self.create_publisher(
             Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos())
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
-        self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
-                                 self._on_pairs, encoder_qos())
+        self._always_publish = subscribe
+        self._te_listened = True
+        self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
+        if subscribe:
+            self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
+                                     self._on_pairs, encoder_qos())
         self.create_timer(p['analysis_period_s'], self._analyze)
         self.create_timer(p['te_publish_period_s'], self._publish_te)
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
@@ -120,6 +134,19 @@ class TEMonitor(Node):
         except InvalidInput as err:
             self.rejects.reject('bad_layout', str(err))
             return
+        self.take_pairs(rows)
+
+    def take_pairs(self, rows):
+        """
+        Compute the TE of a batch of clean encoder pairs.
+
+        Parameters
+        ----------
+        rows : ndarray, shape (n, 5)
+            Rows in the ``encoder_pairs`` layout (stamp [s], motor and link
+            angle [rad], effort [N*m], link velocity [rad/s]).
+
+        """
         if rows.shape[0] == 0:
             return
         # TE on arrival; the bookkeeping (rows of the TE batch, latencies) is done in bulk
@@ -137,8 +164,12 @@ class TEMonitor(Node):
         te = np.concatenate([b[2] for b in batches])
         arrival = np.repeat([b[0] for b in batches], [b[1].shape[0] for b in batches])
         self._record_latency(rows[:, 0], arrival)
-        self.te_pub.publish(self._te_msg.fill(
-            np.column_stack([rows[:, 0], rows[:, 2], te, rows[:, 3]])))
+        if self._always_publish or self._te_listened:
+            self.te_pub.publish(self._te_msg.fill(
+                np.column_stack([rows[:, 0], rows[:, 2], te, rows[:, 3]])))
+
+    def _check_listeners(self):
+        self._te_listened = self.te_pub.get_subscription_count() > 0
 
     def _record_latency(self, stamps, arrival):
         k = self._latency_n % LATENCY_KEEP
@@ -157,7 +188,7 @@ class TEMonitor(Node):
     def analyze_now(self):
         """Analyse what has accumulated and wait for it (end of a demo, tests)."""
         self._analyze()
-        WORKER.submit(lambda: None).result()
+        WORKER.wait_idle()
 
     def _analyze_rows(self, rows):
         """Run TE extraction and the window analysis; publish completed windows (worker)."""

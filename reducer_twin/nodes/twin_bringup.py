@@ -6,7 +6,10 @@ builds one ``encoder_ingest`` for the robot and, per joint, a
 ``te_monitor``, a ``wear_estimator`` and a ``life_publisher`` (and the
 ``joint_simulator`` when ``twin.simulate`` is true), all spun by one
 EventsExecutor (single-threaded executor as fallback). Nodes are named
-``<kind>_<joint>`` so several joints coexist.
+``<kind>_<joint>`` so several joints coexist. With ``twin.intra_process``
+(default) the ingest hands its clean pairs to the TE monitors directly, as
+rclcpp does for composed nodes; the pairs and TE topics are then published
+only while something subscribes to them.
 """
 
 from rclpy.parameter import Parameter
@@ -55,18 +58,24 @@ def build_nodes(config, sim_overrides=None):
             sim.append(Parameter('wear_rate_scales', value=scales))
         sim += list(sim_overrides or [])
         nodes['simulator'] = JointSimulatorNode(params=params, parameter_overrides=sim)
+    local = bool(twin['intra_process'])
     nodes['ingest'] = EncoderIngest(parameter_overrides=[
         Parameter('joints', value=joints),
+        # Handed over in process, a batch costs nothing: every message goes on at once.
+        Parameter('batch_period_s', value=0.0 if local else 0.002),
         Parameter('link_topic', value=twin['link_topic']),
         Parameter('motor_topic', value=twin['motor_topic']),
         Parameter('motor_suffix', value=twin['motor_suffix']),
         Parameter('motor_angles', value=twin['motor_angles'])])
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
     for joint in joints:
-        nodes['te'][joint] = TEMonitor(f'te_monitor_{joint}', params=params, parameter_overrides=[
-            Parameter('joint', value=joint),
-            Parameter('aging_factor', value=float(twin['aging_factor'])),
-            Parameter('window_s', value=float(twin['window_s']))])
+        nodes['te'][joint] = TEMonitor(
+            f'te_monitor_{joint}', params=params, subscribe=not local, parameter_overrides=[
+                Parameter('joint', value=joint),
+                Parameter('aging_factor', value=float(twin['aging_factor'])),
+                Parameter('window_s', value=float(twin['window_s']))])
+        if local:
+            nodes['ingest'].attach(joint, nodes['te'][joint].take_pairs)
         nodes['estimator'][joint] = WearEstimatorNode(
             f'wear_estimator_{joint}', params=params, parameter_overrides=[
                 Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir'])])

@@ -27,6 +27,7 @@ from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import m_to_um
 from reducer_twin.nodes.base import diagnostics_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
+from reducer_twin.nodes.base import WORKER
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
@@ -88,20 +89,41 @@ class WearEstimatorNode(Node):
     def _on_features(self, msg):
         try:
             features = features_from_record(from_multiarray(msg, TE_FEATURES))
+        except InvalidInput as err:
+            self.rejects.reject('bad_features', str(err))
+            return
+        WORKER.submit(self._update, features)
+
+    def _update(self, features):
+        """Step the filter with one window and publish the estimate (on the worker)."""
+        try:
             status = self.stage.process(features)
         except InvalidInput as err:
             self.rejects.reject('bad_features', str(err))
             return
+        except Exception as err:  # a worker's failure must be seen, not vanish in a future
+            self.get_logger().error(f'{self.joint}: estimator update failed: {err!r}')
+            self.rejects.reject('estimator_error', repr(err))
+            return
         self.statuses[status] = self.statuses.get(status, 0) + 1
         self._publish(features.t_end)
 
+    def wait_idle(self):
+        """Wait until the windows received so far have been processed (demo end, tests)."""
+        WORKER.wait_idle()
+
     def close(self):
-        """Write the last queued state before the node goes away."""
+        """Process the queued windows and write the last state before the node goes away."""
+        WORKER.wait_idle()
         self.stage.flush()
 
-    def _on_reset(self, request, response):
+    def _reset(self):
         self.stage.reset('maintenance: reducer replaced (reset service)')
         self._publish()
+
+    def _on_reset(self, request, response):
+        # On the worker, after the windows already queued: they belong to the old reducer.
+        WORKER.submit(self._reset).result()
         response.success = True
         response.message = f'{self.joint}: estimator reset to a new reducer'
         return response

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.encoder_ingest import EncoderIngest
 from sensor_msgs.msg import JointState
@@ -306,3 +307,38 @@ def test_a_silent_motor_topic_shows_as_unpaired_samples_and_a_warning(ros):
     assert status.level == DiagnosticStatus.WARN
     assert robot.ros.key_values(status)['published'] == '0'
     assert robot.rows(joint).shape[0] == 0
+
+
+# -- composed in one process: pairs handed over directly ---------------------------------------
+
+
+def test_in_process_consumers_get_every_pair_and_the_topic_only_while_subscribed(ros):
+    robot = Robot(ros)
+    j1, j2 = robot.joints
+    handed = []
+    robot.node.attach(j1, handed.append)
+    robot.send([(robot.link_pub, robot.combined(k)) for k in range(200)])
+    # Someone subscribes to j1's topic (the probe): published as well, the same rows.
+    published = robot.wait_rows(j1, 200)
+    np.testing.assert_array_equal(np.concatenate(handed), published)
+    # The probe leaves j1's topic: the consumer still gets every pair, the topic goes quiet.
+    topic = joint_topic(j1, 'encoder_pairs')
+    sub = next(s for s in robot.probe.subscriptions if s.topic_name == topic)
+    robot.probe.destroy_subscription(sub)
+    out = robot.node.outputs[j1]
+    robot.ros.spin_until(lambda: not out.listened, what='ingest to see no subscriber of j1')
+    before = len(robot.pairs[j1])
+    robot.send([(robot.link_pub, robot.combined(k)) for k in range(200, 400)])
+    robot.wait_rows(j2, 400)                      # j2 has no in-process consumer: published
+    robot.ros.spin_until(lambda: sum(r.shape[0] for r in handed) >= 400,
+                         what='400 pairs handed to the consumer')
+    rows = np.concatenate(handed)
+    np.testing.assert_allclose(rows[:, 0], expected_stamps_s(robot, np.arange(400)), atol=1e-6)
+    assert len(robot.pairs[j1]) == before
+    assert robot.node.counts()[j1]['published'] == 400
+
+
+def test_a_consumer_of_a_joint_not_ingested_is_refused(ros):
+    robot = Robot(ros)
+    with pytest.raises(InvalidParameter, match="joint 'elbow' is not ingested here"):
+        robot.node.attach('elbow', print)

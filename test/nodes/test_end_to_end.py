@@ -66,7 +66,9 @@ def twin(default_ros, tmp_path_factory):
     for node in [sim, ingest, *nodes['te'].values(), *nodes['estimator'].values(),
                  *nodes['life'].values()]:
         ros.add(node)
-    ros.wait_matched(sim.pub, *(out.publisher for out in ingest.outputs.values()))
+    # In one process the ingest hands its pairs to the TE monitors directly (intra_process).
+    assert all(out.sinks for out in ingest.outputs.values())
+    ros.wait_matched(sim.pub)
     ros.spin_until(lambda: sim.sent >= STREAM_S * sim.rate_hz, timeout=STREAM_S + 25.0,
                    what=f'{STREAM_S:g} s of simulated stream')
     ros.remove(sim)                                     # the robot stops
@@ -80,7 +82,10 @@ def twin(default_ros, tmp_path_factory):
     # what they hold and the last windows reach the estimators and life publishers.
     ros.spin_until(delivered, what='every simulated sample at the TE monitors')
     for te in nodes['te'].values():
-        te._analyze()
+        te.analyze_now()
+    ros.spin_for(0.5)
+    for est in nodes['estimator'].values():
+        est.wait_idle()             # the last windows' updates, published from the worker
     ros.spin_for(0.5)
     return {'nodes': nodes, 'joints': joints, 'state_dir': state_dir, 'life': life,
             'diagnostics': diagnostics, 'ros': ros}
