@@ -48,18 +48,21 @@ def main():
     args = ap.parse_args()
     import numpy as np
     import rclpy
-    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
+    from reducer_twin.nodes.base import start_housekeeping
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
     config = load_config(None)
     config['twin'].update({'joints': joints, 'aging_factor': 36000.0, 'simulate': True,
                            'state_dir': tempfile.mkdtemp(prefix='bench-live-')})
+    bound_allocator()   # as the node programs do (run_nodes)
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     nodes = build_nodes(config)
     executor = make_executor()
     for node in all_nodes(nodes):
         executor.add_node(node)
     quiet_gc()
+    start_housekeeping()
     sim = nodes['simulator']
 
     def spin_for(seconds):

@@ -139,7 +139,8 @@ def main():
     import rclpy
     from reducer_twin.core.errors import StateFileError
     from reducer_twin.core.estimator import decode_state
-    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
+    from reducer_twin.nodes.base import start_housekeeping
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
 
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -147,6 +148,7 @@ def main():
     config = load_config(None)
     config['twin'].update({'joints': joints, 'aging_factor': 36000.0, 'simulate': True,
                            'state_dir': str(state_dir)})
+    bound_allocator()   # as the node programs do (run_nodes)
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     nodes = build_nodes(config)
     flat = all_nodes(nodes)
@@ -155,6 +157,7 @@ def main():
         executor.add_node(node)
     rings = touch_rings(flat)
     quiet_gc()
+    start_housekeeping()
     sim = nodes['simulator']
     progress = Progress(nodes, joints)
     failure = None
@@ -197,7 +200,7 @@ def main():
     lost = sum(sim.sent - nodes['te'][j].samples for j in joints)
     writers = [nodes['estimator'][j].stage.writer for j in joints]
     for j in joints:
-        nodes['estimator'][j].stage.flush()
+        nodes['estimator'][j].close()        # queued updates done, last state written
     written = sum(w.written for w in writers if w is not None)
     write_failures = sum(w.failures for w in writers if w is not None)
     readable = 0

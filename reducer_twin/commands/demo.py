@@ -78,7 +78,8 @@ def run(args):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from rclpy.parameter import Parameter
-    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
+    from reducer_twin.nodes.base import start_housekeeping
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     aging = args.hours * HOUR / args.duration_s
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -87,6 +88,7 @@ def run(args):
     config['twin'].update({'joints': joints, 'aging_factor': aging, 'simulate': True,
                            'state_dir': state_dir})
     config['simulator'].update({'profile': args.profile, 'wear_rate_scales': scales})
+    bound_allocator()   # as the node programs do (run_nodes)
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     history = {j: [] for j in joints}
     try:
@@ -97,6 +99,7 @@ def run(args):
         for node in all_nodes(nodes):
             executor.add_node(node)
         quiet_gc()
+        start_housekeeping()
         rows = _spin(executor, nodes, joints, args, history)
         summary = _summary(nodes, joints, rows)
     finally:

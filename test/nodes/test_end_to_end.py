@@ -7,7 +7,9 @@ aging factor of 5.4e5 compresses 3000 operating hours into 20 s of a 1 kHz
 stream. The estimate must approach the simulator's hidden truth, no sample
 may be lost between the simulator and the TE, and the remaining life and
 the reducers' health must reach ``/diagnostics``. Real DDS between the nodes,
-one executor, as ``twin_bringup`` runs them. The chain runs once per module;
+one executor, as ``twin_bringup`` runs them (the ingest hands its pairs to the
+TE monitors in process, ``twin.intra_process``; the last test runs that hop
+over DDS instead). The chain runs once per module;
 each test checks one promise of that run.
 """
 
@@ -153,3 +155,23 @@ def test_each_estimator_saved_its_state_in_the_state_dir(twin):
         state = decode_state(path.read_bytes(), path)
         assert state['counters']['updates'] == (
             twin['nodes']['estimator'][joint].stage.estimator.updates)
+
+
+def test_without_intra_process_the_pairs_cross_dds_and_none_is_lost(default_ros, tmp_path):
+    ros = default_ros
+    config = load_config(default_config())
+    joint = config['twin']['joints'][0]
+    config['twin'].update({'simulate': True, 'intra_process': False, 'joints': [joint],
+                           'aging_factor': 3600.0, 'state_dir': str(tmp_path)})
+    nodes = build_nodes(config, sim_overrides=[Parameter('sim.seed', value=5)])
+    ingest, sim, te = nodes['ingest'], nodes['simulator'], nodes['te'][joint]
+    assert not ingest.outputs[joint].sinks
+    for node in [ingest, te, nodes['estimator'][joint], nodes['life'][joint]]:
+        ros.add(node)
+    ros.wait_matched(sim.pub, ingest.outputs[joint].publisher)
+    ros.add(sim)                                  # the stream starts when it is spun
+    ros.spin_until(lambda: sim.sent >= 2000, what='2 s of simulated stream')
+    ros.remove(sim)
+    ros.spin_until(lambda: ingest.counts()[joint]['published'] == sim.sent == te.samples,
+                   what='every simulated sample at the TE monitor over DDS')
+    assert te.rejects.total == 0 and ingest.rejects.total == 0
