@@ -143,7 +143,14 @@ def _spin(executor, nodes, joints, args, history):
             executor.spin_once(timeout_sec=0.02)
         for te in nodes['te'].values():
             te.analyze_now()
-        end = time.monotonic() + 0.5
+        # The last windows' estimates, then their remaining life (each on the worker).
+        for _ in range(2):
+            end = time.monotonic() + 0.5
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.02)
+            for est in nodes['estimator'].values():
+                est.wait_idle()
+        end = time.monotonic() + 0.3
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.02)
         _record(nodes, joints, history)

@@ -27,7 +27,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
-from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
+from reducer_twin.core.errors import InvalidInput, InvalidParameter, out_of_range
+from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.params import check_value, describe_range
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -247,6 +248,41 @@ class RejectCounter:
             self.node.get_logger().warning(
                 f'dropped a message ({reason}): {detail} [{self.total} dropped so far: '
                 f'{self.counts}]')
+
+    def guard(self, what, reason, fn, *args):
+        """
+        Run ``fn(*args)`` for a background task; count what fails instead of losing it.
+
+        An :class:`~reducer_twin.core.errors.InvalidInput` is counted as
+        ``reason``; any other exception is logged as an error and counted as
+        ``'<what>_error'`` (a worker's failure must be seen, not vanish in a
+        future).
+
+        Parameters
+        ----------
+        what : str
+            The task, for the log and the count (e.g. ``'estimator'``).
+        reason : str
+            Reason key of invalid input.
+        fn : callable
+            The task.
+        *args
+            Its arguments.
+
+        Returns
+        -------
+        tuple
+            ``(True, result)``, or ``(False, None)`` when it failed.
+
+        """
+        try:
+            return True, fn(*args)
+        except InvalidInput as err:
+            self.reject(reason, str(err))
+        except Exception as err:  # noqa: B902 - counted and logged, the node goes on
+            self.node.get_logger().error(f'{what} failed: {err!r}')
+            self.reject(f'{what.split()[-1]}_error', repr(err))
+        return False, None
 
 
 MALLOC_ARENAS = 2

@@ -85,10 +85,7 @@ class LifePublisher(Node):
         WORKER.submit(self._observe_duty, duty)
 
     def _observe_duty(self, duty):
-        try:
-            self.stage.observe_duty(duty)
-        except InvalidInput as err:
-            self.rejects.reject('bad_features', str(err))
+        self.rejects.guard(f'{self.joint}: life', 'bad_features', self.stage.observe_duty, duty)
 
     def _on_wear(self, msg):
         try:
@@ -100,17 +97,12 @@ class LifePublisher(Node):
 
     def _assess(self, wear):
         """Sample the remaining life of one estimate and publish it (on the worker)."""
-        try:
-            record, level, message = self.stage.process(wear)
-        except InvalidInput as err:
-            self.rejects.reject('bad_wear', str(err))
-            return
-        except Exception as err:  # a worker's failure must be seen, not vanish in a future
-            self.get_logger().error(f'{self.joint}: remaining-life update failed: {err!r}')
-            self.rejects.reject('life_error', repr(err))
-            return
-        self.last = (wear, record, level, message)
-        self.pub.publish(to_multiarray(REMAINING_LIFE, record_values(REMAINING_LIFE, record)))
+        ok, result = self.rejects.guard(f'{self.joint}: life', 'bad_wear',
+                                        self.stage.process, wear)
+        if ok:
+            self.last = (wear, *result)
+            self.pub.publish(to_multiarray(REMAINING_LIFE,
+                                           record_values(REMAINING_LIFE, result[0])))
 
     def wait_idle(self):
         """Wait until the estimates received so far have been assessed (demo end, tests)."""

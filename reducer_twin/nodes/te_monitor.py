@@ -111,7 +111,8 @@ class TEMonitor(Node):
             'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)"),
             'window_s': (2.0, 'window length in stream time [s]'),
             'max_gap_s': (0.05, 'largest stamp gap bridged inside a window [s]'),
-            'analysis_period_s': (0.1, 'period of the window analysis [s]'),
+            'analysis_period_s': (0.5, 'period of the window analysis [s] (features of a '
+                                       'window come at most this late)'),
             'te_publish_period_s': (0.02, 'period of the TE batches [s]'),
             'diagnostics_period_s': (1.0, 'period of /diagnostics [s]'),
         }
@@ -192,15 +193,9 @@ class TEMonitor(Node):
 
     def _analyze_rows(self, rows):
         """Run TE extraction and the window analysis; publish completed windows (worker)."""
-        try:
-            stream = self.extractor.update(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2])
-            windows = self.analyzer.update(stream, rows[:, 3], rows[:, 4])
-        except InvalidInput as err:
-            self.rejects.reject('bad_samples', str(err))
-            return
-        except Exception as err:  # a worker's failure must be seen, not vanish in a future
-            self.get_logger().error(f'{self.joint}: window analysis failed: {err!r}')
-            self.rejects.reject('analysis_error', repr(err))
+        ok, windows = self.rejects.guard(f'{self.joint}: window analysis', 'bad_samples',
+                                         self._windows_of, rows)
+        if not ok:
             return
         for f in windows:
             if self.calibration.observe(f):
@@ -210,6 +205,10 @@ class TEMonitor(Node):
             self.last_features = f
             rec = features_record(f, self.params)
             self.feat_pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
+
+    def _windows_of(self, rows):
+        stream = self.extractor.update(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2])
+        return self.analyzer.update(stream, rows[:, 3], rows[:, 4])
 
     def reset_latency(self):
         """Forget the latency samples so far (a benchmark's warm-up)."""

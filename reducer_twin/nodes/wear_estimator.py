@@ -96,17 +96,11 @@ class WearEstimatorNode(Node):
 
     def _update(self, features):
         """Step the filter with one window and publish the estimate (on the worker)."""
-        try:
-            status = self.stage.process(features)
-        except InvalidInput as err:
-            self.rejects.reject('bad_features', str(err))
-            return
-        except Exception as err:  # a worker's failure must be seen, not vanish in a future
-            self.get_logger().error(f'{self.joint}: estimator update failed: {err!r}')
-            self.rejects.reject('estimator_error', repr(err))
-            return
-        self.statuses[status] = self.statuses.get(status, 0) + 1
-        self._publish(features.t_end)
+        ok, status = self.rejects.guard(f'{self.joint}: estimator', 'bad_features',
+                                        self.stage.process, features)
+        if ok:
+            self.statuses[status] = self.statuses.get(status, 0) + 1
+            self._publish(features.t_end)
 
     def wait_idle(self):
         """Wait until the windows received so far have been processed (demo end, tests)."""
