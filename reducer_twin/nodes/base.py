@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 
+import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 import rclpy
@@ -283,6 +284,60 @@ class RejectCounter:
             self.node.get_logger().error(f'{what} failed: {err!r}')
             self.reject(f'{what.split()[-1]}_error', repr(err))
         return False, None
+
+
+class RowBuffer:
+    """
+    Rows accumulated in place in one preallocated array.
+
+    A node that keeps every small batch it receives as an array object until
+    it processes them churns thousands of interpreter objects a second that
+    live for a fraction of a second; over minutes that fragments the
+    allocator's arenas and the resident memory creeps up. Copying the rows
+    into one buffer keeps no object per batch.
+
+    Parameters
+    ----------
+    width : int
+        Columns per row.
+    capacity : int
+        Initial rows; the buffer doubles when it must.
+
+    """
+
+    def __init__(self, width, capacity=1024):
+        self._data = np.empty((int(capacity), int(width)))
+        self.n = 0
+
+    def extend(self, rows):
+        """
+        Return a view of ``rows`` new rows at the end, for the caller to fill.
+
+        Parameters
+        ----------
+        rows : int
+            Rows to add.
+
+        Returns
+        -------
+        ndarray
+            Writable ``(rows, width)`` view.
+
+        """
+        end = self.n + rows
+        if end > self._data.shape[0]:
+            grown = np.empty((max(2 * self._data.shape[0], end), self._data.shape[1]))
+            grown[:self.n] = self._data[:self.n]
+            self._data = grown
+        view = self._data[self.n:end]
+        self.n = end
+        return view
+
+    def take(self):
+        """Return a copy of the rows so far and empty the buffer."""
+        out = self._data[:self.n].copy()
+        self.n = 0
+        return out
 
 
 MALLOC_ARENAS = 2

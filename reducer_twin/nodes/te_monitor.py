@@ -37,9 +37,12 @@ from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
-from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node
+from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WORKER
 from std_msgs.msg import Float64MultiArray
+
+_TE_FROM_PAIRS = [0, 2, 2, 3]
+"""Columns of an encoder pair that start a TE row: stamp, link angle, (link angle), effort."""
 
 LATENCY_KEEP = 1 << 17
 """Latency samples kept for the statistics (a ring of 2 MB per joint)."""
@@ -90,8 +93,8 @@ class TEMonitor(Node):
         self.create_timer(p['analysis_period_s'], self._analyze)
         self.create_timer(p['te_publish_period_s'], self._publish_te)
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
-        self._pending = []
-        self._te_rows = []
+        self._pending = RowBuffer(5, 4096)   # encoder pairs waiting for the window analysis
+        self._te_rows = RowBuffer(5, 256)    # stamp, link, TE, effort, when the TE was computed
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         # Rings filled now: np.zeros would commit pages as they fill, a slow RSS growth.
         self._stamps = np.empty(LATENCY_KEEP)     # sample stamps [s]
@@ -150,24 +153,22 @@ class TEMonitor(Node):
         """
         if rows.shape[0] == 0:
             return
-        # TE on arrival; the bookkeeping (rows of the TE batch, latencies) is done in bulk
-        # when the batch is published, which keeps this 2 kHz callback small.
-        te = rows[:, 2] - rows[:, 1] / self.ratio
-        self._te_rows.append((time.time(), rows, te))
-        self._pending.append(rows)
+        # TE on arrival, into the next TE batch; the latencies are recorded in bulk when
+        # the batch is published, which keeps this 1 kHz callback small.
+        out = self._te_rows.extend(rows.shape[0])
+        out[:, :4] = rows[:, _TE_FROM_PAIRS]
+        out[:, 2] -= rows[:, 1] / self.ratio
+        out[:, 4] = time.time()
+        self._pending.extend(rows.shape[0])[:] = rows
         self.samples += rows.shape[0]
 
     def _publish_te(self):
-        if not self._te_rows:
+        if not self._te_rows.n:
             return
-        batches, self._te_rows = self._te_rows, []
-        rows = np.concatenate([b[1] for b in batches])
-        te = np.concatenate([b[2] for b in batches])
-        arrival = np.repeat([b[0] for b in batches], [b[1].shape[0] for b in batches])
-        self._record_latency(rows[:, 0], arrival)
+        rows = self._te_rows.take()
+        self._record_latency(rows[:, 0], rows[:, 4])
         if self._always_publish or self._te_listened:
-            self.te_pub.publish(self._te_msg.fill(
-                np.column_stack([rows[:, 0], rows[:, 2], te, rows[:, 3]])))
+            self.te_pub.publish(self._te_msg.fill(rows[:, :4]))
 
     def _check_listeners(self):
         self._te_listened = self.te_pub.get_subscription_count() > 0
@@ -181,10 +182,9 @@ class TEMonitor(Node):
 
     def _analyze(self):
         """Hand the accumulated samples to the worker thread (the executor must not wait)."""
-        if not self._pending:
+        if not self._pending.n:
             return
-        rows, self._pending = np.concatenate(self._pending), []
-        WORKER.submit(self._analyze_rows, rows)
+        WORKER.submit(self._analyze_rows, self._pending.take())
 
     def analyze_now(self):
         """Analyse what has accumulated and wait for it (end of a demo, tests)."""

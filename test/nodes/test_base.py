@@ -1,5 +1,5 @@
 """
-The nodes' background worker: order, failures handed over, rests between tasks.
+The nodes' shared helpers: the background worker and the in-place row buffer.
 
 The worker takes window analysis, estimator and remaining-life updates and
 simulator blocks off the executor thread (``reducer_twin.nodes.base``).
@@ -8,8 +8,9 @@ simulator blocks off the executor thread (``reducer_twin.nodes.base``).
 import threading
 import time
 
+import numpy as np
 import pytest
-from reducer_twin.nodes.base import BackgroundWorker
+from reducer_twin.nodes.base import BackgroundWorker, RowBuffer
 
 pytestmark = pytest.mark.timeout(30, method='thread')
 
@@ -49,3 +50,16 @@ def test_the_worker_rests_after_a_task_in_proportion_to_it():
     second = worker.submit(time.perf_counter)
     # The second task starts only after the first one's rest: as long again as it ran.
     assert second.result(timeout=10) - first.result(timeout=10) >= busy_s * 0.9
+
+
+def test_a_row_buffer_keeps_rows_in_order_across_growth_and_empties_on_take():
+    buf = RowBuffer(3, capacity=4)
+    rows = np.arange(30.0).reshape(10, 3)
+    buf.extend(3)[:] = rows[:3]
+    buf.extend(7)[:] = rows[3:]          # past the capacity: the buffer grows
+    np.testing.assert_array_equal(buf.take(), rows)
+    assert buf.n == 0 and buf.take().shape == (0, 3)
+    buf.extend(2)[:] = rows[:2]
+    taken = buf.take()
+    buf.extend(2)[:] = -1.0               # reusing the space leaves the taken copy alone
+    np.testing.assert_array_equal(taken, rows[:2])
