@@ -185,3 +185,40 @@ def test_bad_layouts_are_rejected_and_counted_and_the_monitor_carries_on(ros, si
     status = monitor.status(lambda s: ros.key_values(s)['samples'] == '3000')
     assert status.level == DiagnosticStatus.WARN
     assert ros.key_values(status)['rejected_messages'] == str(len(bad))
+
+
+def test_fed_in_process_the_monitor_publishes_te_only_while_someone_listens(ros, simulated):
+    batch, rows = simulated
+    joint = f'wrist{next(_ids)}'
+    node = ros.add(TEMonitor(f'te_monitor_{joint}', params=PARAMS, subscribe=False,
+                             context=ros.context, parameter_overrides=[
+                                 Parameter('joint', value=joint),
+                                 Parameter('aging_factor', value=AGING)]))
+    pairs_topic = joint_topic(joint, 'encoder_pairs')
+    assert all(s.topic_name != pairs_topic for s in node.subscriptions)
+    sent = []                           # what the monitor hands its real TE publisher
+    publish = node.te_pub.publish
+    node.te_pub.publish = lambda msg: (sent.append(msg), publish(msg))
+    # Nobody listens to the TE topic: the monitor computes TE and windows, publishes no TE.
+    ros.spin_until(lambda: not node._te_listened, what='the monitor to see no TE subscriber')
+    sent.clear()
+    for start in range(0, 4000, 10):
+        node.take_pairs(rows[start:start + 10])
+    ros.spin_for(0.1)
+    node.flush_latency()
+    assert node.samples == 4000 and node.latency_stats()['count'] == 4000
+    assert sent == []
+    probe = ros.probe()
+    te = probe.listen(joint_topic(joint, 'te'), Float64MultiArray, RECEIVE_QOS)
+    ros.wait_matched(node.te_pub)
+    ros.spin_until(lambda: node._te_listened, what='the monitor to see the TE subscriber')
+    for start in range(4000, 6000, 10):
+        node.take_pairs(rows[start:start + 10])
+    ros.spin_until(lambda: sum(m.layout.dim[0].size for m in te) >= 2000, what='2000 TE rows')
+    assert sum(m.layout.dim[0].size for m in sent) == 2000
+    got = np.concatenate([batch_array(m, TE_BATCH) for m in te])
+    np.testing.assert_array_equal(got[:, 0], rows[4000:6000, 0])
+    np.testing.assert_allclose(got[:, 2], rows[4000:6000, 2] - rows[4000:6000, 1] / RATIO,
+                               rtol=0, atol=1e-15)
+    node.analyze_now()
+    assert node.windows >= 1
