@@ -63,9 +63,30 @@ def encoder_qos(reliable=True):
         durability=DurabilityPolicy.VOLATILE)
 
 
-def stream_qos():
-    """Return the QoS of derived streams (TE batches, features): reliable, depth 100."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+WINDOW_DEPTH = 20
+"""History depth of per-window topics (``te_features``): 40 s of windows for a stalled reader.
+
+Each DDS writer keeps up to its depth of samples; a depth of 100 windows, at one
+window per joint every 2 s, kept filling the middleware's pools for minutes."""
+
+
+def stream_qos(depth=100):
+    """
+    Return the QoS of derived streams: reliable, volatile.
+
+    Parameters
+    ----------
+    depth : int
+        KEEP_LAST depth: 100 for TE batches (2 s at 50 Hz), :data:`WINDOW_DEPTH`
+        for per-window features.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+        The profile.
+
+    """
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
 

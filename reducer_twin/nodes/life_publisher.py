@@ -23,7 +23,7 @@ from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeSta
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
-from reducer_twin.nodes.base import WORKER
+from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
 from std_msgs.msg import Float64MultiArray
 
 
@@ -63,7 +63,7 @@ class LifePublisher(Node):
         self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'wear'),
                                  self._on_wear, latest_qos())
         self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'te_features'),
-                                 self._on_features, stream_qos())
+                                 self._on_features, stream_qos(WINDOW_DEPTH))
         self.create_timer(period, self._publish_diagnostics)
 
     def _reconfig(self, config):

@@ -38,7 +38,8 @@ from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
-from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WORKER
+from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW_DEPTH
+from reducer_twin.nodes.base import WORKER
 from std_msgs.msg import Float64MultiArray
 
 _TE_FROM_PAIRS = [0, 2, 2, 3]
@@ -82,7 +83,7 @@ class TEMonitor(Node):
         self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
                                             stream_qos())
         self.feat_pub = self.create_publisher(
-            Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos())
+            Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos(WINDOW_DEPTH))
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._always_publish = subscribe
         self._te_listened = True

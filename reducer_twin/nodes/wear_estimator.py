@@ -27,7 +27,7 @@ from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import m_to_um
 from reducer_twin.nodes.base import diagnostics_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
-from reducer_twin.nodes.base import WORKER
+from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 
@@ -81,7 +81,7 @@ class WearEstimatorNode(Node):
                                          latest_qos())
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.create_subscription(Float64MultiArray, joint_topic(joint, 'te_features'),
-                                 self._on_features, stream_qos())
+                                 self._on_features, stream_qos(WINDOW_DEPTH))
         self.create_service(Trigger, joint_topic(joint, 'reset'), self._on_reset)
         self.create_timer(period, self._publish_diagnostics)
         self._publish()
