@@ -48,13 +48,8 @@ def cpu_s():
     return ru.ru_utime + ru.ru_stime
 
 
-def allocated_mb():
-    """
-    Return the memory glibc's malloc has handed out and not got back [MB], or NaN.
-
-    Unlike the RSS, it leaves out the free memory the allocator keeps in its heaps
-    (fragmentation, returned to the system only by ``malloc_trim``).
-    """
+def _mallinfo2():
+    """Return glibc's ``mallinfo2`` with its result type set, or None (loaded once)."""
     import ctypes
 
     class MallInfo2(ctypes.Structure):
@@ -63,11 +58,29 @@ def allocated_mb():
             'uordblks', 'fordblks', 'keepcost')]
 
     try:
-        mallinfo2 = ctypes.CDLL('libc.so.6').mallinfo2
+        function = ctypes.CDLL('libc.so.6').mallinfo2
     except (OSError, AttributeError):
+        return None
+    function.restype = MallInfo2
+    return function
+
+
+_MALLINFO2 = []
+
+
+def allocated_mb():
+    """
+    Return the memory glibc's malloc has handed out and not got back [MB], or NaN.
+
+    Unlike the RSS, it leaves out the free memory the allocator keeps in its heaps
+    (fragmentation, returned to the system only by ``malloc_trim``). Only the main
+    arena and large mapped blocks are counted (what ``mallinfo2`` reports).
+    """
+    if not _MALLINFO2:
+        _MALLINFO2.append(_mallinfo2())
+    if _MALLINFO2[0] is None:
         return float('nan')
-    mallinfo2.restype = MallInfo2
-    info = mallinfo2()
+    info = _MALLINFO2[0]()
     return (info.uordblks + info.hblkhd) / 1e6
 
 

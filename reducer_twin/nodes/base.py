@@ -369,11 +369,18 @@ TRIM_PERIOD_S = 30.0
 
 
 def _libc():
-    import ctypes
-    try:
-        return ctypes.CDLL('libc.so.6')
-    except OSError:   # not glibc: its allocator needs none of this
-        return None
+    """Return glibc, loaded once (each load makes new function-pointer classes), or None."""
+    global _LIBC
+    if _LIBC is False:
+        import ctypes
+        try:
+            _LIBC = ctypes.CDLL('libc.so.6')
+        except OSError:   # not glibc: its allocator needs none of this
+            _LIBC = None
+    return _LIBC
+
+
+_LIBC = False
 
 
 def bound_allocator(arenas=MALLOC_ARENAS):
