@@ -78,8 +78,7 @@ def run(args):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from rclpy.parameter import Parameter
-    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
-    from reducer_twin.nodes.base import start_housekeeping
+    from reducer_twin.nodes.base import make_executor, quiet_gc
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     aging = args.hours * HOUR / args.duration_s
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -88,7 +87,6 @@ def run(args):
     config['twin'].update({'joints': joints, 'aging_factor': aging, 'simulate': True,
                            'state_dir': state_dir})
     config['simulator'].update({'profile': args.profile, 'wear_rate_scales': scales})
-    bound_allocator()   # as the node programs do (run_nodes)
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     history = {j: [] for j in joints}
     try:
@@ -99,7 +97,6 @@ def run(args):
         for node in all_nodes(nodes):
             executor.add_node(node)
         quiet_gc()
-        start_housekeeping()
         rows = _spin(executor, nodes, joints, args, history)
         summary = _summary(nodes, joints, rows)
     finally:
@@ -120,6 +117,7 @@ def run(args):
 
 def _spin(executor, nodes, joints, args, history):
     """Spin until the simulator has streamed ``duration_s``; keep the history and the table."""
+    from reducer_twin.nodes.base import WORKER
     sim = nodes['simulator']
     live = None
     if not args.json:
@@ -137,27 +135,26 @@ def _spin(executor, nodes, joints, args, history):
             if live is not None and now - last_view >= 0.5:
                 last_view = now
                 live.update(_table(_summary(nodes, joints, None), _title(sim, args)))
-        # Let the last windows reach the estimator.
-        end = time.monotonic() + 1.0
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.02)
+        # The last samples reach the TE monitors and are analysed; then the windows'
+        # estimates and their remaining life (each a DDS hop, then a task on the worker).
+        _spin_for(executor, 1.0)
         for te in nodes['te'].values():
             te.analyze_now()
-        # The last windows' estimates, then their remaining life (each on the worker).
         for _ in range(2):
-            end = time.monotonic() + 0.5
-            while time.monotonic() < end:
-                executor.spin_once(timeout_sec=0.02)
-            for est in nodes['estimator'].values():
-                est.wait_idle()
-        end = time.monotonic() + 0.3
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.02)
+            _spin_for(executor, 0.5)
+            WORKER.wait_idle()
+        _spin_for(executor, 0.3)
         _record(nodes, joints, history)
     finally:
         if live is not None:
             live.stop()
     return None
+
+
+def _spin_for(executor, seconds):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
 
 
 def _title(sim, args):

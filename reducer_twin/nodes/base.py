@@ -64,10 +64,7 @@ def encoder_qos(reliable=True):
 
 
 WINDOW_DEPTH = 20
-"""History depth of per-window topics (``te_features``): 40 s of windows for a stalled reader.
-
-Each DDS writer keeps up to its depth of samples; a depth of 100 windows, at one
-window per joint every 2 s, kept filling the middleware's pools for minutes."""
+"""History depth of per-window topics (``te_features``): 40 s of windows for a stalled reader."""
 
 
 def stream_qos(depth=100):
@@ -271,19 +268,19 @@ class RejectCounter:
                 f'dropped a message ({reason}): {detail} [{self.total} dropped so far: '
                 f'{self.counts}]')
 
-    def guard(self, what, reason, fn, *args):
+    def guard(self, task, reason, fn, *args):
         """
         Run ``fn(*args)`` for a background task; count what fails instead of losing it.
 
         An :class:`~reducer_twin.core.errors.InvalidInput` is counted as
         ``reason``; any other exception is logged as an error and counted as
-        ``'<what>_error'`` (a worker's failure must be seen, not vanish in a
+        ``'<task>_error'`` (a worker's failure must be seen, not vanish in a
         future).
 
         Parameters
         ----------
-        what : str
-            The task, for the log and the count (e.g. ``'estimator'``).
+        task : str
+            Short name of the task, for the log and the count (e.g. ``'estimator'``).
         reason : str
             Reason key of invalid input.
         fn : callable
@@ -302,8 +299,8 @@ class RejectCounter:
         except InvalidInput as err:
             self.reject(reason, str(err))
         except Exception as err:  # noqa: B902 - counted and logged, the node goes on
-            self.node.get_logger().error(f'{what} failed: {err!r}')
-            self.reject(f'{what.split()[-1]}_error', repr(err))
+            self.node.get_logger().error(f'{task} failed: {err!r}')
+            self.reject(f'{task}_error', repr(err))
         return False, None
 
 
@@ -311,11 +308,9 @@ class RowBuffer:
     """
     Rows accumulated in place in one preallocated array.
 
-    A node that keeps every small batch it receives as an array object until
-    it processes them churns thousands of interpreter objects a second that
-    live for a fraction of a second; over minutes that fragments the
-    allocator's arenas and the resident memory creeps up. Copying the rows
-    into one buffer keeps no object per batch.
+    For a node that receives small batches (one row per controller message)
+    and processes them later: rows are copied in as they come, and taken out
+    as one array, with no list of batch arrays to keep and concatenate.
 
     Parameters
     ----------
@@ -359,81 +354,6 @@ class RowBuffer:
         out = self._data[:self.n].copy()
         self.n = 0
         return out
-
-
-MALLOC_ARENAS = 2
-"""glibc malloc arenas a node process may use (glibc's default is 8 per core)."""
-
-TRIM_PERIOD_S = 30.0
-"""How often free heap memory is handed back to the system in a long run [s]."""
-
-
-def _libc():
-    """Return glibc, loaded once (each load makes new function-pointer classes), or None."""
-    global _LIBC
-    if _LIBC is False:
-        import ctypes
-        try:
-            _LIBC = ctypes.CDLL('libc.so.6')
-        except OSError:   # not glibc: its allocator needs none of this
-            _LIBC = None
-    return _LIBC
-
-
-_LIBC = False
-
-
-def bound_allocator(arenas=MALLOC_ARENAS):
-    """
-    Keep the C allocator's memory from creeping up over days of running.
-
-    glibc's malloc gives each thread that allocates under contention an arena
-    of its own, up to 8 per core; DDS, the executor and the worker threads
-    each fragment one, and the resident memory creeps up by megabytes though
-    nothing leaks. Bounding the arenas (``M_ARENA_MAX``, the effect of
-    ``MALLOC_ARENA_MAX``) must happen before those threads start: call this
-    before ``rclpy.init``. No-op where the C library is not glibc.
-
-    Parameters
-    ----------
-    arenas : int
-        Largest number of arenas.
-
-    """
-    libc = _libc()
-    if libc is not None and hasattr(libc, 'mallopt'):
-        libc.mallopt(-8, int(arenas))   # M_ARENA_MAX
-
-
-def trim_memory():
-    """Hand the free memory of the C allocator's heaps back to the system (``malloc_trim``)."""
-    libc = _libc()
-    if libc is not None and hasattr(libc, 'malloc_trim'):
-        libc.malloc_trim(0)
-
-
-def _housekeeping(period_s):
-    while True:
-        time.sleep(period_s)
-        WORKER.submit(trim_memory)
-
-
-def start_housekeeping(period_s=TRIM_PERIOD_S):
-    """
-    Trim the C heaps every ``period_s`` on the background worker, for good.
-
-    Freed memory inside glibc's heaps stays resident until trimmed; a twin
-    that runs for months trims it periodically (a few milliseconds, on
-    :data:`WORKER`). Started once per process; later calls do nothing.
-    """
-    global _housekeeper
-    if _housekeeper is None:
-        _housekeeper = threading.Thread(target=_housekeeping, args=(period_s,),
-                                        name='reducer-twin-housekeeping', daemon=True)
-        _housekeeper.start()
-
-
-_housekeeper = None
 
 
 def quiet_gc():
@@ -614,7 +534,6 @@ def run_nodes(factory, args=None):
     """
     stop = StopRequest()
     previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
-    bound_allocator()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
@@ -624,7 +543,6 @@ def run_nodes(factory, args=None):
         for node in nodes:
             executor.add_node(node)
         quiet_gc()
-        start_housekeeping()
         spin_until_shutdown(executor, stop=stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

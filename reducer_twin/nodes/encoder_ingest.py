@@ -60,7 +60,7 @@ class _JointOutput:
         self.published += rows.shape[0]
         for sink in self.sinks:
             sink(rows)
-        if self.listened or not self.sinks:
+        if self.listened:
             self.publisher.publish(self.message.fill(rows))
 
 
@@ -238,8 +238,9 @@ class EncoderIngest(Node):
         self.outputs[joint].sinks.append(sink)
 
     def _check_listeners(self):
+        # Without an in-process consumer the topic is the only way out: always published.
         for out in self.outputs.values():
-            out.listened = out.publisher.get_subscription_count() > 0
+            out.listened = not out.sinks or out.publisher.get_subscription_count() > 0
 
     def _flush_stale(self):
         if self._raw_since is None:

@@ -85,7 +85,7 @@ class LifePublisher(Node):
         WORKER.submit(self._observe_duty, duty)
 
     def _observe_duty(self, duty):
-        self.rejects.guard(f'{self.joint}: life', 'bad_features', self.stage.observe_duty, duty)
+        self.rejects.guard('life', 'bad_features', self.stage.observe_duty, duty)
 
     def _on_wear(self, msg):
         try:
@@ -97,16 +97,11 @@ class LifePublisher(Node):
 
     def _assess(self, wear):
         """Sample the remaining life of one estimate and publish it (on the worker)."""
-        ok, result = self.rejects.guard(f'{self.joint}: life', 'bad_wear',
-                                        self.stage.process, wear)
+        ok, result = self.rejects.guard('life', 'bad_wear', self.stage.process, wear)
         if ok:
             self.last = (wear, *result)
             self.pub.publish(to_multiarray(REMAINING_LIFE,
                                            record_values(REMAINING_LIFE, result[0])))
-
-    def wait_idle(self):
-        """Wait until the estimates received so far have been assessed (demo end, tests)."""
-        WORKER.wait_idle()
 
     def summary(self):
         """

@@ -18,7 +18,7 @@ batches are published only while something subscribes to them.
 The link encoder's time offset is learnt from the first windows and then
 compensated (:class:`~reducer_twin.core.pipeline.TimeOffsetCalibration`).
 The node also measures how long samples take from their stamp to their TE
-(``latency_stats()``, and the ``latency_p99_ms`` diagnostic).
+(``latency_stats()``, and the ``latency_p99_ms`` diagnostic over each report's period).
 """
 
 import time
@@ -85,10 +85,10 @@ class TEMonitor(Node):
         self.feat_pub = self.create_publisher(
             Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos(WINDOW_DEPTH))
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
-        self._always_publish = subscribe
-        self._te_listened = True
-        self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
-        if subscribe:
+        self._te_listened = True    # fed in process, checked: see _check_listeners
+        if not subscribe:
+            self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
+        else:
             self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
                                      self._on_pairs, encoder_qos())
         self.create_timer(p['analysis_period_s'], self._analyze)
@@ -103,6 +103,7 @@ class TEMonitor(Node):
         self._stamps.fill(0.0)
         self._arrival.fill(0.0)
         self._latency_n = 0
+        self._diag_mark = 0     # latency samples already reported in /diagnostics
         self.samples = 0
         self.windows = 0
         self.last_features = None
@@ -168,7 +169,7 @@ class TEMonitor(Node):
             return
         rows = self._te_rows.take()
         self._record_latency(rows[:, 0], rows[:, 4])
-        if self._always_publish or self._te_listened:
+        if self._te_listened:
             self.te_pub.publish(self._te_msg.fill(rows[:, :4]))
 
     def _check_listeners(self):
@@ -194,8 +195,7 @@ class TEMonitor(Node):
 
     def _analyze_rows(self, rows):
         """Run TE extraction and the window analysis; publish completed windows (worker)."""
-        ok, windows = self.rejects.guard(f'{self.joint}: window analysis', 'bad_samples',
-                                         self._windows_of, rows)
+        ok, windows = self.rejects.guard('analysis', 'bad_samples', self._windows_of, rows)
         if not ok:
             return
         for f in windows:
@@ -214,11 +214,7 @@ class TEMonitor(Node):
     def reset_latency(self):
         """Forget the latency samples so far (a benchmark's warm-up)."""
         self._latency_n = 0
-
-    def latency_samples(self):
-        """Return the kept stamp-to-TE latencies [s]."""
-        n = min(self._latency_n, LATENCY_KEEP)
-        return self._arrival[:n] - self._stamps[:n]
+        self._diag_mark = 0
 
     def latency_records(self):
         """Return ``(stamps [s], TE times [s])`` of the kept samples."""
@@ -229,25 +225,37 @@ class TEMonitor(Node):
         """Publish the pending TE batch now so its latencies are counted."""
         self._publish_te()
 
-    def latency_stats(self):
+    def latency_stats(self, last=None):
         """
         Return stamp-to-TE latency statistics [s].
+
+        Parameters
+        ----------
+        last : int, optional
+            Only the newest ``last`` samples; default every kept sample.
 
         Returns
         -------
         dict
-            ``count``, ``p50``, ``p99``, ``max`` over the kept samples.
+            ``count``, ``p50``, ``p99``, ``max``.
 
         """
-        n = min(self._latency_n, LATENCY_KEEP)
+        kept = min(self._latency_n, LATENCY_KEEP)
+        n = kept if last is None else max(min(last, kept), 0)
         if n == 0:
             return {'count': 0, 'p50': float('nan'), 'p99': float('nan'), 'max': float('nan')}
-        lat = self._arrival[:n] - self._stamps[:n]
-        return {'count': self._latency_n, 'p50': float(np.percentile(lat, 50)),
-                'p99': float(np.percentile(lat, 99)), 'max': float(lat.max())}
+        rows = (slice(0, n) if last is None
+                else np.arange(self._latency_n - n, self._latency_n) % LATENCY_KEEP)
+        lat = self._arrival[rows] - self._stamps[rows]
+        return {'count': self._latency_n if last is None else n,
+                'p50': float(np.percentile(lat, 50)), 'p99': float(np.percentile(lat, 99)),
+                'max': float(lat.max())}
 
     def _publish_diagnostics(self):
-        lat = self.latency_stats()
+        # The samples since the last report: a percentile over the whole ring (1 MB) would
+        # cost the executor a millisecond a second per joint.
+        lat = self.latency_stats(last=self._latency_n - self._diag_mark)
+        self._diag_mark = self._latency_n
         f = self.last_features
         values = {'samples': self.samples, 'windows': self.windows,
                   'rejected_messages': self.rejects.total,

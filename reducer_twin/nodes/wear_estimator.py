@@ -96,15 +96,11 @@ class WearEstimatorNode(Node):
 
     def _update(self, features):
         """Step the filter with one window and publish the estimate (on the worker)."""
-        ok, status = self.rejects.guard(f'{self.joint}: estimator', 'bad_features',
-                                        self.stage.process, features)
+        ok, status = self.rejects.guard('estimator', 'bad_features', self.stage.process,
+                                        features)
         if ok:
             self.statuses[status] = self.statuses.get(status, 0) + 1
             self._publish(features.t_end)
-
-    def wait_idle(self):
-        """Wait until the windows received so far have been processed (demo end, tests)."""
-        WORKER.wait_idle()
 
     def close(self):
         """Process the queued windows and write the last state before the node goes away."""

@@ -23,7 +23,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.estimator import decode_state
 from reducer_twin.core.units import HOUR
-from reducer_twin.nodes.base import joint_topic
+from reducer_twin.nodes.base import joint_topic, WORKER
 from reducer_twin.nodes.twin_bringup import build_nodes, default_config, load_config
 from std_msgs.msg import Float64MultiArray
 
@@ -86,8 +86,7 @@ def twin(default_ros, tmp_path_factory):
     for te in nodes['te'].values():
         te.analyze_now()
     ros.spin_for(0.5)
-    for est in nodes['estimator'].values():
-        est.wait_idle()             # the last windows' updates, published from the worker
+    WORKER.wait_idle()              # the last windows' updates, published from the worker
     ros.spin_for(0.5)
     return {'nodes': nodes, 'joints': joints, 'state_dir': state_dir, 'life': life,
             'diagnostics': diagnostics, 'ros': ros}
