@@ -19,27 +19,9 @@ Usage: ``python bench/bench_live_chain.py [--joints 6] [--duration-s 60]``
 import argparse
 import os
 import resource
-import tempfile
 import time
 
-os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')
-os.environ.setdefault('ROS_DOMAIN_ID', str(40 + os.getpid() % 50))
-
-
-def rss_mb():
-    """Return the resident set size of this process [MB]."""
-    with open('/proc/self/statm') as fh:
-        return int(fh.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 1e6
-
-
-def steal_s():
-    """Return the CPU time the hypervisor has given other guests so far [s], or None."""
-    try:
-        with open('/proc/stat') as fh:
-            return int(fh.readline().split()[8]) / os.sysconf('SC_CLK_TCK')
-    except (OSError, ValueError, IndexError):
-        return None
+from live_bringup import rss_mb, start_bringup, steal_s
 
 
 def main():
@@ -51,21 +33,8 @@ def main():
     args = ap.parse_args()
     import numpy as np
     import rclpy
-    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
-    from reducer_twin.nodes.base import start_housekeeping
-    from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
-    joints = [f'joint_{k + 1}' for k in range(args.joints)]
-    config = load_config(None)
-    config['twin'].update({'joints': joints, 'aging_factor': 36000.0, 'simulate': True,
-                           'state_dir': tempfile.mkdtemp(prefix='bench-live-')})
-    bound_allocator()   # as the node programs do (run_nodes)
-    rclpy.init(args=['--ros-args', '--log-level', 'warn'])
-    nodes = build_nodes(config)
-    executor = make_executor()
-    for node in all_nodes(nodes):
-        executor.add_node(node)
-    quiet_gc()
-    start_housekeeping()
+    nodes, executor, _ = start_bringup(args.joints, 'bench-live-')
+    joints = list(nodes['te'])
     sim = nodes['simulator']
 
     def spin_for(seconds):

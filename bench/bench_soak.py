@@ -12,9 +12,9 @@ nothing lost"):
 * resident memory every 30 s, and its growth after the first minute
   (``--warmup-s``), once the caches are warm: the first minute fills the model
   tables, the import caches and the executor's pools. The nodes' fixed-size
-  latency rings (``te_monitor``: 200 k samples per joint; the simulator's publish
-  log), allocated zero-filled but resident only once written, are written through
-  at the start, so that their filling is not taken for growth;
+  latency rings (``te_monitor``: 131 k samples per joint; the simulator's publish
+  log) are written through when the nodes are built, so that their filling is not
+  taken for growth;
 * estimator state files written (and whether each file on disk decodes), windows
   analysed, and whether every node survived: still making progress in the last
   interval, nothing raised out of a callback.
@@ -25,21 +25,11 @@ Usage: ``python bench/bench_soak.py [--joints 6] [--duration-s 600] [--warmup-s 
 """
 
 import argparse
-import os
 from pathlib import Path
 import resource
-import tempfile
 import time
 
-os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-os.environ.setdefault('FASTDDS_BUILTIN_TRANSPORTS', 'SHM')
-os.environ.setdefault('ROS_DOMAIN_ID', str(40 + os.getpid() % 50))
-
-
-def rss_mb():
-    """Return the resident set size of this process [MB]."""
-    with open('/proc/self/statm') as fh:
-        return int(fh.read().split()[1]) * os.sysconf('SC_PAGE_SIZE') / 1e6
+from live_bringup import rss_mb, start_bringup
 
 
 def cpu_s():
@@ -82,23 +72,6 @@ def allocated_mb():
         return float('nan')
     info = _MALLINFO2[0]()
     return (info.uordblks + info.hblkhd) / 1e6
-
-
-def touch_rings(nodes):
-    """
-    Write through the nodes' large fixed-size numpy buffers; return their size [MB].
-
-    ``np.zeros`` memory becomes resident only when written: a ring that fills over
-    minutes would look like a leak. Written once here, before the first sample.
-    """
-    import numpy as np
-    total = 0
-    for node in nodes:
-        for value in vars(node).values():
-            if isinstance(value, np.ndarray) and value.nbytes >= 1 << 20:
-                value.fill(0)
-                total += value.nbytes
-    return total / 1e6
 
 
 class Progress:
@@ -152,25 +125,10 @@ def main():
     import rclpy
     from reducer_twin.core.errors import StateFileError
     from reducer_twin.core.estimator import decode_state
-    from reducer_twin.nodes.base import bound_allocator, make_executor, quiet_gc
-    from reducer_twin.nodes.base import start_housekeeping
-    from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
 
-    joints = [f'joint_{k + 1}' for k in range(args.joints)]
-    state_dir = Path(tempfile.mkdtemp(prefix='bench-soak-'))
-    config = load_config(None)
-    config['twin'].update({'joints': joints, 'aging_factor': 36000.0, 'simulate': True,
-                           'state_dir': str(state_dir)})
-    bound_allocator()   # as the node programs do (run_nodes)
-    rclpy.init(args=['--ros-args', '--log-level', 'warn'])
-    nodes = build_nodes(config)
-    flat = all_nodes(nodes)
-    executor = make_executor()
-    for node in flat:
-        executor.add_node(node)
-    rings = touch_rings(flat)
-    quiet_gc()
-    start_housekeeping()
+    nodes, executor, state_dir = start_bringup(args.joints, 'bench-soak-')
+    state_dir = Path(state_dir)
+    joints = list(nodes['te'])
     sim = nodes['simulator']
     progress = Progress(nodes, joints)
     failure = None
@@ -246,7 +204,6 @@ def main():
     print(f'  malloc in use        {warm[7]:.1f} MB at {warm[0]:.0f} s, {end[7]:.1f} MB at '
           f'{end[0]:.0f} s ({end[7] - warm[7]:+.1f} MB; the RSS also counts the free memory '
           f'the allocator keeps)')
-    print(f'  fixed rings written through at start: {rings:.1f} MB')
     print(f'  windows analysed     {end[4]}; estimator state files written {written} '
           f'({write_failures} failed), {readable}/{args.joints} files on disk decode')
     survived = failure is None and not stalled
