@@ -9,7 +9,6 @@ from the same windows, so the node must match it exactly.
 """
 
 import itertools
-import math
 import subprocess
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -19,18 +18,16 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from reducer_twin.core import wear
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import backup_path, decode_state, EstimatorConfig
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import duty_to_record, EstimatorStage, features_from_record
-from reducer_twin.core.te_extraction import DutySummary
-from reducer_twin.core.transmission_error import model_tables
-from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.core.pipeline import EstimatorStage, features_from_record
+from reducer_twin.core.units import HOUR
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from window_records import feature_records
 
 pytestmark = pytest.mark.timeout(60, method='thread')
 
@@ -51,25 +48,8 @@ LATE_JOINER_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
 @pytest.fixture(scope='module')
 def records():
     """Forty te_features records of a reducer wearing at 0.8 x the model rate."""
-    rng = np.random.default_rng(11)
-    n = 40
-    torque = PARAMS.rating.rated_torque * rng.uniform(0.6, 1.2, n)
-    speed = np.full(n, wear.reference_speed(PARAMS))
-    exposure = np.full(n, EXPOSURE)
-    increment = wear.wear_rate(torque, speed, 0.0, PARAMS) * exposure
-    true_w = wear.integrate_wear(exposure, torque, speed, PARAMS, rate_scale=0.8)
-    z = model_tables(PARAMS).lost_motion(true_w) + rng.normal(0.0, 0.05 * ARCMIN, n)
-    out = []
-    for k in range(n):
-        rec = dict.fromkeys(TE_FEATURES.fields, math.nan)
-        rec.update({'window_start_s': 5000.0 + k * WINDOW_S,
-                    'window_end_s': 5000.0 + (k + 1) * WINDOW_S, 'samples': 2000.0,
-                    'lost_motion_rad': float(z[k]), 'lost_motion_std_rad': 0.05 * ARCMIN})
-        rec.update(duty_to_record(DutySummary(
-            WINDOW_S, EXPOSURE, float(increment[k]), float(torque[k]), float(speed[k]),
-            float(torque[k]), float(1.1 * torque[k]))))
-        out.append(rec)
-    return out
+    return feature_records(PARAMS, 40, seed=11, start_s=5000.0, window_s=WINDOW_S,
+                           exposure_s=EXPOSURE)
 
 
 def offline(records):

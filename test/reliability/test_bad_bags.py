@@ -17,15 +17,14 @@ prints one ``ERROR:`` line and exits 1. Never a traceback.
 """
 
 import contextlib
-import importlib.util
 import io
 import json
 import math
-from pathlib import Path
 import re
 import shutil
 import subprocess
 
+import bad_inputs as bad
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_adapters.jointstate_cdr import encode_joint_states
 from msg_adapters.ros import make_joint_state
@@ -36,16 +35,6 @@ from reducer_twin.analysis.bag import BagDirWriter, open_bag
 from reducer_twin.analysis.simulate import AGING_KEY
 from reducer_twin.cli import main
 
-
-def _load(name):
-    spec = importlib.util.spec_from_file_location(
-        f'reliability_{name}', Path(__file__).with_name(f'{name}.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-bad = _load('bad_inputs')
 
 pytestmark = pytest.mark.timeout(120, method='thread')
 

@@ -16,12 +16,11 @@ life stay finite, and the estimate does not jump: it ends within a tolerance of 
 estimate of the clean stream and never steps further than the clean run does.
 """
 
-import importlib.util
 import itertools
 import math
-from pathlib import Path
 import time
 
+import bad_inputs as bad
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from msg_adapters.layouts import REMAINING_LIFE, WEAR_ESTIMATE
 from msg_adapters.ros import from_multiarray, make_joint_state
@@ -37,16 +36,6 @@ from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-
-def _load(name):
-    spec = importlib.util.spec_from_file_location(
-        f'reliability_{name}', Path(__file__).with_name(f'{name}.py'))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-bad = _load('bad_inputs')
 
 pytestmark = pytest.mark.timeout(60, method='thread')
 

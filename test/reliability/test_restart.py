@@ -23,16 +23,14 @@ from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from reducer_twin.core import wear
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import backup_path, decode_state, load_with_fallback
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import duty_to_record, EstimatorStage, features_from_record
-from reducer_twin.core.te_extraction import DutySummary
-from reducer_twin.core.transmission_error import model_tables
-from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.core.pipeline import EstimatorStage, features_from_record
+from reducer_twin.core.units import HOUR
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from std_msgs.msg import Float64MultiArray
+from window_records import feature_records
 
 pytestmark = [pytest.mark.timeout(120, method='thread'), pytest.mark.slow]
 
@@ -52,24 +50,8 @@ RECEIVE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
 @pytest.fixture(scope='module')
 def records():
     """Return twelve te_features records of a reducer wearing at 0.8 x the model rate."""
-    rng = np.random.default_rng(23)
-    torque = PARAMS.rating.rated_torque * rng.uniform(0.6, 1.2, WINDOWS)
-    speed = np.full(WINDOWS, wear.reference_speed(PARAMS))
-    exposure = np.full(WINDOWS, EXPOSURE)
-    increment = wear.wear_rate(torque, speed, 0.0, PARAMS) * exposure
-    true_w = wear.integrate_wear(exposure, torque, speed, PARAMS, rate_scale=0.8)
-    z = model_tables(PARAMS).lost_motion(true_w) + rng.normal(0.0, 0.05 * ARCMIN, WINDOWS)
-    out = []
-    for k in range(WINDOWS):
-        rec = dict.fromkeys(TE_FEATURES.fields, math.nan)
-        rec.update({'window_start_s': 9000.0 + k * WINDOW_S,
-                    'window_end_s': 9000.0 + (k + 1) * WINDOW_S, 'samples': 2000.0,
-                    'lost_motion_rad': float(z[k]), 'lost_motion_std_rad': 0.05 * ARCMIN})
-        rec.update(duty_to_record(DutySummary(
-            WINDOW_S, EXPOSURE, float(increment[k]), float(torque[k]), float(speed[k]),
-            float(torque[k]), float(1.1 * torque[k]))))
-        out.append(rec)
-    return out
+    return feature_records(PARAMS, WINDOWS, seed=23, start_s=9000.0, window_s=WINDOW_S,
+                           exposure_s=EXPOSURE)
 
 
 def offline(records, params=PARAMS, state_path=None):
