@@ -536,6 +536,9 @@ class SpikeFilterBank:
         self.ratio = float(ratio)
         self.filters = [SpikeFilter(ratio, config) for _ in range(columns)]
         self.threshold = self.filters[0].threshold
+        # Last accepted TE of every column while no filter has a rejection pending (the
+        # common case, kept here as one array); None otherwise, the filters then hold it.
+        self._last = None
 
     def keep(self, motor, link, valid):
         """
@@ -551,24 +554,33 @@ class SpikeFilterBank:
         Returns
         -------
         ndarray of bool, shape (N, K)
-            ``valid`` without the spikes.
+            ``valid`` without the spikes: ``valid`` itself when no sample is
+            dropped.
 
         """
         with np.errstate(invalid='ignore'):
             te = link - motor / self.ratio
-        filters = self.filters
-        if valid.all() and all(f._rejected is None for f in filters):
-            last = np.array([te[0, k] if f._last is None else f._last
-                             for k, f in enumerate(filters)])
-            jumps = np.abs(np.diff(te, axis=0, prepend=last[None, :])) > self.threshold
+        last = self._last
+        if last is not None and valid.all():
+            if te.shape[0] == 1:
+                jumps = np.abs(te[0] - last) > self.threshold
+            else:
+                jumps = np.abs(np.diff(te, axis=0, prepend=last[None, :])) > self.threshold
             if not jumps.any():
-                for f, x in zip(filters, te[-1].tolist()):
-                    f._last = x
+                self._last = te[-1].copy()
                 return valid
+        filters = self.filters
+        if last is not None:
+            for f, x in zip(filters, last.tolist()):
+                f._last = x
         keep = valid.copy()
         for k, f in enumerate(filters):
             rows = np.flatnonzero(valid[:, k])
             keep[rows, k] = f.keep_te(te[rows, k])
+        if all(f._last is not None and f._rejected is None for f in filters):
+            self._last = np.array([f._last for f in filters])
+        else:
+            self._last = None
         return keep
 
     def counts(self, k):

@@ -349,6 +349,22 @@ class RowBuffer:
         self.n = end
         return view
 
+    def append(self, row):
+        """
+        Add one row.
+
+        Parameters
+        ----------
+        row : sequence of float
+            ``width`` values.
+
+        """
+        if self.n == self._data.shape[0]:
+            self.extend(1)
+            self.n -= 1
+        self._data[self.n] = row
+        self.n += 1
+
     def take(self):
         """Return a copy of the rows so far and empty the buffer."""
         out = self._data[:self.n].copy()

@@ -114,7 +114,8 @@ class EncoderIngest(Node):
         self.create_subscription(JointState, p['link_topic'], self._on_link, qos)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
-        self.create_timer(max(p['batch_period_s'] * 5, 0.01), self._flush_stale)
+        if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
+            self.create_timer(max(p['batch_period_s'] * 5, 0.01), self._flush_stale)
         self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
 
     def _declare_plain(self):
@@ -161,7 +162,8 @@ class EncoderIngest(Node):
         self._raw[side].append((t, pos, vel, eff))
         if self._raw_since is None:
             self._raw_since = t
-        elif t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
+        # With batch_period_s 0 the message goes on at once, not with the next one.
+        if t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
             self._process()
 
     def _process(self):
@@ -183,26 +185,32 @@ class EncoderIngest(Node):
 
     def _pair_all(self, clean):
         """Pair, despike and publish every joint of a combined-form batch at once."""
-        link = clean.position[:, 0::2]
-        motor = clean.position[:, 1::2] * self.scale
-        link_ok, motor_ok = np.isfinite(link), np.isfinite(motor)
-        paired = link_ok & motor_ok
+        position = clean.position
+        finite = np.isfinite(position)
+        link = position[:, 0::2]
+        motor = position[:, 1::2] * self.scale
+        if finite.all():
+            paired, unpaired = _all_true(finite.shape[0], link.shape[1]), None
+        else:
+            link_ok, motor_ok = finite[:, 0::2], finite[:, 1::2]
+            paired = link_ok & motor_ok
+            unpaired = np.count_nonzero(link_ok ^ motor_ok, axis=0)
         keep = self.spikes.keep(motor, link, paired)
         n, j = link.shape
-        rows = np.empty((n, j, 5))
-        rows[:, :, 0] = (clean.t_ns * 1e-9)[:, None]
-        rows[:, :, 1] = motor
-        rows[:, :, 2] = link
-        rows[:, :, 3] = clean.effort[:, 0::2]
-        rows[:, :, 4] = clean.velocity[:, 0::2]
-        all_kept = keep.all()
-        unpaired = np.count_nonzero(link_ok ^ motor_ok, axis=0) if not paired.all() else None
+        # Joint-major, so that each joint's rows are one contiguous block.
+        rows = np.empty((j, n, 5))
+        rows[:, :, 0] = clean.t_ns * 1e-9
+        rows[:, :, 1] = motor.T
+        rows[:, :, 2] = link.T
+        rows[:, :, 3] = clean.effort[:, 0::2].T
+        rows[:, :, 4] = clean.velocity[:, 0::2].T
+        all_kept = keep is paired and unpaired is None
         for k, out in enumerate(self.outputs.values()):
             if unpaired is not None:
                 out.pairer.unpaired += int(unpaired[k])
-            joint_rows = rows[:, k, :] if all_kept else rows[keep[:, k], k, :]
+            joint_rows = rows[k] if all_kept else rows[k][keep[:, k]]
             if joint_rows.shape[0]:
-                out.emit(np.ascontiguousarray(joint_rows))
+                out.emit(joint_rows)
 
     def _publish(self, out, pairs):
         if len(pairs):
@@ -278,10 +286,29 @@ class EncoderIngest(Node):
         self.diag_pub.publish(diagnostic_array(self.get_clock().now().nanoseconds, statuses))
 
 
+_ALL_TRUE = {}
+"""Read-only all-True masks of small batches, by shape (most batches are all paired)."""
+
+
+def _all_true(n, k):
+    """Return a read-only all-True ``(n, k)`` mask."""
+    mask = _ALL_TRUE.get((n, k))
+    if mask is None:
+        mask = np.ones((n, k), dtype=bool)
+        mask.flags.writeable = False
+        if n <= 64:
+            _ALL_TRUE[(n, k)] = mask
+    return mask
+
+
 def _clean(cleaner, rows):
     """Run buffered ``(t, pos, vel, eff)`` rows through a cleaner; None if there are none."""
     if not rows:
         return None
+    if len(rows) == 1:      # the live case: one controller message at a time
+        t, pos, vel, eff = rows[0]
+        return cleaner.process(np.array([t], dtype=np.int64), pos[None, :], vel[None, :],
+                               eff[None, :])
     t = np.fromiter((r[0] for r in rows), dtype=np.int64, count=len(rows))
     pos = np.stack([r[1] for r in rows])
     vel = np.stack([r[2] for r in rows])

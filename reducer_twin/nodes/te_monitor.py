@@ -42,8 +42,8 @@ from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW
 from reducer_twin.nodes.base import WORKER
 from std_msgs.msg import Float64MultiArray
 
-_TE_FROM_PAIRS = [0, 2, 2, 3]
-"""Columns of an encoder pair that start a TE row: stamp, link angle, (link angle), effort."""
+_TE_COLUMNS = [0, 2, 5, 3]
+"""Columns of an arrived row that make a TE batch row: stamp, link angle, TE, effort."""
 
 LATENCY_KEEP = 1 << 17
 """Latency samples kept for the statistics (a ring of 2 MB per joint)."""
@@ -92,10 +92,14 @@ class TEMonitor(Node):
             self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
                                      self._on_pairs, encoder_qos())
         self.create_timer(p['analysis_period_s'], self._analyze)
-        self.create_timer(p['te_publish_period_s'], self._publish_te)
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
         self._pending = RowBuffer(5, 4096)   # encoder pairs waiting for the window analysis
-        self._te_rows = RowBuffer(5, 256)    # stamp, link, TE, effort, when the TE was computed
+        self._arrived = RowBuffer(7, 256)    # encoder pair, its TE, when the TE was computed
+        self._minus_inv_ratio = -1.0 / self.ratio
+        # TE batches go out as rows arrive, once the oldest waiting row is this old (no 50 Hz
+        # timer per joint to wake the executor), and with every window analysis.
+        self._te_period_s = p['te_publish_period_s']
+        self._first_arrival = None
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         # Rings filled now: np.zeros would commit pages as they fill, a slow RSS growth.
         self._stamps = np.empty(LATENCY_KEEP)     # sample stamps [s]
@@ -118,7 +122,9 @@ class TEMonitor(Node):
             'max_gap_s': (0.05, 'largest stamp gap bridged inside a window [s]'),
             'analysis_period_s': (0.5, 'period of the window analysis [s] (features of a '
                                        'window come at most this late)'),
-            'te_publish_period_s': (0.02, 'period of the TE batches [s]'),
+            'te_publish_period_s': (0.02, 'longest wait of a TE row for its batch while the '
+                                          'stream flows [s] (the last rows of a stopped '
+                                          'stream go with the next analysis)'),
             'diagnostics_period_s': (1.0, 'period of /diagnostics [s]'),
         }
         out = {}
@@ -153,24 +159,45 @@ class TEMonitor(Node):
             angle [rad], effort [N*m], link velocity [rad/s]).
 
         """
-        if rows.shape[0] == 0:
+        n = rows.shape[0]
+        if n == 0:
             return
-        # TE on arrival, into the next TE batch; the latencies are recorded in bulk when
-        # the batch is published, which keeps this 1 kHz callback small.
-        out = self._te_rows.extend(rows.shape[0])
-        out[:, :4] = rows[:, _TE_FROM_PAIRS]
-        out[:, 2] -= rows[:, 1] / self.ratio
-        out[:, 4] = time.time()
-        self._pending.extend(rows.shape[0])[:] = rows
-        self.samples += rows.shape[0]
+        # TE on arrival, kept with its pair; the TE batch, the latencies and the rows for the
+        # window analysis are made in bulk at the TE period, which keeps this 1 kHz call to
+        # a handful of array operations.
+        if n == 1:      # the live case, one controller message: cheaper in plain floats
+            row = rows[0].tolist()
+            now = time.time()
+            row += (row[2] + row[1] * self._minus_inv_ratio, now)
+            self._arrived.append(row)
+            self.samples += 1
+            self._batch_due(now)
+            return
+        out = self._arrived.extend(n)
+        out[:, :5] = rows
+        te = out[:, 5]
+        np.multiply(rows[:, 1], self._minus_inv_ratio, out=te)
+        te += rows[:, 2]
+        now = time.time()
+        out[:, 6] = now
+        self.samples += n
+        self._batch_due(now)
+
+    def _batch_due(self, now):
+        if self._first_arrival is None:
+            self._first_arrival = now
+        elif now - self._first_arrival >= self._te_period_s:
+            self._publish_te()
 
     def _publish_te(self):
-        if not self._te_rows.n:
+        if not self._arrived.n:
             return
-        rows = self._te_rows.take()
-        self._record_latency(rows[:, 0], rows[:, 4])
+        rows = self._arrived.take()
+        self._first_arrival = None
+        self._record_latency(rows[:, 0], rows[:, 6])
+        self._pending.extend(rows.shape[0])[:] = rows[:, :5]
         if self._te_listened:
-            self.te_pub.publish(self._te_msg.fill(rows[:, :4]))
+            self.te_pub.publish(self._te_msg.fill(rows[:, _TE_COLUMNS]))
 
     def _check_listeners(self):
         self._te_listened = self.te_pub.get_subscription_count() > 0
@@ -184,6 +211,7 @@ class TEMonitor(Node):
 
     def _analyze(self):
         """Hand the accumulated samples to the worker thread (the executor must not wait)."""
+        self._publish_te()
         if not self._pending.n:
             return
         WORKER.submit(self._analyze_rows, self._pending.take())

@@ -1,5 +1,5 @@
 """
-The ingestion rules of encoder streams (StreamCleaner, SpikeFilter, Pairer, pair_columns).
+The ingestion rules of encoder streams (StreamCleaner, SpikeFilter(Bank), Pairer, pair_columns).
 
 Streams are built by hand at 1 kHz from a stamp near the epoch of a real
 robot clock, so that every rule of the table in :mod:`reducer_twin.core.ingest`
@@ -19,7 +19,7 @@ import pytest
 from reducer_twin.core import ingest
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import CleanStream, IngestConfig, pair_columns, pair_same_stamps
-from reducer_twin.core.ingest import Pairer, SpikeFilter, StreamCleaner
+from reducer_twin.core.ingest import Pairer, SpikeFilter, SpikeFilterBank, StreamCleaner
 
 MS = 1_000_000
 """One millisecond in nanoseconds (the 1 kHz period)."""
@@ -510,6 +510,36 @@ def test_spike_filtering_does_not_depend_on_how_the_pairs_are_chunked(seed, chun
                           for a, b in zip(bounds[:-1], bounds[1:])])
     np.testing.assert_array_equal(got, expected)
     assert chunked.counts == whole.counts
+
+
+@settings(max_examples=40)
+@given(seed=st.integers(0, 2 ** 32 - 1), chunk_seed=st.integers(0, 2 ** 32 - 1))
+def test_the_spike_bank_gives_what_one_filter_per_joint_gives_in_any_chunks(seed, chunk_seed):
+    # The bank keeps the common case as one array for all joints; glitches, steps and
+    # unpaired entries (NaN) must come out as each joint's own filter decides.
+    rng = np.random.default_rng(seed)
+    n, joints = 240, 3
+    thr = CFG.spike_te_rad
+    te = np.cumsum(rng.normal(0.0, 0.3 * thr, (n, joints)), axis=0)
+    glitch = rng.random((n, joints)) < 0.03
+    te[glitch] += rng.choice([-1, 1], int(glitch.sum())) * rng.uniform(1.5, 6.0) * thr
+    te += np.cumsum(rng.random((n, joints)) < 0.005, axis=0) * 3 * thr
+    motor = np.linspace(0.0, 8.0, n)[:, None] + np.zeros((1, joints))
+    link = motor / RATIO + te
+    valid = rng.random((n, joints)) > 0.02
+    expected = np.zeros((n, joints), dtype=bool)
+    singles = [SpikeFilter(RATIO) for _ in range(joints)]
+    for k, f in enumerate(singles):
+        rows = np.flatnonzero(valid[:, k])
+        expected[rows, k] = f.keep(motor[rows, k], link[rows, k])
+    bank = SpikeFilterBank(RATIO, joints)
+    sizes = np.random.default_rng(chunk_seed).choice([1, 1, 1, 2, 5, 17], n)
+    bounds = np.concatenate([[0], np.cumsum(sizes)])
+    bounds = bounds[bounds < n].tolist() + [n]
+    got = np.concatenate([bank.keep(motor[a:b], link[a:b], valid[a:b])
+                          for a, b in zip(bounds[:-1], bounds[1:])])
+    np.testing.assert_array_equal(got, expected)
+    assert [bank.counts(k) for k in range(joints)] == [f.counts for f in singles]
 
 
 # -- Pairer and pair_columns ------------------------------------------------------------------

@@ -65,7 +65,7 @@ class Robot:
 
     """
 
-    def __init__(self, ros, split=False, motor_angles='raw', joints=2):
+    def __init__(self, ros, split=False, motor_angles='raw', joints=2, batch_period_s=0.002):
         n = next(_ids)
         self.ros = ros
         self.joints = [f'arm{n}_j{k + 1}' for k in range(joints)]
@@ -80,6 +80,7 @@ class Robot:
                 Parameter('link_topic', value=self.link_topic),
                 Parameter('motor_topic', value=self.motor_topic),
                 Parameter('motor_angles', value=motor_angles),
+                Parameter('batch_period_s', value=batch_period_s),
                 Parameter('diagnostics_period_s', value=0.1)]))
         self.probe = ros.probe()
         self.link_pub = self.probe.publisher(self.link_topic, JointState, encoder_qos())
@@ -336,6 +337,20 @@ def test_in_process_consumers_get_every_pair_and_the_topic_only_while_subscribed
     np.testing.assert_allclose(rows[:, 0], expected_stamps_s(robot, np.arange(400)), atol=1e-6)
     assert len(robot.pairs[j1]) == before
     assert robot.node.counts()[j1]['published'] == 400
+
+
+def test_without_batching_each_message_reaches_the_consumer_before_the_next_is_sent(ros):
+    # batch_period_s 0 (the bringup's setting): a sample must not wait for the next message.
+    robot = Robot(ros, batch_period_s=0.0)
+    handed = []
+    robot.node.attach(robot.joints[0], handed.append)
+    for k in range(6):
+        robot.link_pub.publish(robot.combined(k))
+        robot.ros.spin_until(lambda: sum(r.shape[0] for r in handed) == k + 1,
+                             what=f'pair {k} handed on on its own')
+    rows = np.concatenate(handed)
+    np.testing.assert_allclose(rows[:, 0], expected_stamps_s(robot, np.arange(6)), atol=1e-6)
+    np.testing.assert_allclose(rows[:, 2], [link_angle(0, k * 1e-3) for k in range(6)])
 
 
 def test_a_consumer_of_a_joint_not_ingested_is_refused(ros):
