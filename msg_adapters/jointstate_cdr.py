@@ -373,6 +373,10 @@ def _parse_layout(payload, where):
         raw = payload[pos + 4:pos + 4 + length]
         if length and raw[-1:] != b'\x00':
             raise _reject(where, pos + 3 + length, f'{what} does not end with NUL')
+        inner = raw.find(b'\x00', 0, max(length - 1, 0))
+        if inner >= 0:
+            raise _reject(where, pos + 4 + inner, f'{what} has a NUL inside (a C reader would '
+                          'cut it there)')
         try:
             text = raw[:-1].decode('utf-8') if length else ''
         except UnicodeDecodeError as err:
@@ -421,6 +425,69 @@ def _parse_layout(payload, where):
         coarse.append((begin, pos))
     return _Layout(size, order, frame_id, tuple(names), tuple(fields), tuple(merged),
                    tuple(coarse))
+
+
+class JointStateReader:
+    """
+    Decode JointState payloads one message at a time, as a live subscription gets them.
+
+    A controller sends the same names every tick, so the layout of the last
+    message is kept: a payload of the same length whose structural bytes
+    (encapsulation, frame, names, array counts) equal the last one's is read
+    without parsing, the stamp and the three float arrays straight out of the
+    bytes. Any other payload is parsed and checked completely and its layout
+    kept in turn. The result is what the typed message would hold; no
+    ``sensor_msgs.msg.JointState`` (twelve strings, three arrays) is built.
+    """
+
+    def __init__(self):
+        self._known = {}    # payload length -> (layout, template bytes, stamp struct, dtype)
+
+    def read(self, payload):
+        """
+        Decode one payload.
+
+        Parameters
+        ----------
+        payload : bytes
+            One serialised ``sensor_msgs/msg/JointState`` (CDR, with its
+            encapsulation header), as a raw subscription delivers it.
+
+        Returns
+        -------
+        tuple
+            ``(stamp_ns, names, position, velocity, effort)``: int, tuple of
+            str and three read-only float64 arrays as long as the message's
+            fields (empty where the message left a field empty).
+
+        Raises
+        ------
+        InvalidInput
+            If the payload is not a well-formed JointState.
+
+        """
+        known = self._known.get(len(payload))
+        if known is None or not _same_layout(payload, known[0], known[1]):
+            layout = _parse_layout(bytes(payload), 'a JointState message')
+            if len(self._known) >= _MAX_TEMPLATES_PER_LENGTH and known is None:
+                self._known.clear()     # traffic of ever new lengths: start again
+            known = (layout, bytes(payload), struct.Struct(layout.byte_order + 'iI'),
+                     np.dtype(layout.byte_order + 'f8'))
+            self._known[len(payload)] = known
+        layout, _, stamp, dtype = known
+        sec, nsec = stamp.unpack_from(payload, 4)
+        position, velocity, effort = (np.frombuffer(payload, dtype, count, offset)
+                                      for offset, count in layout.fields)
+        return sec * _NS_PER_S + nsec, layout.names, position, velocity, effort
+
+
+def _same_layout(payload, layout, template):
+    """Whether ``payload`` (of the template's length) has the template's structure."""
+    for start, stop in layout.coarse:
+        if payload[start:stop] != template[start:stop]:
+            # Padding may differ between writers: compare the meaningful bytes only.
+            return all(payload[a:b] == template[a:b] for a, b in layout.spans)
+    return True
 
 
 def _as_buffer(payloads, offsets, lengths):

@@ -402,13 +402,37 @@ class JointStatePicker:
             If a wanted name is missing or the arrays are inconsistent.
 
         """
-        names = tuple(msg.name)
+        return self.pick_fields(tuple(msg.name), msg.position, msg.velocity, msg.effort)
+
+    def pick_fields(self, names, position, velocity, effort):
+        """
+        Return the wanted entries of a message given as its fields.
+
+        Parameters
+        ----------
+        names : tuple of str
+            The message's ``name``.
+        position, velocity, effort : array.array or ndarray
+            Its float fields (as rclpy or
+            :class:`~msg_adapters.jointstate_cdr.JointStateReader` gives them).
+
+        Returns
+        -------
+        tuple of ndarray
+            As :meth:`pick`.
+
+        Raises
+        ------
+        InvalidInput
+            If a wanted name is missing or the arrays are inconsistent.
+
+        """
         n = len(names)
-        for field, arr in (('position', msg.position), ('velocity', msg.velocity),
-                           ('effort', msg.effort)):
+        fields = (position, velocity, effort)
+        for field, arr in zip(('position', 'velocity', 'effort'), fields):
             if len(arr) not in (0, n):
                 raise InvalidInput(f'JointState {field} has {len(arr)} values for {n} names')
-        if names != self._cache_key:
+        if names is not self._cache_key and names != self._cache_key:
             lookup = {name: k for k, name in enumerate(names)}
             missing = [name for name in self.names if name not in lookup]
             if missing:
@@ -416,7 +440,7 @@ class JointStatePicker:
             self._index = np.array([lookup[name] for name in self.names], dtype=np.intp)
             self._cache_key = names
         out = []
-        for arr in (msg.position, msg.velocity, msg.effort):
+        for arr in fields:
             if len(arr):
                 out.append(np.frombuffer(arr, dtype=np.float64)[self._index]
                            if isinstance(arr, array) else

@@ -9,7 +9,10 @@ Subscribes to what robot controllers publish, in either form:
   (``motor_topic`` set).
 
 Motor angles are raw (input side) or already divided by the gear ratio
-(``motor_angles: output``). Every stream goes through the core ingestion
+(``motor_angles: output``). The subscriptions take the messages as their
+serialised bytes, read by :class:`~msg_adapters.jointstate_cdr.JointStateReader`
+(the same values rclpy would give, without building a message object of
+names and arrays per controller tick). Every stream goes through the core ingestion
 rules (:mod:`reducer_twin.core.ingest`); clean, time-aligned samples are
 published per joint on ``/reducer_twin/<joint>/encoder_pairs``
 (``Float64MultiArray``, layout ``encoder_pairs``) in small batches
@@ -24,9 +27,10 @@ batch and joint.
 """
 
 from diagnostic_msgs.msg import DiagnosticArray
+from msg_adapters.jointstate_cdr import JointStateReader
 from msg_adapters.layouts import PAIRED_SAMPLES
 from msg_adapters.ros import BatchPublisherMessage, diagnostic_array, diagnostic_status
-from msg_adapters.ros import JointStatePicker, stamp_to_ns
+from msg_adapters.ros import JointStatePicker
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
@@ -102,16 +106,21 @@ class EncoderIngest(Node):
         self._raw = {'link': [], 'motor': []}
         self._raw_since = None
         qos = encoder_qos(p['reliable'])
+        # The controller streams are taken as their serialised bytes and read by a
+        # JointStateReader: no JointState object (names, arrays) is built per message.
         if self.split:
             self._link_pick = JointStatePicker(self.joints)
             self._motor_pick = JointStatePicker(self.joints)
-            self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos)
+            self._motor_reader = JointStateReader()
+            self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos,
+                                     raw=True)
         else:
             names = []
             for joint in self.joints:
                 names += [joint, joint + p['motor_suffix']]
             self._link_pick = JointStatePicker(names)
-        self.create_subscription(JointState, p['link_topic'], self._on_link, qos)
+        self._link_reader = JointStateReader()
+        self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
         if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
@@ -146,16 +155,16 @@ class EncoderIngest(Node):
             raise InvalidParameter(f"joints must be non-empty names, got {out['joints']!r}")
         return out
 
-    def _on_link(self, msg):
-        self._buffer('link', self._link_pick, msg)
+    def _on_link(self, payload):
+        self._buffer('link', self._link_reader, self._link_pick, payload)
 
-    def _on_motor(self, msg):
-        self._buffer('motor', self._motor_pick, msg)
+    def _on_motor(self, payload):
+        self._buffer('motor', self._motor_reader, self._motor_pick, payload)
 
-    def _buffer(self, side, picker, msg):
+    def _buffer(self, side, reader, picker, payload):
         try:
-            pos, vel, eff = picker.pick(msg)
-            t = stamp_to_ns(msg.header.stamp)
+            t, names, *fields = reader.read(payload)
+            pos, vel, eff = picker.pick_fields(names, *fields)
         except InvalidInput as err:
             self.rejects.reject('bad_joint_state', str(err))
             return

@@ -17,8 +17,9 @@ import threading
 import time
 from types import SimpleNamespace
 
+from msg_adapters.jointstate_cdr import encode_joint_states
 from msg_adapters.layouts import GROUND_TRUTH, record_values
-from msg_adapters.ros import JointStateMessage, to_multiarray
+from msg_adapters.ros import to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidParameter
@@ -93,8 +94,6 @@ class JointSimulatorNode(Node):
         self._block_start = 0
         self._names = (self.names if self.split
                        else [x for n in self.names for x in (n, n + '_motor')])
-        self._link_msg = JointStateMessage(self._names)
-        self._motor_msg = JointStateMessage(self.names)
         self._pending_block = self._submit_block()
         self.max_catch_up = int(plain['max_catch_up'])
         self._stop = threading.Event()
@@ -170,10 +169,19 @@ class JointSimulatorNode(Node):
 
     def _next_block(self):
         # The block after this one is prepared on the worker while this one is published.
-        self._block, self._block_truth = self._assemble(
-            [f.result() for f in self._pending_block])
+        samples, self._block_truth = self._assemble([f.result() for f in self._pending_block])
         self._pending_block = self._submit_block()
         self._block_start = self.sent
+        # Serialised for the whole block at once (the messages differ only in stamp and
+        # numbers): a tick publishes ready bytes instead of converting a JointState.
+        t, pos, vel, eff, motor = samples
+        stamps = self.start_ns + np.round(t * 1e9).astype(np.int64)
+        if self.split:
+            link = _rows_of(*encode_joint_states(stamps, self._names, pos, vel, eff))
+            motor = _rows_of(*encode_joint_states(stamps, self._names, motor))
+        else:
+            link = _rows_of(*encode_joint_states(stamps, self._names, pos, vel, eff))
+        self._block = (stamps, link, motor)
 
     def _run(self):
         """Publish every sample at its time, until the node closes (own thread)."""
@@ -205,14 +213,13 @@ class JointSimulatorNode(Node):
         while self.sent < due and budget > 0:
             if self._block is None or self.sent - self._block_start >= len(self._block[0]):
                 self._next_block()
-            t, pos, vel, eff, motor = self._block
+            stamps, link, motor = self._block
             i = self.sent - self._block_start
-            stamp = self.start_ns + int(round(t[i] * 1e9))
-            self.pub.publish(self._link_msg.fill(stamp, pos[i], vel[i], eff[i]))
+            self.pub.publish(link[i].tobytes())
             if self.split:
-                self.motor_pub.publish(self._motor_msg.fill(stamp, motor[i]))
+                self.motor_pub.publish(motor[i].tobytes())
             k = self.sent % PUBLISH_LOG
-            self.publish_log[k, 0], self.publish_log[k, 1] = stamp, time.time_ns()
+            self.publish_log[k, 0], self.publish_log[k, 1] = stamps[i], time.time_ns()
             self.sent += 1
             budget -= 1
 
@@ -285,6 +292,11 @@ class JointSimulatorNode(Node):
         parts = [f'{n}: LM {tr.lost_motion / ARCMIN:.2f} arcmin'
                  for n, tr in self.truth().items()]
         return '; '.join(parts)
+
+
+def _rows_of(buffer, offsets):
+    """Return same-length serialised messages as one row each."""
+    return buffer.reshape(offsets.size - 1, -1)
 
 
 def main(args=None):

@@ -3,7 +3,7 @@
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
 from msg_adapters.jointstate_cdr import (
-    concat_batches, decode_joint_states, encode_joint_states, JointStateBatch)
+    concat_batches, decode_joint_states, encode_joint_states, JointStateBatch, JointStateReader)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
@@ -226,6 +226,7 @@ BAD_PAYLOADS = [
     ('name count overflows', _valid_payload()[:24] + b'\xff\xff\xff\x7f'
      + _valid_payload()[28:]),
     ('string without NUL', _valid_payload()[:21] + b'X' + _valid_payload()[22:]),
+    ('NUL inside a name', _valid_payload()[:33] + b'\x00' + _valid_payload()[34:]),
 ]
 
 
@@ -310,3 +311,81 @@ def test_corrupted_valid_messages_raise_only_project_errors(where, value, cut):
     except ReducerTwinError:
         return
     assert len(batch) + len(batch.rejected) == 2
+
+
+# -- one message at a time (a raw live subscription) ------------------------------------------
+
+
+def _read_like_rclpy(reader, payload):
+    """Read ``payload`` with the reader and check it against rclpy's own deserialisation."""
+    stamp, names, position, velocity, effort = reader.read(payload)
+    msg = deserialize_message(payload, JointState)
+    assert stamp == msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+    assert names == tuple(msg.name)
+    for got, field in ((position, msg.position), (velocity, msg.velocity),
+                       (effort, msg.effort)):
+        np.testing.assert_array_equal(got, np.array(field, dtype=float))
+    return stamp, names, position, velocity, effort
+
+
+def test_the_reader_gives_what_rclpy_deserializes_as_layouts_come_and_go():
+    reader = JointStateReader()
+    rng = np.random.default_rng(3)
+    messages = []
+    for i in range(40):
+        # A controller's steady layout, interleaved with others: another joint set of
+        # the same length, empty fields, a short field, another frame, big endian.
+        names = NAMES if i % 5 else ['joint_lonk', 'rotom']
+        position = rng.normal(size=2)
+        velocity = None if i % 7 == 3 else rng.normal(size=2)
+        effort = position[:1] if i % 11 == 4 else rng.normal(size=2)
+        frame = 'base' if i % 13 else 'tool0'
+        if i % 17 == 9:
+            messages.append(_rosbags_bytes(STAMPS[i % 3], names, position, velocity, effort,
+                                           frame, little_endian=False))
+        else:
+            messages.append(serialize_message(_rclpy_message(
+                STAMPS[i % 3] + i, names, position, velocity, effort, frame)))
+    for payload in messages:
+        _read_like_rclpy(reader, payload)
+
+
+def test_the_reader_reads_a_steady_stream_with_other_padding_bytes():
+    reader = JointStateReader()
+    payload = bytearray(_valid_payload())
+    _read_like_rclpy(reader, bytes(payload))
+    meaningful, end = _meaningful_bytes(payload)
+    padding = np.flatnonzero(~meaningful)
+    assert padding.size and end == len(payload)
+    for at in padding:
+        payload[at] = 0xA5          # padding carries no meaning: same layout, same values
+    stamp, names, position, velocity, effort = reader.read(bytes(payload))
+    assert stamp == 5 and names == tuple(NAMES)
+    np.testing.assert_array_equal(position, POSITION[0])
+    assert effort.size == 0
+
+
+@pytest.mark.parametrize('label, payload', BAD_PAYLOADS, ids=[b[0] for b in BAD_PAYLOADS])
+def test_the_reader_refuses_malformed_payloads_and_keeps_reading_good_ones(label, payload):
+    reader = JointStateReader()
+    reader.read(_valid_payload())
+    with pytest.raises(InvalidInput, match=r'malformed JointState CDR in a JointState message'):
+        reader.read(payload)
+    assert reader.read(_valid_payload())[0] == 5
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(0, 10_000), st.integers(0, 255), st.integers(0, 100))
+def test_the_reader_on_corrupted_messages_raises_only_project_errors(where, value, cut):
+    reader = JointStateReader()
+    reader.read(_valid_payload())           # the template a corrupted message is held to
+    payload = bytearray(_valid_payload())
+    payload[where % len(payload)] = value
+    payload = bytes(payload[:len(payload) - cut % 8])
+    try:
+        stamp, names, position, velocity, effort = reader.read(payload)
+    except ReducerTwinError:
+        return
+    msg = deserialize_message(payload, JointState)     # accepted: it is a JointState
+    assert names == tuple(msg.name)
+    np.testing.assert_array_equal(position, np.array(msg.position, dtype=float))
