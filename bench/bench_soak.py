@@ -9,12 +9,16 @@ nothing lost"):
 * samples dropped (missing at ingest, unpaired) and messages rejected by any node,
   counted after the start-up (``--settle-s``), and samples published but not analysed;
 * process CPU in cores, per 30 s interval and overall;
-* resident memory every 30 s, and its growth after the first minute
+* resident memory every 30 s, and its growth after the first minute (also by kind:
+  anonymous, pages of mapped files, shared memory)
   (``--warmup-s``), once the caches are warm: the first minute fills the model
   tables, the import caches and the executor's pools. The nodes' fixed-size
   latency rings (``te_monitor``: 131 k samples per joint; the simulator's publish
   log) are written through when the nodes are built, so that their filling is not
   taken for growth;
+* objects in reference cycles reclaimed by the garbage collector during the run and
+  left at the end (the nodes make none in steady operation; a library that does
+  grows the young generation until a collection);
 * estimator state files written (and whether each file on disk decodes), windows
   analysed, and whether every node survived: still making progress in the last
   interval, nothing raised out of a callback.
@@ -29,7 +33,7 @@ from pathlib import Path
 import resource
 import time
 
-from live_bringup import rss_mb, start_bringup
+from live_bringup import rss_kinds_mb, rss_mb, start_bringup
 
 
 def cpu_s():
@@ -72,6 +76,27 @@ def allocated_mb():
         return float('nan')
     info = _MALLINFO2[0]()
     return (info.uordblks + info.hblkhd) / 1e6
+
+
+class CycleCount:
+    """Objects in reference cycles that the garbage collector reclaims (none is expected)."""
+
+    def __init__(self):
+        import gc
+        self.collected = 0
+        self.collections = 0
+        gc.callbacks.append(self._on_gc)
+
+    def _on_gc(self, phase, info):
+        if phase == 'stop':
+            self.collected += info['collected']
+            self.collections += 1
+
+    def final(self):
+        """Run a full collection now; return the objects it found unreachable."""
+        import gc
+        gc.callbacks.remove(self._on_gc)
+        return gc.collect()
 
 
 class Progress:
@@ -127,6 +152,7 @@ def main():
     from reducer_twin.core.estimator import decode_state
 
     nodes, executor, state_dir = start_bringup(args.joints, 'bench-soak-')
+    reclaimed = CycleCount()
     state_dir = Path(state_dir)
     joints = list(nodes['te'])
     sim = nodes['simulator']
@@ -137,7 +163,7 @@ def main():
     marks = sorted({args.settle_s, args.warmup_s,
                     *np.arange(args.sample_s, args.duration_s, args.sample_s).tolist(),
                     args.duration_s})
-    samples = []            # (t, rss, cpu, sent, windows, dropped, snapshot, allocated)
+    samples = []   # (t, rss, cpu, sent, windows, dropped, snapshot, allocated, rss by kind)
     for mark in marks:
         try:
             while time.monotonic() - start < mark:
@@ -147,7 +173,8 @@ def main():
             break
         samples.append((time.monotonic() - start, rss_mb(), cpu_s(), sim.sent,
                         sum(te.windows for te in nodes['te'].values()),
-                        progress.dropped(), progress.snapshot(), allocated_mb()))
+                        progress.dropped(), progress.snapshot(), allocated_mb(),
+                        rss_kinds_mb()))
 
     end = samples[-1]
     settled = next(s for s in samples if s[0] >= args.settle_s)
@@ -201,6 +228,11 @@ def main():
     print(f'  RSS                  {settled[1]:.1f} MB at {settled[0]:.0f} s, {warm[1]:.1f} MB '
           f'at {warm[0]:.0f} s, {end[1]:.1f} MB at {end[0]:.0f} s: growth after '
           f'{warm[0]:.0f} s {growth:+.1f} MB, trend {slope:+.2f} MB/min   (floor: <= 5 MB)')
+    kinds = ', '.join(f'{kind} {end[8][kind] - warm[8][kind]:+.1f} MB' for kind in end[8])
+    print(f'  RSS growth by kind   {kinds or "not reported by this kernel"}')
+    print(f'  reference cycles     {reclaimed.collected} objects reclaimed by the collector '
+          f'during the run ({reclaimed.collections} young collections); '
+          f'{reclaimed.final()} left for a full collection at the end')
     print(f'  malloc in use        {warm[7]:.1f} MB at {warm[0]:.0f} s, {end[7]:.1f} MB at '
           f'{end[0]:.0f} s ({end[7] - warm[7]:+.1f} MB; the RSS also counts the free memory '
           f'the allocator keeps)')
