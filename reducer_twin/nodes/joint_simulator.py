@@ -27,7 +27,7 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
-from reducer_twin.nodes.base import encoder_qos, joint_topic, latest_qos, Node
+from reducer_twin.nodes.base import create_spread_timer, encoder_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import run_nodes, SpecParameters, WORKER
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -107,7 +107,7 @@ class JointSimulatorNode(Node):
         else:
             self._thread = None
             self.create_timer(1.0 / self.rate_hz, self._tick)
-        self.create_timer(plain['truth_period_s'], self._publish_truth)
+        create_spread_timer(self, plain['truth_period_s'], self._publish_truth)
         self.get_logger().info(
             f'simulating {len(self.sims)} joint(s) {self.names} at {self.rate_hz:g} Hz, '
             f'aging factor {base.aging_factor:g}, profile {plain["profile"]}')

@@ -36,7 +36,7 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
+from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.base import WORKER
@@ -87,12 +87,12 @@ class TEMonitor(Node):
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._te_listened = True    # fed in process, checked: see _check_listeners
         if not subscribe:
-            self.create_timer(LISTENERS_PERIOD_S, self._check_listeners)
+            create_spread_timer(self, LISTENERS_PERIOD_S, self._check_listeners)
         else:
             self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
                                      self._on_pairs, encoder_qos())
-        self.create_timer(p['analysis_period_s'], self._analyze)
-        self.create_timer(p['diagnostics_period_s'], self._publish_diagnostics)
+        create_spread_timer(self, p['analysis_period_s'], self._analyze)
+        create_spread_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
         self._pending = RowBuffer(5, 4096)   # encoder pairs waiting for the window analysis
         self._arrived = RowBuffer(7, 256)    # encoder pair, its TE, when the TE was computed
         self._minus_inv_ratio = -1.0 / self.ratio

@@ -1,5 +1,5 @@
 """
-The nodes' shared helpers: the background worker and the in-place row buffer.
+The nodes' shared helpers: the background worker, the in-place row buffer, spread timers.
 
 The worker takes window analysis, estimator and remaining-life updates and
 simulator blocks off the executor thread (``reducer_twin.nodes.base``).
@@ -10,7 +10,8 @@ import time
 
 import numpy as np
 import pytest
-from reducer_twin.nodes.base import BackgroundWorker, RowBuffer
+from rclpy.node import Node
+from reducer_twin.nodes.base import BackgroundWorker, create_spread_timer, RowBuffer
 
 pytestmark = pytest.mark.timeout(30, method='thread')
 
@@ -72,3 +73,19 @@ def test_a_row_buffer_takes_single_rows_across_growth():
     for row in rows[1:]:
         buf.append(row.tolist())        # the third row is past the capacity
     np.testing.assert_array_equal(buf.take(), rows)
+
+
+def test_spread_timers_of_one_period_fire_at_phases_apart(ros):
+    # Five nodes' 1 s timers made at once would fire in the same millisecond; spread
+    # (golden-ratio phases) the closest two are about a tenth of the period apart, and
+    # each keeps firing.
+    node = ros.add(Node('spread_timers', context=ros.context))
+    calls = [[] for _ in range(5)]
+    timers = [create_spread_timer(node, 1.0, lambda k=k: calls[k].append(k))
+              for k in range(5)]
+    ros.spin_for(1.05)                  # every starter has fired: the timers run
+    assert all(not t.is_canceled() for t in timers)
+    phases = sorted(t.time_until_next_call() * 1e-9 for t in timers)
+    assert min(np.diff(phases)) > 0.03
+    ros.spin_until(lambda: all(len(c) >= 2 for c in calls), timeout=5.0,
+                   what='two calls of every spread timer')
