@@ -25,6 +25,7 @@ import rclpy
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -143,6 +144,44 @@ def create_spread_timer(node, period_s, callback):
 
     starter = node.create_timer(max(phase * period_s, 1e-3), start)
     return timer
+
+
+def create_background_timer(node, period_s, fn):
+    """
+    Create a spread periodic timer whose work runs on :data:`WORKER`.
+
+    For the nodes' ``/diagnostics``: building a DiagnosticArray of a dozen
+    key/values and publishing it is a millisecond of Python, several with
+    the worker busy, and the nodes of a bringup publish twenty a second. On
+    the executor thread that is the stream waiting; on the worker the
+    executor takes the interpreter back within one switch interval.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        Owner of the timer.
+    period_s : float
+        Period [s].
+    fn : callable
+        The work; it may read what the executor thread updates (counters).
+
+    Returns
+    -------
+    rclpy.timer.Timer
+        The timer.
+
+    """
+    def run():
+        try:
+            fn()
+        except _rclpy.InvalidHandle:
+            pass                # the node was destroyed while the task waited
+        except Exception as err:  # noqa: B902 - logged: a failing report must be seen
+            if node.context.ok():
+                node.get_logger().error(f'{getattr(fn, "__name__", "periodic task")} '
+                                        f'failed: {err!r}')
+
+    return create_spread_timer(node, period_s, lambda: WORKER.submit(run))
 
 
 def joint_topic(joint, suffix, namespace='reducer_twin'):

@@ -38,7 +38,8 @@ from reducer_twin.core.ingest import IngestConfig, Pairer, SpikeFilter, SpikeFil
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, encoder_qos, joint_topic
+from reducer_twin.nodes.base import create_background_timer, create_spread_timer
+from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters
 from sensor_msgs.msg import JointState
@@ -122,7 +123,7 @@ class EncoderIngest(Node):
         self._link_reader = JointStateReader()
         self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True)
         self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
-        create_spread_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
+        create_background_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
         if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
             self.create_timer(max(p['batch_period_s'] * 5, 0.01), self._flush_stale)
         create_spread_timer(self, LISTENERS_PERIOD_S, self._check_listeners)

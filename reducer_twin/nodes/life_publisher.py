@@ -21,7 +21,7 @@ from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
-from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, joint_topic
+from reducer_twin.nodes.base import create_background_timer, diagnostics_qos, joint_topic
 from reducer_twin.nodes.base import latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
 from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
@@ -65,7 +65,7 @@ class LifePublisher(Node):
                                  self._on_wear, latest_qos())
         self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'te_features'),
                                  self._on_features, stream_qos(WINDOW_DEPTH))
-        create_spread_timer(self, period, self._publish_diagnostics)
+        create_background_timer(self, period, self._publish_diagnostics)
 
     def _reconfig(self, config):
         def apply():

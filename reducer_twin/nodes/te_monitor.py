@@ -36,7 +36,8 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
-from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, encoder_qos, joint_topic
+from reducer_twin.nodes.base import create_background_timer, create_spread_timer
+from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
 from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.base import WORKER
@@ -92,7 +93,7 @@ class TEMonitor(Node):
             self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
                                      self._on_pairs, encoder_qos())
         create_spread_timer(self, p['analysis_period_s'], self._analyze)
-        create_spread_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
+        create_background_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
         self._pending = RowBuffer(5, 4096)   # encoder pairs waiting for the window analysis
         self._arrived = RowBuffer(7, 256)    # encoder pair, its TE, when the TE was computed
         self._minus_inv_ratio = -1.0 / self.ratio

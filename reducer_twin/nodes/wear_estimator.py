@@ -25,7 +25,7 @@ from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import m_to_um
-from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, joint_topic
+from reducer_twin.nodes.base import create_background_timer, diagnostics_qos, joint_topic
 from reducer_twin.nodes.base import latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
 from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
@@ -84,7 +84,7 @@ class WearEstimatorNode(Node):
         self.create_subscription(Float64MultiArray, joint_topic(joint, 'te_features'),
                                  self._on_features, stream_qos(WINDOW_DEPTH))
         self.create_service(Trigger, joint_topic(joint, 'reset'), self._on_reset)
-        create_spread_timer(self, period, self._publish_diagnostics)
+        create_background_timer(self, period, self._publish_diagnostics)
         self._publish()
 
     def _on_features(self, msg):

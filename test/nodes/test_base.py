@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 from rclpy.node import Node
-from reducer_twin.nodes.base import BackgroundWorker, create_spread_timer, RowBuffer
+from reducer_twin.nodes.base import BackgroundWorker, create_background_timer
+from reducer_twin.nodes.base import create_spread_timer, RowBuffer
 
 pytestmark = pytest.mark.timeout(30, method='thread')
 
@@ -89,3 +90,19 @@ def test_spread_timers_of_one_period_fire_at_phases_apart(ros):
     assert min(np.diff(phases)) > 0.03
     ros.spin_until(lambda: all(len(c) >= 2 for c in calls), timeout=5.0,
                    what='two calls of every spread timer')
+
+
+def test_a_background_timer_runs_its_work_on_the_worker_and_goes_on_after_a_failure(ros):
+    # /diagnostics is built off the executor thread; a report that fails is logged and
+    # the next period runs again.
+    node = ros.add(Node('background_timer', context=ros.context))
+    threads = []
+
+    def report():
+        threads.append(threading.current_thread().name)
+        if len(threads) == 1:
+            raise RuntimeError('first report fails')
+
+    create_background_timer(node, 0.05, report)
+    ros.spin_until(lambda: len(threads) >= 3, what='three background reports')
+    assert set(threads) == {'reducer-twin-worker'}
