@@ -314,53 +314,6 @@ def make_joint_state(stamp_ns, names, position, velocity=None, effort=None, fram
     return msg
 
 
-class JointStateMessage:
-    """
-    One reusable ``JointState`` for a fixed list of names (a publisher's message).
-
-    Building a message (header, stamp, names) costs more than publishing it;
-    a publisher serialises at once, so one message can be refilled per tick.
-
-    Parameters
-    ----------
-    names : sequence of str
-        Joint (interface) names.
-    frame_id : str
-        Header frame.
-
-    """
-
-    def __init__(self, names, frame_id=''):
-        self.msg = JointState()
-        self.msg.name = list(names)
-        self.msg.header.frame_id = frame_id
-
-    def fill(self, stamp_ns, position, velocity=None, effort=None):
-        """
-        Set stamp and values and return the message.
-
-        Parameters
-        ----------
-        stamp_ns : int
-            Header stamp [ns].
-        position, velocity, effort : sequence of float
-            Values per name [rad, rad/s, N·m]; None leaves the field empty.
-
-        Returns
-        -------
-        sensor_msgs.msg.JointState
-            The refilled message.
-
-        """
-        sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
-        stamp = self.msg.header.stamp
-        stamp.sec, stamp.nanosec = sec, nsec
-        self.msg.position = _doubles(position)
-        self.msg.velocity = array('d') if velocity is None else _doubles(velocity)
-        self.msg.effort = array('d') if effort is None else _doubles(effort)
-        return self.msg
-
-
 class JointStatePicker:
     """
     Pick named entries out of ``JointState`` messages.
