@@ -461,9 +461,9 @@ def quiet_gc():
     Everything alive after start-up (modules, tables, nodes) is moved out of
     the collector's view (``gc.freeze``) and full collections are made rare.
     The nodes make no reference cycles in steady operation (the soak
-    benchmark checks that the young generation does not grow); the young
+    benchmark counts the objects the collector reclaims); the young
     collections that still come every 10 000 net allocations reclaim any
-    cycle a library makes, in well under a millisecond.
+    cycle a library makes within minutes, not never.
     The interpreter switches threads every 0.5 ms instead of 5 ms, so the
     executor thread regains the interpreter quickly from :data:`WORKER`.
     """

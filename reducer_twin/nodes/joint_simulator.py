@@ -176,11 +176,9 @@ class JointSimulatorNode(Node):
         # numbers): a tick publishes ready bytes instead of converting a JointState.
         t, pos, vel, eff, motor = samples
         stamps = self.start_ns + np.round(t * 1e9).astype(np.int64)
+        link = _rows_of(*encode_joint_states(stamps, self._names, pos, vel, eff))
         if self.split:
-            link = _rows_of(*encode_joint_states(stamps, self._names, pos, vel, eff))
             motor = _rows_of(*encode_joint_states(stamps, self._names, motor))
-        else:
-            link = _rows_of(*encode_joint_states(stamps, self._names, pos, vel, eff))
         self._block = (stamps, link, motor)
 
     def _run(self):
