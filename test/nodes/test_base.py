@@ -84,8 +84,9 @@ def test_spread_timers_of_one_period_fire_at_phases_apart(ros):
     calls = [[] for _ in range(5)]
     timers = [create_spread_timer(node, 1.0, lambda k=k: calls[k].append(k))
               for k in range(5)]
-    ros.spin_for(1.05)                  # every starter has fired: the timers run
-    assert all(not t.is_canceled() for t in timers)
+    # Each timer waits for its phase (up to one period) before it runs at all.
+    ros.spin_until(lambda: not any(t.is_canceled() for t in timers), timeout=5.0,
+                   what='every spread timer started')
     phases = sorted(t.time_until_next_call() * 1e-9 for t in timers)
     assert min(np.diff(phases)) > 0.03
     ros.spin_until(lambda: all(len(c) >= 2 for c in calls), timeout=5.0,
