@@ -200,7 +200,7 @@ class EncoderIngest(Node):
         link = position[:, 0::2]
         motor = position[:, 1::2] * self.scale
         if finite.all():
-            paired, unpaired = _all_true(finite.shape[0], link.shape[1]), None
+            paired, unpaired = np.ones(link.shape, dtype=bool), None
         else:
             link_ok, motor_ok = finite[:, 0::2], finite[:, 1::2]
             paired = link_ok & motor_ok
@@ -294,21 +294,6 @@ class EncoderIngest(Node):
                 f'reducer_twin: {joint} encoder ingest', joint, 'OK' if bad == 0 else 'WARN',
                 'streams clean' if bad == 0 else f'{bad} samples dropped or repaired', counts))
         self.diag_pub.publish(diagnostic_array(self.get_clock().now().nanoseconds, statuses))
-
-
-_ALL_TRUE = {}
-"""Read-only all-True masks of small batches, by shape (most batches are all paired)."""
-
-
-def _all_true(n, k):
-    """Return a read-only all-True ``(n, k)`` mask."""
-    mask = _ALL_TRUE.get((n, k))
-    if mask is None:
-        mask = np.ones((n, k), dtype=bool)
-        mask.flags.writeable = False
-        if n <= 64:
-            _ALL_TRUE[(n, k)] = mask
-    return mask
 
 
 def _clean(cleaner, rows):

@@ -76,21 +76,22 @@ def test_a_row_buffer_takes_single_rows_across_growth():
     np.testing.assert_array_equal(buf.take(), rows)
 
 
-def test_spread_timers_of_one_period_fire_at_phases_apart(ros):
-    # Five nodes' 1 s timers made at once would fire in the same millisecond; spread
-    # (golden-ratio phases) the closest two are about a tenth of the period apart, and
-    # each keeps firing.
+def test_spread_timers_of_one_period_start_at_phases_apart_and_keep_firing(ros):
+    # Five nodes' 1 s timers made at once would fire in the same millisecond. Spread, each
+    # waits for its own golden-ratio phase (a starter timer) before it runs at all: the
+    # closest two phases are about a tenth of the period apart.
     node = ros.add(Node('spread_timers', context=ros.context))
     calls = [[] for _ in range(5)]
     timers = [create_spread_timer(node, 1.0, lambda k=k: calls[k].append(k))
               for k in range(5)]
-    # Each timer waits for its phase (up to one period) before it runs at all.
-    ros.spin_until(lambda: not any(t.is_canceled() for t in timers), timeout=5.0,
-                   what='every spread timer started')
-    phases = sorted(t.time_until_next_call() * 1e-9 for t in timers)
-    assert min(np.diff(phases)) > 0.03
+    assert all(t.is_canceled() for t in timers)
+    starters = [t for t in node.timers if all(t is not p for p in timers)]
+    phases = sorted(t.timer_period_ns * 1e-9 for t in starters)
+    assert len(phases) == 5 and phases[-1] < 1.0
+    assert min(np.diff(phases)) > 0.05
     ros.spin_until(lambda: all(len(c) >= 2 for c in calls), timeout=5.0,
                    what='two calls of every spread timer')
+    assert all(t.is_canceled() for t in starters)
 
 
 def test_a_background_timer_runs_its_work_on_the_worker_and_goes_on_after_a_failure(ros):
