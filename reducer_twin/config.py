@@ -13,7 +13,8 @@ from reducer_twin.core.errors import InvalidParameter
 
 DEFAULTS = {
     'twin': {'joints': ['joint_1'], 'link_topic': '/joint_states', 'motor_topic': '',
-             'motor_suffix': '_motor', 'motor_angles': 'raw', 'aging_factor': 1.0,
+             'motor_suffix': '_motor', 'motor_angles': 'raw', 'effort_source': 'auto',
+             'motor_effort_units': 'auto', 'aging_factor': 1.0,
              'window_s': 2.0, 'state_dir': '', 'simulate': False,
              'intra_process': True},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},

@@ -59,7 +59,7 @@ from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import IngestConfig, pair_columns, StreamCleaner
+from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, pair_columns, StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, LifeConfig
@@ -93,7 +93,16 @@ class AnalysisSettings:
     motor_suffix : str
         Suffix of motor entries in a combined message.
     motor_angles : str
-        ``'raw'`` or ``'output'`` (already divided by the ratio).
+        ``'raw'``, ``'output'`` (already divided by the ratio) or ``'auto'``: found
+        from the data (motor travel against link travel); a configured value the
+        data contradict is an error naming both.
+    effort_source : str
+        Where the torque is read: ``'link'``, ``'motor'`` or ``'auto'`` (the link
+        entry where it has an effort, else the motor entry).
+    motor_effort_units : str
+        The motor entry's effort: ``'motor'`` (motor torque, times the ratio),
+        ``'joint'`` (already output torque) or ``'auto'`` (motor torque when the
+        motor angles are raw).
     aging_factor : float or None
         Seconds of wear exposure per stream second; None: the bag's own
         (``custom_data`` :data:`~reducer_twin.analysis.simulate.AGING_KEY`), else 1.
@@ -115,7 +124,9 @@ class AnalysisSettings:
     link_topic: str = '/joint_states'
     motor_topic: str = ''
     motor_suffix: str = '_motor'
-    motor_angles: str = 'raw'
+    motor_angles: str = 'auto'
+    effort_source: str = 'auto'
+    motor_effort_units: str = 'auto'
     aging_factor: float = None
     window_s: float = 2.0
     params: ReducerParams = field(default_factory=ReducerParams)
@@ -149,9 +160,11 @@ class AnalysisSettings:
         """
         config, given = load_config_sources(path)
         twin = config['twin']
-        if twin['motor_angles'] not in ('raw', 'output'):
-            raise InvalidParameter(f"{path}: twin.motor_angles must be 'raw' or 'output', got "
-                                   f"{twin['motor_angles']!r}")
+        for key, allowed in (('motor_angles', MOTOR_ANGLES), ('effort_source', EFFORT_SOURCES),
+                             ('motor_effort_units', MOTOR_EFFORT_UNITS)):
+            if twin[key] not in allowed:
+                raise InvalidParameter(f'{path}: twin.{key} must be one of '
+                                       f'{", ".join(repr(a) for a in allowed)}, got {twin[key]!r}')
         aging = None
         if 'twin.aging_factor' in given:
             aging = _number(path, 'twin.aging_factor', twin['aging_factor'], 0.0, 1e9)
@@ -168,8 +181,15 @@ class AnalysisSettings:
             raise InvalidParameter(f'{path}: {err}') from None
         return cls(joints=tuple(twin['joints']) if 'twin.joints' in given else None,
                    link_topic=str(twin['link_topic']), motor_topic=str(twin['motor_topic']),
-                   motor_suffix=str(twin['motor_suffix']), motor_angles=twin['motor_angles'],
+                   motor_suffix=str(twin['motor_suffix']),
+                   motor_angles=twin['motor_angles'] if 'twin.motor_angles' in given else 'auto',
+                   effort_source=twin['effort_source'],
+                   motor_effort_units=twin['motor_effort_units'],
                    aging_factor=aging, window_s=window_s, params=params, life=life)
+
+
+MOTOR_ANGLES = ('auto', 'raw', 'output')
+MOTOR_EFFORT_UNITS = ('auto', 'motor', 'joint')
 
 
 def _number(path, name, value, lo, hi):
@@ -461,6 +481,13 @@ class JointResult:
     levels: list = field(default_factory=list)
     te: np.ndarray = None
     truth: np.ndarray = None
+    windows: int = 0
+    reason: str = None
+
+    @property
+    def observed(self):
+        """Whether at least one window gave a lost motion (the estimate rests on data)."""
+        return self.windows > 0
 
     def summary(self):
         """
@@ -470,7 +497,9 @@ class JointResult:
         -------
         dict
             ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
-            ``lost_motion_arcmin``, ``messages``, ``rejected``.
+            ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
+            ``observed``, ``windows`` (windows with a lost motion) and ``reason`` (why
+            not observed, else None).
 
         """
         nan = float('nan')
@@ -484,9 +513,14 @@ class JointResult:
                'rul_p50_h': life.get('p50_s', nan) / HOUR,
                'rul_p90_h': life.get('p90_s', nan) / HOUR,
                'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
-        out = {k: (float(v) if math.isfinite(v) else None) for k, v in out.items()}
+        observed = self.observed
+        # Not observed: no number stands for the reducer (a model guess is not a finding).
+        out = {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
         out['messages'] = int(self.messages)
         out['rejected'] = int(self.rejected)
+        out['observed'] = observed
+        out['windows'] = int(self.windows)
+        out['reason'] = None if observed else (self.reason or 'no usable window')
         return out
 
 
@@ -583,10 +617,48 @@ def _bag_aging_factor(bag, settings):
     return value
 
 
-def _motor_scale(settings):
-    if settings.motor_angles == 'output':
+def _motor_scale(settings, angles=None):
+    if (angles or settings.motor_angles) == 'output':
         return total_ratio(settings.params.geometry)
     return 1.0
+
+
+def _motor_effort_scale(settings, angles):
+    """Factor from the motor entry's effort to output torque (the ratio for a motor torque)."""
+    units = settings.motor_effort_units
+    if units == 'auto':
+        units = 'motor' if angles == 'raw' else 'joint'
+    return total_ratio(settings.params.geometry) if units == 'motor' else 1.0
+
+
+MIN_DETECT_TRAVEL_RAD = 0.05
+"""Link travel [rad] a chunk must show before its motor angles are classified."""
+
+
+def motor_travel_ratio(link, motor):
+    """
+    Motor travel over link travel (total variation) of one joint in one chunk.
+
+    About the reduction ratio for raw motor angles and about 1 for angles
+    already divided by it; NaN when the link moved less than
+    :data:`MIN_DETECT_TRAVEL_RAD` (nothing to tell them apart by).
+
+    Parameters
+    ----------
+    link, motor : ndarray
+        Positions of the link and motor entries [rad] (NaN where absent).
+
+    Returns
+    -------
+    float
+        The ratio of travels.
+
+    """
+    def travel(x):
+        x = x[np.isfinite(x)]
+        return float(np.abs(np.diff(x)).sum()) if x.size > 1 else 0.0
+    t_link, t_motor = travel(link), travel(motor)
+    return t_motor / t_link if t_link >= MIN_DETECT_TRAVEL_RAD else math.nan
 
 
 class _Output:
@@ -650,6 +722,58 @@ class _Run:
         self.back_out = {j: [] for j in plan.joints}
         self.started = False
         self.messages_read = 0
+        self.angles = {}     # joint -> 'raw' / 'output', as the data show them
+        for joint, front in self.fronts.items():
+            front.effort_topic = plan.link_topic if settings.effort_source != 'motor' or \
+                not plan.motor_topic else plan.motor_topic
+            if settings.effort_source == 'auto' and plan.motor_topic:
+                front.effort_topic = f'{plan.link_topic} or {plan.motor_topic}'
+
+    def _resolve_angles(self, link, motor, link_names):
+        """
+        Tell raw from output motor angles by their travel against the link, per joint.
+
+        Sets each front's motor scale and motor effort scale once its joint moved.
+
+        Raises
+        ------
+        InvalidInput
+            If ``twin.motor_angles`` in the configuration contradicts the data.
+
+        """
+        settings, plan = self.settings, self.plan
+        ratio = total_ratio(settings.params.geometry)
+        for k, joint in enumerate(plan.joints):
+            if joint in self.angles:
+                continue
+            if plan.motor_topic is None:
+                if link is None or not len(link):
+                    continue
+                pos = _columns(link, link_names[2 * k:2 * k + 2])[0]
+                r = motor_travel_ratio(pos[:, 0], pos[:, 1])
+            else:
+                if link is None or motor is None or not len(link) or not len(motor):
+                    continue
+                r = motor_travel_ratio(_columns(link, [joint])[0][:, 0],
+                                       _columns(motor, [plan.motor_names[k]])[0][:, 0])
+            if not math.isfinite(r):
+                continue
+            found = 'raw' if r > math.sqrt(ratio) else 'output'
+            if settings.motor_angles not in ('auto', found):
+                where = plan.motor_topic or plan.link_topic
+                raise InvalidInput(
+                    f'{self.bag.path}: twin.motor_angles is {settings.motor_angles!r} in --config, '
+                    f'but the motor angles of {joint} on {where} move {r:.3g} times the link '
+                    f'({found!r}: raw angles move about {ratio:g} times, output angles about 1)')
+            self._set_angles(joint, found)
+
+    def _set_angles(self, joint, angles):
+        front = self.fronts[joint]
+        self.angles[joint] = angles
+        front.motor_scale = _motor_scale(self.settings, angles)
+        front.pairer.motor_scale = front.motor_scale
+        front.effort_scale = _motor_effort_scale(self.settings, angles)
+        front.pairer.motor_effort_scale = front.effort_scale
 
     def run(self):
         plan = self.plan
@@ -660,6 +784,9 @@ class _Run:
             if not plan.motor_topic else list(plan.joints)
         for chunk in chunks:
             link = chunk[plan.link_topic]
+            if len(self.angles) < len(plan.joints):
+                self._resolve_angles(link, chunk[plan.motor_topic] if plan.motor_topic else None,
+                                     link_names)
             if not self.started and link is not None and len(link):
                 self._start(int(link.stamps_ns[0]))
             if plan.motor_topic is None:
@@ -692,7 +819,8 @@ class _Run:
         clean = cleaner.process(link.stamps_ns, pos, vel, eff)
         for k, joint in enumerate(self.plan.joints):
             front = self.fronts[joint]
-            cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale)
+            cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale,
+                                          self.settings.effort_source, front.effort_scale)
             front.unpaired += unpaired
             self._feed(joint, *cols)
 
@@ -759,6 +887,23 @@ class _Run:
         for joint, values in rows.items():
             self.results[joint].truth = np.array(values) if values else None
 
+    def _not_observed(self, front, counts, sides):
+        """Why a joint gave no lost motion, naming the topic; None when it did."""
+        if front.analyzer.windows_observed:
+            return None
+        plan = self.plan
+        for side, _, _ in sides:
+            topic = plan.motor_topic if side == 'motor' else plan.link_topic
+            dup, missing = counts.get(f'{side}_duplicate', 0), counts.get(f'{side}_missing', 0)
+            if dup and dup >= 0.5 * max(front.samples + dup, 1):
+                return (f'stamps do not advance on {topic}: {dup} samples repeat an earlier '
+                        'stamp (frozen clock or all-zero header stamps)')
+        if front.samples == 0:
+            return (f'no motor/link sample pairs on {plan.link_topic}'
+                    + (f' and {plan.motor_topic}' if plan.motor_topic else '')
+                    + f' ({counts.get("unpaired", 0)} unpaired)')
+        return front.analyzer.not_observed_reason(front.effort_topic)
+
     def _finish(self, chunks, link_clean, motor_clean):
         plan = self.plan
         self.messages_read = sum(chunks.messages.values())
@@ -802,6 +947,8 @@ class _Run:
                 if front.report_te else np.zeros((0, 4))
             if len(res.wear):
                 last_ns = max(last_ns, _stamp_ns(res.wear[-1][0]))
+            res.windows = int(front.analyzer.windows_observed)
+            res.reason = self._not_observed(front, counts, sides)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step') and not k.endswith('_wrap'))
             statuses.append(Status('OK' if bad == 0 else 'WARN',

@@ -29,6 +29,9 @@ ANALYSIS_PERIOD_S = 0.1
 CALIBRATION_WINDOWS = 20
 """Windows fed in 0.1 s pieces at most while the time offset is not learnt yet."""
 
+PAIR_HOLD_S = 60.0
+"""How long [s of link stream] a link sample of a bag waits for its motor partner."""
+
 TE_MAX_GAP_S = 0.05
 """``te_monitor``'s ``max_gap_s``: the largest stamp gap TE extraction bridges [s]."""
 
@@ -98,8 +101,15 @@ class JointFront:
         self.params = params
         self.ratio = total_ratio(params.geometry)
         self.motor_scale = motor_scale
+        self.effort_scale = self.ratio if settings.motor_angles != 'output' else 1.0
+        if settings.motor_effort_units != 'auto':
+            self.effort_scale = self.ratio if settings.motor_effort_units == 'motor' else 1.0
+        self.effort_topic = 'the joint states'
         self.spikes = SpikeFilter(self.ratio, settings.ingest)
-        self.pairer = Pairer(settings.ingest, motor_scale)
+        # Offline a partner can come chunks later: hold link samples for PAIR_HOLD_S.
+        self.pairer = Pairer(settings.ingest, motor_scale, hold_s=PAIR_HOLD_S,
+                             effort=settings.effort_source,
+                             motor_effort_scale=self.effort_scale)
         self.extractor = TEExtractor(self.ratio, max_gap_s=TE_MAX_GAP_S)
         self.calibration = TimeOffsetCalibration(self.extractor)
         self.analyzer = WindowAnalyzer(params, window_s=settings.window_s,

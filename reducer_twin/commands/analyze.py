@@ -15,6 +15,12 @@ total}`` (a bag that failed: ``{"error": message}``). Exit 1 when a bag has no
 JointState (the ERROR line names the topics found), cannot be read, or was truncated or
 corrupt: what was readable is still analysed and written, and a WARNING says at which
 byte reading stopped.
+
+Never silent: a joint without a usable window (no effort, too few samples per torque
+reversal, stamps that do not advance, ...) is reported with ``"observed": false``, its
+``"windows"`` and ``"reason"`` in ``--json`` (and no number for its wear or life), a
+``WARNING: <joint>: not observed ...`` line on stderr, and exit status 3 when nothing
+else failed.
 """
 
 import math
@@ -27,6 +33,9 @@ from reducer_twin.commands.simulate import check_out_dir
 from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
 
 MAX_JOBS = 64
+
+EXIT_NOT_OBSERVED = 3
+"""Exit status when every bag was analysed but a joint gave no usable window."""
 
 
 def add_parser(sub):
@@ -136,6 +145,7 @@ def run(args):
         if worker is not None:
             worker.close()
     code = 0
+    blind = False
     summary, failed = {}, {}
     for bag, name in zip(args.bags, names):
         result = results[bag]
@@ -148,6 +158,11 @@ def run(args):
             sys.stderr.write(f'WARNING: {warning.path}: {warning.message}\n')
         if result.damaged:
             code = 1
+        for joint, res in result.joints.items():
+            if not res.observed:
+                sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
+                                 f'{res.reason or "no usable window"}\n')
+                blind = True
         if args.report:
             from reducer_twin.analysis.report import write_report
             page = write_report(result, Path(args.report) if single else
@@ -170,7 +185,8 @@ def run(args):
     else:
         for name, result in summary.items():
             _print_summary(name, result)
-    return code
+    # 3: everything ran, but some reducer could not be observed (said on stderr and in JSON).
+    return EXIT_NOT_OBSERVED if code == 0 and blind else code
 
 
 def _fmt(value, spec):
@@ -183,6 +199,9 @@ def _print_summary(name, result):
           f'derived bag {result.out}')
     for joint, res in result.joints.items():
         s = res.summary()
+        if not s['observed']:
+            print(f'  {joint}: NOT OBSERVED: {s["reason"]}')
+            continue
         print(f'  {joint}: wear {_fmt(s["wear_um"], ".3f")} +/- {_fmt(s["wear_std_um"], ".3f")} '
               f'um, lost motion {_fmt(s["lost_motion_arcmin"], ".3f")} arcmin, remaining life '
               f'P10/P50/P90 {_fmt(s["rul_p10_h"], ",.0f")} / {_fmt(s["rul_p50_h"], ",.0f")} / '

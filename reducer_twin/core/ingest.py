@@ -676,12 +676,27 @@ class Pairer:
     motor_scale : float
         Factor that turns reported motor angles into input angles (1 for
         raw motor angles, the ratio when the controller divides by it).
+    hold_s : float, optional
+        How long [s of link stream] a link sample waits for the motor stream
+        to cover it before it counts as unpaired (default ``max_gap_s``: live, a
+        stalled motor topic must not hold the link). Offline, where a bag's
+        link and motor messages can lie seconds apart in the file, a longer
+        hold keeps every sample whose partner comes in a later chunk.
+    effort : str
+        Where the torque is read (:data:`EFFORT_SOURCES`); the motor side's
+        effort is interpolated at the link stamps like its angle.
+    motor_effort_scale : float
+        Factor that turns the motor entry's effort into output torque.
 
     """
 
-    def __init__(self, config=None, motor_scale=1.0):
+    def __init__(self, config=None, motor_scale=1.0, hold_s=None, effort='link',
+                 motor_effort_scale=1.0):
         self.config = config or IngestConfig()
         self.motor_scale = float(motor_scale)
+        self.hold_ns = int((self.config.max_gap_s if hold_s is None else hold_s) * 1e9)
+        self.effort = effort
+        self.motor_effort_scale = float(motor_effort_scale)
         self.unpaired = 0
         self._motor = CleanStream.empty()
         self._link = CleanStream.empty()
@@ -715,7 +730,7 @@ class Pairer:
         gap_ns = int(self.config.max_gap_s * 1e9)
         # A link sample the motor stream has not covered while the link stream ran on for
         # max_gap_s is given up: a stalled motor topic must not hold the link for ever.
-        stale = link.t_ns < link.t_ns[-1] - gap_ns
+        stale = link.t_ns < link.t_ns[-1] - max(gap_ns, self.hold_ns)
         if len(motor) == 0:
             drop = np.ones(len(link), bool) if final else stale
             self.unpaired += int(np.count_nonzero(drop))
@@ -742,8 +757,12 @@ class Pairer:
         m = motor.position[lo] + frac * (motor.position[hi] - motor.position[lo])
         self.unpaired += int(np.count_nonzero(~ok))
         good = idx[ok]
+        torque = link.effort[good]
+        if self.effort != 'link':
+            me = motor.effort[lo] + frac * (motor.effort[hi] - motor.effort[lo])
+            torque = choose_effort(torque, me[ok], self.effort, self.motor_effort_scale)
         out = PairedSamples(link.t_ns[good], m[ok] * self.motor_scale, link.position[good],
-                            link.effort[good], link.velocity[good])
+                            torque, link.velocity[good])
         self._link = _take(link, rest)
         # Keep the motor samples still needed for later link stamps (plus one before).
         keep_from = max(0, int(np.searchsorted(motor.t_ns, lt[-1] if lt.size else 0)) - 1)
@@ -753,7 +772,40 @@ class Pairer:
         return out
 
 
-def pair_columns(stream, link_col, motor_col, motor_scale=1.0):
+EFFORT_SOURCES = ('auto', 'link', 'motor')
+"""Where the joint torque is read: the link entry, the motor entry, or the link where known."""
+
+
+def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1.0):
+    """
+    Output torque from the link side, the motor side, or the link side where it is known.
+
+    Parameters
+    ----------
+    link_effort, motor_effort : ndarray
+        Effort of the link and motor entries at the same samples.
+    source : str
+        One of :data:`EFFORT_SOURCES`.
+    motor_effort_scale : float
+        Factor that turns the motor entry's effort into output torque (the ratio
+        for a motor torque, 1 when the controller reports it in joint units).
+
+    Returns
+    -------
+    ndarray
+        Output torque [N·m], NaN where unknown.
+
+    """
+    if source == 'link':
+        return link_effort
+    motor = motor_effort * motor_effort_scale if motor_effort_scale != 1.0 else motor_effort
+    if source == 'motor':
+        return motor
+    return np.where(np.isfinite(link_effort), link_effort, motor)
+
+
+def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
+                 motor_effort_scale=1.0):
     """
     Pair two columns of a stream cleaned together (one message per tick).
 
@@ -765,6 +817,10 @@ def pair_columns(stream, link_col, motor_col, motor_scale=1.0):
         Column indices of the link and motor sides.
     motor_scale : float
         Factor that turns reported motor angles into input angles.
+    effort : str
+        Where the torque is read (:data:`EFFORT_SOURCES`).
+    motor_effort_scale : float
+        Factor that turns the motor entry's effort into output torque.
 
     Returns
     -------
@@ -778,10 +834,12 @@ def pair_columns(stream, link_col, motor_col, motor_scale=1.0):
     motor = stream.position[:, motor_col]
     ok = np.isfinite(link) & np.isfinite(motor)
     unpaired = int(np.count_nonzero(np.isfinite(link) ^ np.isfinite(motor)))
+    torque = stream.effort[:, link_col] if effort == 'link' else choose_effort(
+        stream.effort[:, link_col], stream.effort[:, motor_col], effort, motor_effort_scale)
     if ok.all():
-        return (stream.t_ns, motor * motor_scale, link, stream.effort[:, link_col],
+        return (stream.t_ns, motor * motor_scale, link, torque,
                 stream.velocity[:, link_col]), unpaired
-    return (stream.t_ns[ok], motor[ok] * motor_scale, link[ok], stream.effort[ok, link_col],
+    return (stream.t_ns[ok], motor[ok] * motor_scale, link[ok], torque[ok],
             stream.velocity[ok, link_col]), unpaired
 
 

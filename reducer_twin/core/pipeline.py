@@ -466,7 +466,9 @@ class LifeStage:
         -------
         tuple
             ``(record, level, message)``: the ``remaining_life`` record, the
-            level ``'OK'``/``'WARN'``/``'ERROR'`` and a one-line message.
+            level ``'OK'``/``'WARN'``/``'ERROR'`` and a one-line message;
+            ``'STALE'`` instead of ``'OK'`` while no lost motion has been observed
+            (``updates`` 0).
 
         """
         x, P = state_from_record(wear_record)
@@ -495,4 +497,8 @@ class LifeStage:
                    + (' (censored)' if pred.p50_censored else ''))
         if pred.limit_reached:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
+        if level == 'OK' and int(wear_record.get('updates', 1)) == 0:
+            # A prediction from the duty alone is no assessment: never 'OK' without evidence.
+            level = 'STALE'
+            message = 'not observed: no lost-motion observation yet; ' + message
         return record, level, message

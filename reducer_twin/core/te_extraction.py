@@ -61,7 +61,7 @@ bin when they cannot be separated from the torque lines. Without it, bins
 with many samples would claim a precision the model does not have.
 """
 
-_MIN_IDENTIFIABILITY = 1e-3
+_MIN_IDENTIFIABILITY = 1e-2
 """
 Smallest fraction of a regressor's energy left after the other regressors.
 
@@ -662,6 +662,20 @@ class WindowAnalyzer:
     compliance_prior : float
         Prior standard deviation of the compliance correction of the wear
         fit, as a fraction of the series compliance ``1/k_s``.
+    min_window_samples : int
+        Fewest samples in a window that ends by revolution, duration or
+        motion: at 100 Hz a 2 s window holds too few samples per torque bin
+        and sign, so the window is lengthened (up to ``max_window_s``).
+    torque_smoothing_s : float
+        Length of the centred moving average applied to the effort inside
+        each window before it is binned [s] (0: none). A motor-current torque
+        estimate carries white noise of a few % of rated torque; the
+        reducer's torque changes with the robot's dynamics, far slower.
+    sign_sigmas : float
+        Samples whose smoothed torque lies within this many standard
+        deviations of its noise from zero take no part in the hysteresis:
+        there the noise, not the load, would pick the flank (standstill of
+        an unloaded joint, torque reversals).
 
     Raises
     ------
@@ -672,7 +686,8 @@ class WindowAnalyzer:
 
     def __init__(self, params, window='auto', window_s=2.0, max_window_s=20.0, aging_factor=1.0,
                  orders=None, torque_bins=16, bin_range=(0.02, 1.5), min_bin_samples=20,
-                 min_bins=2, memory_windows=10.0, min_speed=0.01, compliance_prior=0.3):
+                 min_bins=2, memory_windows=10.0, min_speed=0.01, compliance_prior=0.3,
+                 min_window_samples=1000, torque_smoothing_s=0.03, sign_sigmas=3.0):
         if window not in WINDOW_MODES:
             raise InvalidParameter(out_of_range(
                 'window', window, '', 'one of ' + ', '.join(repr(m) for m in WINDOW_MODES)))
@@ -689,6 +704,10 @@ class WindowAnalyzer:
         self.torque_bins = _whole('torque_bins', torque_bins, 1, 200)
         self.min_bin_samples = _whole('min_bin_samples', min_bin_samples, 3, 10 ** 9)
         self.min_bins = _whole('min_bins', min_bins, 1, 200)
+        self.min_window_samples = _whole('min_window_samples', min_window_samples, 1, 10 ** 9)
+        self.torque_smoothing_s = _finite('torque_smoothing_s', torque_smoothing_s, 's',
+                                          '>= 0', lambda v: v >= 0.0)
+        self.sign_sigmas = _finite('sign_sigmas', sign_sigmas, '', '>= 0', lambda v: v >= 0.0)
         try:
             lo, hi = (float(v) for v in bin_range)
         except (TypeError, ValueError):
@@ -712,9 +731,16 @@ class WindowAnalyzer:
         self._pool_raw = np.zeros(n_par)
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._last_t = None
+        self._last_theta = None
         self._aliased = False
         self.ignored_samples = 0
         self.clock_resets = 0
+        self.samples_without_effort = 0
+        self.derived_velocity = 0
+        self.samples_seen = 0
+        self.windows_emitted = 0
+        self.windows_observed = 0
+        self._period_s = None
 
     def update(self, stream, effort, velocity):
         """
@@ -767,9 +793,18 @@ class WindowAnalyzer:
 
     def _update(self, stream, effort, velocity):
         """Feed a chunk without a clock reset."""
-        use = stream.valid & np.isfinite(effort) & np.isfinite(velocity)
-        if self._last_t is not None:
-            use &= stream.t > self._last_t
+        fresh = stream.valid if self._last_t is None else stream.valid & (stream.t > self._last_t)
+        self.samples_seen += int(np.count_nonzero(fresh))
+        if self._period_s is None and np.count_nonzero(fresh) > 16:
+            steps = np.diff(stream.t[fresh][:4096])
+            steps = steps[steps > 0]
+            if steps.size:
+                self._period_s = float(np.median(steps))
+        use = fresh & np.isfinite(effort)
+        self.samples_without_effort += int(np.count_nonzero(fresh & ~use))
+        unknown = use & ~np.isfinite(velocity)
+        if unknown.any():
+            velocity = self._derive_velocity(stream, use, velocity, unknown)
         self.ignored_samples += int(np.count_nonzero(stream.valid & ~use))
         if use.all():
             def pick(a):
@@ -785,6 +820,7 @@ class WindowAnalyzer:
             gap = step > stream.max_gap_s
             dt = np.where(step <= stream.max_gap_s, step, 0.0)
             self._last_t = float(t[-1])
+            self._last_theta = float(pick(stream.output_angle)[-1])
             new = {'t': t, 'te': pick(stream.te), 'theta': pick(stream.output_angle),
                    'torque': pick(effort), 'speed': pick(velocity), 'dt': dt,
                    'gap': gap.astype(float)}
@@ -792,6 +828,69 @@ class WindowAnalyzer:
                          else new[k] for k in _BUFFER}
             self._aliased = True
         return self._emit(final=False)
+
+    @property
+    def rate_hz(self):
+        """Sample rate of the stream [Hz] (median stamp step), NaN before 17 samples."""
+        return 1.0 / self._period_s if self._period_s else math.nan
+
+    def not_observed_reason(self, effort_source='the joint states'):
+        """
+        Say why no window has given a lost motion yet, or None once one has.
+
+        Parameters
+        ----------
+        effort_source : str
+            Where the effort was expected (a topic name), for the message.
+
+        Returns
+        -------
+        str or None
+            One line a maintenance engineer can act on.
+
+        """
+        if self.windows_observed:
+            return None
+        seen = self.samples_seen
+        if seen == 0:
+            return 'no encoder samples with a transmission error (no motor/link pairs)'
+        if self.samples_without_effort >= 0.99 * seen:
+            return (f'no effort on {effort_source} ({self.samples_without_effort} of {seen} '
+                    'samples): the lost motion needs the torque')
+        if self.windows_emitted == 0:
+            return f'no complete analysis window yet ({seen} samples)'
+        rate = self.rate_hz
+        if math.isfinite(rate) and rate < LOW_RATE_HZ:
+            return (f'{rate:.0f} Hz: too few samples per torque reversal in '
+                    f'{self.windows_emitted} windows')
+        return (f'no torque reversal at equal |T| above the effort noise in '
+                f'{self.windows_emitted} windows (the joint did not reverse under load)')
+
+    def _derive_velocity(self, stream, use, velocity, unknown):
+        """
+        Output speed from the unwrapped output angle where the stream has none.
+
+        Central differences over the samples in use (one-sided at the ends; the
+        chunk's first sample reaches back to the last sample of the previous chunk
+        when it lies within ``max_gap_s``). Counted in ``derived_velocity``.
+        """
+        idx = np.flatnonzero(use)
+        t, theta = stream.t[idx], stream.output_angle[idx]
+        back = self._last_t is not None and t.size and t[0] - self._last_t <= stream.max_gap_s
+        if back:
+            t = np.concatenate([[self._last_t], t])
+            theta = np.concatenate([[self._last_theta], theta])
+        if t.size >= 2:
+            derived = np.gradient(theta, t)
+        else:
+            derived = np.zeros(t.size)
+        if back:
+            derived = derived[1:]
+        out = np.array(velocity, dtype=float, copy=True)
+        fill = unknown[idx]
+        out[idx[fill]] = derived[fill]
+        self.derived_velocity += int(np.count_nonzero(fill))
+        return out
 
     def flush(self):
         """
@@ -824,7 +923,10 @@ class WindowAnalyzer:
                 last += 1
             end = cuts[last - 1][1]
             part = {k: v[base:end] for k, v in self._buf.items()}
-            out += self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
+            found = self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
+            self.windows_emitted += len(found)
+            self.windows_observed += sum(math.isfinite(f.lost_motion) for f in found)
+            out += found
             first = last
         end = cuts[-1][1]
         self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
@@ -853,6 +955,9 @@ class WindowAnalyzer:
                     moving &= np.sign(speed[s:x]) == np.sign(speed[s])
                     c = s + int(np.argmin(moving)) if not moving.all() else n
                     cand.append((d, 'duration') if c <= d else (c, 'motion'))
+            # Too few samples (a low rate) for the torque bins: the window goes on.
+            shortest = s + self.min_window_samples
+            cand = [(c if r in ('gap', 'max') else max(c, shortest), r) for c, r in cand]
             end, reason = min(cand, key=lambda item: item[0])
             if end >= n:
                 if not final:
@@ -871,10 +976,11 @@ class WindowAnalyzer:
         n_win = starts.size
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
+        torque, ambiguous = self._smooth_torque(torque, t, win, starts, ends)
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
         x = z[:-1]
-        stats = self._group_stats(z, torque, win, starts, ends)
+        stats = self._group_stats(z, torque, win, starts, ends, ambiguous)
         beta, ident, noise = self._fit_harmonics(stats, n_win)
         torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
@@ -942,7 +1048,43 @@ class WindowAnalyzer:
         z[-1] = y
         return z
 
-    def _group_stats(self, z, torque, win, starts, ends):
+    def _smooth_torque(self, torque, t, win, starts, ends):
+        """
+        Centred moving average of the effort inside each window, and its ambiguous samples.
+
+        The noise of the raw effort is estimated per window from second
+        differences (robustly, by their median absolute value), so the
+        smoothed torque's noise is ``sigma/sqrt(m)`` for an average of ``m``
+        samples. Samples whose smoothed torque is within ``sign_sigmas`` of
+        that noise from zero are ambiguous: their flank is unknown.
+
+        Returns
+        -------
+        tuple of ndarray
+            Smoothed torque [N·m] and the ambiguous mask, both like ``torque``.
+
+        """
+        n = torque.size
+        period = float(np.median(np.diff(t))) if n > 1 else 0.0
+        half = int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
+        idx = np.arange(n)
+        lo = np.maximum(idx - half, starts[win])
+        hi = np.minimum(idx + half + 1, ends[win])
+        if half > 0:
+            acc = np.concatenate([[0.0], np.cumsum(torque)])
+            smooth = (acc[hi] - acc[lo]) / (hi - lo)
+        else:
+            smooth = torque
+        sigma = np.zeros(starts.size)
+        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+            if b - a >= 3:
+                seg = torque[a:b]
+                d2 = seg[1:-1] - 0.5 * (seg[:-2] + seg[2:])
+                sigma[k] = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(1.5)
+        ambiguous = np.abs(smooth) < self.sign_sigmas * sigma[win] / np.sqrt(hi - lo)
+        return smooth, ambiguous
+
+    def _group_stats(self, z, torque, win, starts, ends, exclude=None):
         """
         Sum the regressors per group ``(window, |T| bin, torque sign)`` and per window.
 
@@ -956,6 +1098,8 @@ class WindowAnalyzer:
         size = np.abs(torque)
         b = np.searchsorted(self.edges, size, side='right') - 1
         outside = (b < 0) | (b >= self.torque_bins)
+        if exclude is not None:
+            outside |= exclude
         b = np.clip(b, 0, self.torque_bins - 1)
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
         u = size - self.centres[b]
@@ -1161,6 +1305,9 @@ class WindowAnalyzer:
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
+
+LOW_RATE_HZ = 200.0
+"""Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly."""
 
 _BATCH_SAMPLES = 1 << 16
 
