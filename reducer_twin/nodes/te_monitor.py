@@ -286,10 +286,16 @@ class TEMonitor(Node):
             values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
                            'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
         level = 'OK' if self.rejects.total == 0 else 'WARN'
+        message = f'{self.windows} windows analysed'
+        reason = self.analyzer.not_observed_reason(joint_topic(self.joint, 'encoder_pairs'))
+        values['observed_windows'] = self.analyzer.windows_observed
+        if reason is not None:
+            # Never OK without a lost motion: say why the reducer cannot be seen.
+            level, message = 'STALE', f'not observed: {reason}'
         self.diag_pub.publish(diagnostic_array(
             self.get_clock().now().nanoseconds,
             [diagnostic_status(f'reducer_twin: {self.joint} transmission error', self.joint,
-                               level, f'{self.windows} windows analysed', values)]))
+                               level, message, values)]))
 
 
 def main(args=None):

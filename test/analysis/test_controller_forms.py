@@ -1,0 +1,182 @@
+"""
+Spec: ``analyze`` reads every form a controller publishes, or says why it cannot.
+
+One simulated recording is rewritten the way other controllers publish it (effort only on
+the motor entry, in motor units; no velocity field; motor angles already divided by the
+ratio; link and motor on two topics written seconds apart; frozen stamps; no effort at
+all). A form the twin can read must give the original's estimate; a form it cannot must be
+declared not observed, with the reason, a WARNING line and exit status 3.
+"""
+
+import json
+
+from msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
+import numpy as np
+import pytest
+from reducer_twin.analysis import pipeline
+from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+
+AGING = 180_000.0
+SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
+                      wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
+RATIO = total_ratio(ReducerParams().geometry)
+CUSTOM = {AGING_KEY: repr(AGING)}
+
+
+@pytest.fixture(scope='module')
+def original(tmp_path_factory):
+    """The simulated bag, its JointState batch and its analysis."""
+    root = tmp_path_factory.mktemp('forms')
+    simulate_bag(root / 'bag', SPEC)
+    with open_bag(root / 'bag') as bag:
+        js = bag.read_joint_states()['/joint_states']
+    return js, analyze_bag(root / 'bag', root / 'derived')
+
+
+def _rewrite(js, tmp_path, name, **fields):
+    batch = JointStateBatch(fields.get('stamps_ns', js.stamps_ns), js.names,
+                            fields.get('position', js.position),
+                            fields.get('velocity', js.velocity),
+                            fields.get('effort', js.effort))
+    return write_bag_dir(tmp_path / name, {'/joint_states': batch}, custom_data=CUSTOM)
+
+
+def _wear(result):
+    return {j: r.summary()['wear_um'] for j, r in result.joints.items()}
+
+
+def _assert_same_estimate(result, original, rel=0.02):
+    for joint, wear in _wear(original[1]).items():
+        got = result.joints[joint].summary()
+        assert got['observed'] and got['windows'] >= 5
+        assert got['wear_um'] == pytest.approx(wear, rel=rel)
+
+
+def _motor_columns(js):
+    return [k for k, n in enumerate(js.names) if n.endswith('_motor')]
+
+
+def test_effort_only_on_the_motor_entry_in_motor_units_reads_like_the_link_effort(
+        original, tmp_path):
+    js = original[0]
+    effort = np.full_like(js.effort, np.nan)
+    for k in _motor_columns(js):
+        link = js.names.index(js.names[k][:-len('_motor')])
+        effort[:, k] = js.effort[:, link] / RATIO    # the motor's torque
+    result = analyze_bag(_rewrite(js, tmp_path, 'motor_effort', effort=effort),
+                         tmp_path / 'd')
+    _assert_same_estimate(result, original)
+
+
+def test_a_stream_without_velocity_gets_it_from_the_positions(original, tmp_path):
+    js = original[0]
+    result = analyze_bag(_rewrite(js, tmp_path, 'no_velocity',
+                                  velocity=np.full_like(js.velocity, np.nan)), tmp_path / 'd')
+    _assert_same_estimate(result, original, rel=0.03)
+
+
+def _output_angles(js):
+    position = js.position.copy()
+    position[:, _motor_columns(js)] /= RATIO
+    return position
+
+
+def test_motor_angles_divided_by_the_ratio_are_recognised_without_a_config(original, tmp_path):
+    js = original[0]
+    result = analyze_bag(_rewrite(js, tmp_path, 'output', position=_output_angles(js)),
+                         tmp_path / 'd')
+    _assert_same_estimate(result, original)
+
+
+def test_a_config_that_contradicts_the_motor_angles_is_an_error_naming_both(
+        original, tmp_path, capsys):
+    js = original[0]
+    bag = _rewrite(js, tmp_path, 'output', position=_output_angles(js))
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_angles: raw\n')
+    code = main(['analyze', str(bag), '--out', str(tmp_path / 'd'), '--config', str(config)])
+    err = capsys.readouterr().err
+    assert code == 1
+    line = [x for x in err.splitlines() if x.startswith('ERROR:')][0]
+    assert "twin.motor_angles is 'raw'" in line and "'output'" in line
+    assert 'Traceback' not in err
+
+
+def test_link_and_motor_topics_far_apart_in_the_file_lose_no_pair_at_chunk_boundaries(
+        original, tmp_path, monkeypatch):
+    js = original[0]
+    links = [k for k in range(len(js.names)) if k not in _motor_columns(js)]
+    motors = _motor_columns(js)
+
+    def side(cols, names):
+        return JointStateBatch(js.stamps_ns, tuple(names), js.position[:, cols],
+                               js.velocity[:, cols], js.effort[:, cols])
+
+    link = side(links, [js.names[k] for k in links])
+    motor = side(motors, [js.names[k] for k in links])    # the same joint names
+    root = tmp_path / 'apart'
+    with BagDirWriter(root, compression='none', custom_data=CUSTOM) as writer:
+        a = writer.add_topic('/joint_states', JOINT_STATE)
+        b = writer.add_topic('/motor_states', JOINT_STATE)
+        # Each motor message is logged 3 s after its link message (a slow recorder queue).
+        writer.write_joint_states(a, link)
+        writer.write_joint_states(b, motor, log_times_ns=motor.stamps_ns + 3_000_000_000)
+    monkeypatch.setattr(pipeline, 'CHUNK_MESSAGES', 4096)
+    result = analyze_bag(root, tmp_path / 'd')
+    for joint, res in result.joints.items():
+        assert res.counts['unpaired'] == 0
+        assert res.summary()['rejected'] == 0
+    _assert_same_estimate(result, original, rel=0.03)
+
+
+def _cli_json(bag, tmp_path, capsys):
+    code = main(['analyze', str(bag), '--out', str(tmp_path / 'd'), '--json'])
+    captured = capsys.readouterr()
+    return code, json.loads(captured.out), captured.err
+
+
+def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
+        original, tmp_path, capsys):
+    js = original[0]
+    bag = _rewrite(js, tmp_path, 'no_effort', effort=np.full_like(js.effort, np.nan))
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['windows'] == 0
+        assert 'no effort on /joint_states' in got['reason']
+        assert got['wear_um'] is None and got['rul_p50_h'] is None
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
+
+
+def test_all_zero_header_stamps_are_declared_as_stamps_that_do_not_advance(
+        original, tmp_path, capsys):
+    js = original[0]
+    bag = _rewrite(js, tmp_path, 'zero', stamps_ns=np.zeros_like(js.stamps_ns))
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    for got in out['joints'].values():
+        assert got['observed'] is False
+        assert 'stamps do not advance on /joint_states' in got['reason']
+
+
+def test_an_observed_joint_reports_its_windows_and_no_reason(original):
+    for res in original[1].joints.values():
+        got = res.summary()
+        assert got['observed'] is True and got['reason'] is None
+        assert got['windows'] == int(np.isfinite(
+            res.features[:, pipeline.TE_FEATURES.fields.index('lost_motion_rad')]).sum())
+
+
+def test_effort_source_and_units_come_from_the_config(tmp_path):
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  effort_source: motor\n  motor_effort_units: joint\n')
+    settings = AnalysisSettings.from_config(config)
+    assert (settings.effort_source, settings.motor_effort_units) == ('motor', 'joint')
+    config.write_text('twin:\n  effort_source: elbow\n')
+    with pytest.raises(Exception, match="twin.effort_source must be one of 'auto', 'link'"):
+        AnalysisSettings.from_config(config)
