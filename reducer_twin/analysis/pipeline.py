@@ -762,7 +762,8 @@ class _Run:
             if settings.motor_angles not in ('auto', found):
                 where = plan.motor_topic or plan.link_topic
                 raise InvalidInput(
-                    f'{self.bag.path}: twin.motor_angles is {settings.motor_angles!r} in --config, '
+                    f'{self.bag.path}: twin.motor_angles is {settings.motor_angles!r} in '
+                    f'--config, '
                     f'but the motor angles of {joint} on {where} move {r:.3g} times the link '
                     f'({found!r}: raw angles move about {ratio:g} times, output angles about 1)')
             self._set_angles(joint, found)
@@ -894,7 +895,7 @@ class _Run:
         plan = self.plan
         for side, _, _ in sides:
             topic = plan.motor_topic if side == 'motor' else plan.link_topic
-            dup, missing = counts.get(f'{side}_duplicate', 0), counts.get(f'{side}_missing', 0)
+            dup = counts.get(f'{side}_duplicate', 0)
             if dup and dup >= 0.5 * max(front.samples + dup, 1):
                 return (f'stamps do not advance on {topic}: {dup} samples repeat an earlier '
                         'stamp (frozen clock or all-zero header stamps)')

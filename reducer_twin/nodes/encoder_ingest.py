@@ -9,8 +9,10 @@ Subscribes to what robot controllers publish, in either form:
   (``motor_topic`` set).
 
 Motor angles are raw (input side) or already divided by the gear ratio
-(``motor_angles: output``). The subscriptions take the messages as their
-serialised bytes, read by :class:`~msg_adapters.jointstate_cdr.JointStateReader`
+(``motor_angles: output``). The torque is read from the link entry, the motor
+entry (in motor units, times the ratio, or joint units: ``motor_effort_units``),
+or the link entry where it has one (``effort_source: auto``). The subscriptions
+take the messages as their serialised bytes, read by :class:`~msg_adapters.jointstate_cdr.JointStateReader`
 (the same values rclpy would give, without building a message object of
 names and arrays per controller tick). Every stream goes through the core ingestion
 rules (:mod:`reducer_twin.core.ingest`); clean, time-aligned samples are
@@ -34,7 +36,8 @@ from msg_adapters.ros import JointStatePicker
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import IngestConfig, Pairer, SpikeFilter, SpikeFilterBank
+from reducer_twin.core.ingest import choose_effort, EFFORT_SOURCES, IngestConfig, Pairer
+from reducer_twin.core.ingest import SpikeFilter, SpikeFilterBank
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
@@ -49,9 +52,10 @@ from std_msgs.msg import Float64MultiArray
 class _JointOutput:
     """Pairing state, pending rows and publisher of one joint."""
 
-    def __init__(self, name, config, motor_scale, ratio):
+    def __init__(self, name, config, motor_scale, ratio, effort='link', effort_scale=1.0):
         self.name = name
-        self.pairer = Pairer(config, motor_scale)
+        self.pairer = Pairer(config, motor_scale, effort=effort,
+                             motor_effort_scale=effort_scale)
         self.spikes = SpikeFilter(ratio, config)
         self.motor_scale = motor_scale
         self.published = 0
@@ -90,6 +94,11 @@ class EncoderIngest(Node):
         self.joints = p['joints']
         ratio = total_ratio(Geometry()) if p['gear_ratio'] <= 0 else p['gear_ratio']
         scale = ratio if p['motor_angles'] == 'output' else 1.0
+        units = p['motor_effort_units']
+        if units == 'auto':
+            units = 'joint' if p['motor_angles'] == 'output' else 'motor'
+        self.effort_source = p['effort_source']
+        self.effort_scale = ratio if units == 'motor' else 1.0
         self.batch_ns = int(p['batch_period_s'] * 1e9)
         self.split = bool(p['motor_topic'])
         cfg = self.ingest_params.value
@@ -100,7 +109,7 @@ class EncoderIngest(Node):
         self.spikes = SpikeFilterBank(ratio, len(self.joints), cfg)
         self.outputs = {}
         for joint in self.joints:
-            out = _JointOutput(joint, cfg, scale, ratio)
+            out = _JointOutput(joint, cfg, scale, ratio, self.effort_source, self.effort_scale)
             out.publisher = self.create_publisher(
                 Float64MultiArray, joint_topic(joint, 'encoder_pairs'), encoder_qos())
             self.outputs[joint] = out
@@ -136,6 +145,11 @@ class EncoderIngest(Node):
                                 'are in link_topic as <joint><motor_suffix>'),
             'motor_suffix': ('_motor', 'suffix of motor-side entries in a combined message'),
             'motor_angles': ('raw', "'raw' (input side) or 'output' (divided by the ratio)"),
+            'effort_source': ('auto', "torque from the 'link' entry, the 'motor' entry, or "
+                                      "'auto' (link where it has one, else motor)"),
+            'motor_effort_units': ('auto', "motor entry's effort: 'motor' torque (times the "
+                                           "ratio), 'joint' units, or 'auto' (motor torque "
+                                           'when motor_angles is raw)'),
             'gear_ratio': (0.0, 'total ratio; <= 0 takes it from the RV-80E geometry (81)'),
             'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription'),
             'batch_period_s': (0.002, 'longest time a sample waits to be published [s]; 0: '
@@ -149,6 +163,11 @@ class EncoderIngest(Node):
         if out['motor_angles'] not in ('raw', 'output'):
             raise InvalidParameter(
                 f"motor_angles must be 'raw' or 'output', got {out['motor_angles']!r}")
+        for name, allowed in (('effort_source', EFFORT_SOURCES),
+                              ('motor_effort_units', ('auto', 'motor', 'joint'))):
+            if out[name] not in allowed:
+                raise InvalidParameter(f'{name} must be one of '
+                                       f'{", ".join(repr(a) for a in allowed)}, got {out[name]!r}')
         if not 0.0 <= out['batch_period_s'] <= 1.0:
             raise InvalidParameter(
                 f"batch_period_s must be in [0, 1] s, got {out['batch_period_s']!r}")
@@ -212,7 +231,8 @@ class EncoderIngest(Node):
         rows[:, :, 0] = clean.t_ns * 1e-9
         rows[:, :, 1] = motor.T
         rows[:, :, 2] = link.T
-        rows[:, :, 3] = clean.effort[:, 0::2].T
+        rows[:, :, 3] = choose_effort(clean.effort[:, 0::2], clean.effort[:, 1::2],
+                                      self.effort_source, self.effort_scale).T
         rows[:, :, 4] = clean.velocity[:, 0::2].T
         all_kept = keep is paired and unpaired is None
         for k, out in enumerate(self.outputs.values()):

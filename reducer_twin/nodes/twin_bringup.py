@@ -66,7 +66,9 @@ def build_nodes(config, sim_overrides=None):
         Parameter('link_topic', value=twin['link_topic']),
         Parameter('motor_topic', value=twin['motor_topic']),
         Parameter('motor_suffix', value=twin['motor_suffix']),
-        Parameter('motor_angles', value=twin['motor_angles'])])
+        Parameter('motor_angles', value=twin['motor_angles']),
+        Parameter('effort_source', value=twin['effort_source']),
+        Parameter('motor_effort_units', value=twin['motor_effort_units'])])
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
     for joint in joints:
         nodes['te'][joint] = TEMonitor(

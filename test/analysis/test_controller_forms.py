@@ -30,7 +30,7 @@ CUSTOM = {AGING_KEY: repr(AGING)}
 
 @pytest.fixture(scope='module')
 def original(tmp_path_factory):
-    """The simulated bag, its JointState batch and its analysis."""
+    """Simulate the bag; return its JointState batch and its analysis."""
     root = tmp_path_factory.mktemp('forms')
     simulate_bag(root / 'bag', SPEC)
     with open_bag(root / 'bag') as bag:

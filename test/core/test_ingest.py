@@ -713,3 +713,36 @@ def test_pair_same_stamps_pairs_the_common_stamps_only():
     pairs, unpaired = pair_same_stamps(a, clean(t, RATIO * link), motor_scale=2.0)
     np.testing.assert_allclose(pairs.motor_angle, 2.0 * RATIO * link)
     assert unpaired == 0
+
+
+def test_a_held_link_sample_is_paired_when_its_motor_partner_comes_seconds_later():
+    # Offline, a bag can log the motor topic seconds after the link topic: with a hold of
+    # 60 s nothing is given up at a chunk boundary; live (default hold) a stalled motor
+    # topic must not hold the link for longer than max_gap_s.
+    t, link = ramp(3000)
+    offline, live = Pairer(hold_s=60.0), Pairer()
+    for pairer in (offline, live):
+        pairer.add_link(clean(t, link))
+        assert len(pairer.pop()) == 0
+        pairer.add_motor(clean(t, motor_at(t)))
+    assert len(offline.pop(final=True)) == 3000 and offline.unpaired == 0
+    assert live.unpaired > 2900
+
+
+def test_effort_comes_from_the_link_the_motor_side_or_the_link_where_it_is_known():
+    link = np.array([1.0, np.nan, 3.0])
+    motor = np.array([0.1, 0.2, np.nan])
+    np.testing.assert_array_equal(ingest.choose_effort(link, motor, 'link', 81.0), link)
+    np.testing.assert_allclose(ingest.choose_effort(link, motor, 'motor', 10.0),
+                               [1.0, 2.0, np.nan])
+    np.testing.assert_allclose(ingest.choose_effort(link, motor, 'auto', 10.0), [1.0, 2.0, 3.0])
+
+
+def test_a_split_pairer_reads_the_motor_effort_at_the_link_stamps():
+    t, link = ramp(100)
+    motor = StreamCleaner().process(t, motor_at(t)[:, None], None, np.full((100, 1), 2.0))
+    pairer = Pairer(effort='motor', motor_effort_scale=RATIO)
+    pairer.add_link(clean(t, link))
+    pairer.add_motor(motor.column(0))
+    pairs = pairer.pop(final=True)
+    np.testing.assert_allclose(pairs.effort, 2.0 * RATIO)

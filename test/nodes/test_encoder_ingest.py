@@ -65,7 +65,8 @@ class Robot:
 
     """
 
-    def __init__(self, ros, split=False, motor_angles='raw', joints=2, batch_period_s=0.002):
+    def __init__(self, ros, split=False, motor_angles='raw', joints=2, batch_period_s=0.002,
+                 extra=()):
         n = next(_ids)
         self.ros = ros
         self.joints = [f'arm{n}_j{k + 1}' for k in range(joints)]
@@ -81,7 +82,7 @@ class Robot:
                 Parameter('motor_topic', value=self.motor_topic),
                 Parameter('motor_angles', value=motor_angles),
                 Parameter('batch_period_s', value=batch_period_s),
-                Parameter('diagnostics_period_s', value=0.1)]))
+                Parameter('diagnostics_period_s', value=0.1), *extra]))
         self.probe = ros.probe()
         self.link_pub = self.probe.publisher(self.link_topic, JointState, encoder_qos())
         self.motor_pub = (self.probe.publisher(self.motor_topic, JointState, encoder_qos())
@@ -162,6 +163,50 @@ def expected_stamps_s(robot, ks):
 
 
 # -- form (a): one JointState with <joint> and <joint>_motor ----------------------------------
+
+
+def test_effort_only_on_the_motor_entry_in_motor_units_becomes_output_torque(ros):
+    # A controller that reports the motor current's torque on the motor interface only.
+    robot = Robot(ros)
+    n = 200
+    messages = []
+    for k in range(n):
+        msg = robot.combined(k)
+        eff = list(msg.effort)
+        for j, name in enumerate(robot.joints):
+            eff[list(msg.name).index(name + '_motor')] = 100.0 * (j + 1) * math.cos(k * 1e-3) \
+                / RATIO
+            eff[list(msg.name).index(name)] = math.nan
+        msg.effort = eff
+        messages.append((robot.link_pub, msg))
+    robot.send(messages)
+    ks = np.arange(n)
+    for j, joint in enumerate(robot.joints):
+        rows = robot.wait_rows(joint, n)
+        np.testing.assert_allclose(rows[:, 3], 100.0 * (j + 1) * np.cos(ks * 1e-3), rtol=1e-12)
+
+
+def test_effort_on_the_motor_topic_in_joint_units_is_read_with_the_parameters(ros):
+    robot = Robot(ros, split=True, extra=(Parameter('effort_source', value='motor'),
+                                          Parameter('motor_effort_units', value='joint')))
+    n = 200
+    messages = []
+    for k in range(n):
+        link = robot.link_only(k)
+        link.effort = []
+        motor = robot.motor_only(k)
+        motor.effort = [25.0 * (j + 1) for j in range(len(robot.joints))]
+        messages += [(robot.motor_pub, motor), (robot.link_pub, link)]
+    robot.send(messages)
+    for j, joint in enumerate(robot.joints):
+        rows = robot.wait_rows(joint, n - 5)
+        np.testing.assert_allclose(rows[:, 3], 25.0 * (j + 1))
+
+
+def test_an_unknown_effort_source_stops_the_node_naming_the_allowed_values(ros):
+    with pytest.raises(InvalidParameter, match="effort_source must be one of 'auto', 'link'"):
+        EncoderIngest('bad_effort', context=ros.context, parameter_overrides=[
+            Parameter('effort_source', value='elbow')])
 
 
 @pytest.mark.parametrize('motor_angles', ['raw', 'output'])

@@ -242,3 +242,23 @@ def test_fed_in_process_the_monitor_publishes_te_only_while_someone_listens(ros,
                                rtol=0, atol=1e-15)
     node.analyze_now()
     assert node.windows >= 1
+
+
+def test_without_effort_the_diagnostics_are_stale_with_the_reason_never_ok(ros, simulated):
+    _, rows = simulated
+    blind = rows.copy()
+    blind[:, 3] = np.nan        # a controller that publishes no effort
+    monitor = Monitor(ros)
+    monitor.feed(blind)
+    status = monitor.status(lambda s: 'no effort' in s.message)
+    assert status.level == DiagnosticStatus.STALE
+    assert status.message.startswith('not observed: no effort on /reducer_twin/')
+    assert ros.key_values(status)['observed_windows'] == '0'
+
+
+def test_with_effort_the_diagnostics_say_ok_once_a_window_gave_a_lost_motion(ros, simulated):
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    status = monitor.status(lambda s: s.level == DiagnosticStatus.OK)
+    assert int(ros.key_values(status)['observed_windows']) >= 1
