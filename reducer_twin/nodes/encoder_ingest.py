@@ -13,8 +13,9 @@ Motor angles are raw (input side) or already divided by the gear ratio
 entry (in motor units, times the ratio, or joint units: ``motor_effort_units``),
 or the link entry where it has one (``effort_source: auto``). The subscriptions
 take the messages as their serialised bytes, read by
-:class:`~msg_adapters.jointstate_cdr.JointStateReader` (the same values rclpy would give, without building a message object of
-names and arrays per controller tick). Every stream goes through the core ingestion
+:class:`~msg_adapters.jointstate_cdr.JointStateReader` (the same values rclpy
+would give, without building a message object of names and arrays per
+controller tick). Every stream goes through the core ingestion
 rules (:mod:`reducer_twin.core.ingest`); clean, time-aligned samples are
 published per joint on ``/reducer_twin/<joint>/encoder_pairs``
 (``Float64MultiArray``, layout ``encoder_pairs``) in small batches
