@@ -21,6 +21,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + package_name + '/config/foxglove', sorted(glob('config/foxglove/*.json'))),
+        ('share/' + package_name + '/launch', sorted(glob('launch/*.launch.py'))),
     ],
     python_requires='>=3.10',
     # rclpy and the message packages come from the ROS installation (or from

@@ -8,6 +8,7 @@ per module with this venv's colcon. Installed programs run through
 the underlay (the part ``/opt/ros/jazzy`` plays on a ROS machine).
 """
 
+import ast
 import json
 import os
 import shutil
@@ -148,3 +149,29 @@ def test_installed_joint_simulator_runs_on_the_installed_params_file_until_ctrl_
     assert proc.returncode == 0, f'exit {proc.returncode} after SIGINT:\n{err}'
     assert 'Traceback' not in err, err
     assert "simulating 1 joint(s) ['joint_1'] at 1000 Hz" in out + err
+
+
+def test_the_launch_file_is_installed_and_names_an_installed_executable_and_its_parameter(
+        install_dir, repo_root):
+    # launch_ros is not on PyPI: the file is read as Python source, not run.
+    share = install_dir / PACKAGE / 'share' / PACKAGE
+    launch = share / 'launch' / 'twin.launch.py'
+    assert launch.is_file(), 'launch/twin.launch.py not installed to share/reducer_twin/launch'
+    tree = ast.parse(launch.read_text())
+    calls = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+            calls.setdefault(node.func.id, []).append(node)
+    [node_call] = calls['Node']
+    kwargs = {k.arg: k.value for k in node_call.keywords}
+    assert ast.literal_eval(kwargs['package']) == PACKAGE
+    executable = ast.literal_eval(kwargs['executable'])
+    assert os.access(install_dir / PACKAGE / 'lib' / PACKAGE / executable, os.X_OK)
+    [params] = kwargs['parameters'].elts
+    names = [ast.literal_eval(key) for key in params.keys]
+    bringup = (repo_root / 'reducer_twin' / 'nodes' / f'{executable}.py').read_text()
+    for name in names:
+        assert f"declare_parameter('{name}'" in bringup, f'{executable} declares no {name!r}'
+    default = calls['PathJoinSubstitution'][0].args[0].elts
+    assert [ast.literal_eval(e) for e in default[1:]] == ['config', 'twin.yaml']
+    assert (share / 'config' / 'twin.yaml').is_file()
