@@ -23,7 +23,8 @@ nothing lost"):
   analysed, and whether every node survived: still making progress in the last
   interval, nothing raised out of a callback.
 
-Floors (issue 6): zero drops, memory growth <= 5 MB.
+Floors: zero drops, memory growth <= 5 MB; over an hour (``--duration-s 3600``), growth
+<= 5 MB after the first 5 minutes and a trend <= 0.02 MB/min over the last 30 minutes.
 
 Usage: ``python bench/bench_soak.py [--joints 6] [--duration-s 600] [--warmup-s 60]``
 """
@@ -228,6 +229,17 @@ def main():
     print(f'  RSS                  {settled[1]:.1f} MB at {settled[0]:.0f} s, {warm[1]:.1f} MB '
           f'at {warm[0]:.0f} s, {end[1]:.1f} MB at {end[0]:.0f} s: growth after '
           f'{warm[0]:.0f} s {growth:+.1f} MB, trend {slope:+.2f} MB/min   (floor: <= 5 MB)')
+    # Months, not minutes: is the tail flat? Growth after 5 min, trend of the last 30 min
+    # (or of the last half of a shorter run).
+    five = next((s for s in samples if s[0] >= 300.0), None)
+    tail_from = end[0] - min(1800.0, end[0] / 2.0)
+    tail = [s for s in samples if s[0] >= tail_from]
+    tail_slope = (np.polyfit([s[0] / 60.0 for s in tail], [s[1] for s in tail], 1)[0]
+                  if len(tail) >= 3 else float('nan'))
+    if five is not None and five is not end:
+        print(f'  RSS after 5 min      {end[1] - five[1]:+.1f} MB from {five[0]:.0f} s to '
+              f'{end[0]:.0f} s (floor: <= 5 MB); trend of the last {(end[0] - tail_from) / 60:.0f} '
+              f'min {tail_slope:+.3f} MB/min (floor: <= 0.02 MB/min over the last 30 min)')
     kinds = ', '.join(f'{kind} {end[8][kind] - warm[8][kind]:+.1f} MB' for kind in end[8])
     print(f'  RSS growth by kind   {kinds or "not reported by this kernel"}')
     print(f'  reference cycles     {reclaimed.collected} objects reclaimed by the collector '
