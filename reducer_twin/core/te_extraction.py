@@ -676,6 +676,11 @@ class WindowAnalyzer:
         deviations of its noise from zero take no part in the hysteresis:
         there the noise, not the load, would pick the flank (standstill of
         an unloaded joint, torque reversals).
+    friction : bool
+        Identify the friction the effort carries and the reducer's output does
+        not see, and take it out of the torque (see :meth:`_friction`).
+    friction_memory_windows : float
+        Memory of the pooled friction identification in windows.
 
     Raises
     ------
@@ -687,7 +692,8 @@ class WindowAnalyzer:
     def __init__(self, params, window='auto', window_s=2.0, max_window_s=20.0, aging_factor=1.0,
                  orders=None, torque_bins=16, bin_range=(0.02, 1.5), min_bin_samples=20,
                  min_bins=2, memory_windows=10.0, min_speed=0.01, compliance_prior=0.3,
-                 min_window_samples=1000, torque_smoothing_s=0.03, sign_sigmas=3.0):
+                 min_window_samples=1000, torque_smoothing_s=0.03, sign_sigmas=3.0,
+                 friction=True, friction_memory_windows=30.0):
         if window not in WINDOW_MODES:
             raise InvalidParameter(out_of_range(
                 'window', window, '', 'one of ' + ', '.join(repr(m) for m in WINDOW_MODES)))
@@ -708,6 +714,18 @@ class WindowAnalyzer:
         self.torque_smoothing_s = _finite('torque_smoothing_s', torque_smoothing_s, 's',
                                           '>= 0', lambda v: v >= 0.0)
         self.sign_sigmas = _finite('sign_sigmas', sign_sigmas, '', '>= 0', lambda v: v >= 0.0)
+        self.friction = bool(friction)
+        self._friction_memory = math.exp(-1.0 / _finite(
+            'friction_memory_windows', friction_memory_windows, 'windows', '> 0',
+            lambda v: v > 0.0))
+        self._fric_n = np.zeros((_FRICTION_TERMS, _FRICTION_TERMS))
+        self._fric_r = np.zeros(_FRICTION_TERMS)
+        self._fric_e = np.zeros(_FRICTION_TERMS)
+        self._fric_yy = 0.0
+        self._fric_m = 0.0
+        self._fric_dir = np.zeros(2)
+        self.coulomb_friction = 0.0
+        self.viscous_friction = 0.0
         try:
             lo, hi = (float(v) for v in bin_range)
         except (TypeError, ValueError):
@@ -976,6 +994,8 @@ class WindowAnalyzer:
         n_win = starts.size
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
+        if self.friction:
+            torque = self._friction(torque, t, buf['theta'], speed, win, starts, ends)
         torque, ambiguous = self._smooth_torque(torque, t, win, starts, ends)
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
@@ -1047,6 +1067,93 @@ class WindowAnalyzer:
         z[-2] = speed
         z[-1] = y
         return z
+
+    def _friction(self, torque, t, theta, speed, win, starts, ends):
+        """
+        Take the friction the effort carries out of the torque, per window.
+
+        A motor-current torque includes the friction of the motor and the first
+        stage, which the cycloid mesh does not transmit: near a reversal it gives
+        the effort the sign of the motion, not of the load. The effort is
+        explained, by least squares pooled over recent windows
+        (``friction_memory_windows``), as the rigid-body load (a constant,
+        ``cos``/``sin`` of the output angle and of twice it, the output
+        acceleration) plus Coulomb ``Fc·tanh(omega/omega_s)`` and viscous
+        ``Fv·omega`` friction; ``Fc`` and ``Fv`` (each at least 0, 0 while not
+        identifiable: a joint that never reversed) are subtracted when they
+        amount to :data:`_FRICTION_FLOOR` of rated torque or more. Velocity-
+        proportional drag downstream of the mesh is taken out with ``Fv``: it
+        is small next to the load where the flank is decided.
+
+        Returns
+        -------
+        ndarray
+            Torque at the reducer output [N·m].
+
+        """
+        n = torque.size
+        period = float(np.median(np.diff(t))) if n > 1 else 0.0
+        half = max(1, int(round(0.5 * self.torque_smoothing_s / period))) if period > 0 else 1
+        idx = np.arange(n)
+        lo = np.maximum(idx - half, starts[win])
+        hi = np.minimum(idx + half + 1, ends[win])
+
+        def mean(values):
+            acc = np.concatenate([[0.0], np.cumsum(values)])
+            return (acc[hi] - acc[lo]) / (hi - lo)
+
+        speed_s, effort_s = mean(speed), mean(torque)
+        accel = np.zeros(n)
+        inner = (hi - lo) == 2 * half + 1       # not at a window's edge
+        step = np.maximum(t[np.minimum(idx + 1, n - 1)] - t[np.maximum(idx - 1, 0)], 1e-12)
+        accel[1:-1] = (speed_s[2:] - speed_s[:-2]) / step[1:-1]
+        inner[[0, -1]] = False
+        inner &= (idx - 1 >= starts[win]) & (idx + 1 < ends[win])
+        coulomb_shape = np.tanh(speed / _FRICTION_SPEED)
+        x = np.stack([np.ones(n), np.cos(theta), np.sin(theta), np.cos(2.0 * theta),
+                      np.sin(2.0 * theta), accel, coulomb_shape, speed])
+        use = inner & np.isfinite(effort_s) & np.isfinite(accel)
+        out = torque.copy()
+        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
+            sel = use[a:b]
+            xk = x[:, a:b][:, sel]
+            yk = effort_s[a:b][sel]
+            self._fric_n = self._friction_memory * self._fric_n + xk @ xk.T
+            self._fric_r = self._friction_memory * self._fric_r + xk @ yk
+            self._fric_e = self._friction_memory * self._fric_e + np.einsum('ij,ij->i', xk, xk)
+            self._fric_yy = self._friction_memory * self._fric_yy + float(yk @ yk)
+            self._fric_m = self._friction_memory * self._fric_m + yk.size
+            moving = speed[a:b][sel]
+            self._fric_dir = self._friction_memory * self._fric_dir + np.array(
+                [np.count_nonzero(moving > _FRICTION_SPEED),
+                 np.count_nonzero(moving < -_FRICTION_SPEED)])
+            beta, ident = _solve_identifiable(self._fric_n, self._fric_r, self._fric_e)
+            fc, fv = self._significant_friction(beta, ident)
+            self.coulomb_friction, self.viscous_friction = fc, fv
+            typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
+            if typical >= _FRICTION_FLOOR * self.rated_torque:
+                out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
+        return out
+
+    def _significant_friction(self, beta, ident):
+        """Coulomb and viscous friction of the pooled fit, 0 unless 3 standard errors above 0."""
+        free = self._fric_m - np.count_nonzero(ident)
+        # Both directions of motion, each in a fifth of the samples: otherwise the sign of
+        # the speed is a constant and Coulomb friction cannot be told from the load.
+        if free <= 0 or self._fric_dir.min() < 0.2 * self._fric_m:
+            return 0.0, 0.0
+        rss = self._fric_yy - 2.0 * beta @ self._fric_r + beta @ self._fric_n @ beta
+        idx = np.flatnonzero(ident)
+        try:
+            cov = np.linalg.inv(self._fric_n[np.ix_(idx, idx)]) * max(rss, 0.0) / free
+        except np.linalg.LinAlgError:
+            return 0.0, 0.0
+        se = dict(zip(idx.tolist(), np.sqrt(np.maximum(np.diag(cov), 0.0)).tolist()))
+        out = []
+        for j in (6, 7):
+            value = float(beta[j]) if ident[j] else 0.0
+            out.append(value if value > 3.0 * se.get(j, math.inf) else 0.0)
+        return tuple(out)
 
     def _smooth_torque(self, torque, t, win, starts, ends):
         """
@@ -1305,6 +1412,20 @@ class WindowAnalyzer:
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
+
+_FRICTION_TERMS = 8
+"""Regressors of the friction identification (load: 6, Coulomb, viscous)."""
+
+_FRICTION_SPEED = 0.01
+"""Speed [rad/s] over which Coulomb friction changes sign (``tanh(omega/omega_s)``)."""
+
+_FRICTION_FLOOR = 0.005
+"""
+Friction [fraction of rated torque, at the window's RMS speed] below which none is taken out.
+
+Far below the lowest torque bin (2 %) and the effort noise band: it cannot change a
+flank, while subtracting a fitted near-zero friction would only move samples between bins.
+"""
 
 LOW_RATE_HZ = 200.0
 """Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly."""
