@@ -164,7 +164,7 @@ def run(args):
         if args.report:
             from reducer_twin.analysis.report import write_report
             page = write_report(result, Path(args.report) if single else
-                                Path(args.report) / name)
+                                Path(args.report) / name, life=settings.life)
             if not args.json:
                 print(f'report: {page}')
         summary[name] = result

@@ -10,6 +10,8 @@ reason), RETIRED (replaced), ranked by P10. ``--json`` prints ``{"reducers": [..
 reducer's lost-motion and remaining-life trend across its bags.
 """
 
+import textwrap
+
 from reducer_twin.commands.common import print_json
 
 
@@ -64,16 +66,17 @@ def print_table(rows, store_path):
     """Print the fleet view in 80 columns: one line per reducer, the reason beneath."""
     from reducer_twin.fleet.verdict import RULES
     print(f'fleet store {store_path}: {len(rows)} reducer(s), most urgent first')
-    print(f'{"robot/joint":<18} {"bags":>4} {"hours":>7} {"wear um":>12} {"LM arcmin":>9} '
-          f'{"RUL P10/P50 h":>15} verdict')
+    print(f'{"robot/joint":<18} {"bags":>4} {"hours":>6} {"wear um":>11} {"LM arcmin":>9} '
+          f'{"RUL P10/P50 h":>13} verdict')
     for r in rows:
         name = f'{r["robot"]}/{r["joint"]}'
         wear = '-' if r['wear_um'] is None else \
             f'{r["wear_um"]:.2f}±{_num(r["wear_std_um"], ".2f")}'
         rul = f'{_num(r["rul_p10_h"], ".0f")}/{_num(r["rul_p50_h"], ".0f")}'
-        print(f'{name[:18]:<18} {r["bags"]:>4} {r["hours_observed"]:>7.0f} {wear:>12} '
-              f'{_num(r["lost_motion_arcmin"], ".2f"):>9} {rul:>15} {r["verdict"]}')
-        print(f'    {r["reason"]}'[:80] if len(r['reason']) < 76 else f'    {r["reason"]}')
+        print(f'{name[:18]:<18} {r["bags"]:>4} {r["hours_observed"]:>6.0f} {wear:>11} '
+              f'{_num(r["lost_motion_arcmin"], ".2f"):>9} {rul:>13} {r["verdict"]}')
+        print(textwrap.fill(r['reason'], 79, initial_indent='    ', subsequent_indent='    '))
     print('rules:')
     for verdict, rule in RULES:
-        print(f'  {verdict}: {rule}')
+        print(textwrap.fill(f'{verdict}: {rule}', 79, initial_indent='  ',
+                            subsequent_indent='    '))

@@ -200,3 +200,44 @@ def rank(rows):
         return (0 if observed else group, p10 if observed and p10 is not None else math.inf,
                 row['robot'], row['joint'], row['installed_at'] or '')
     return sorted(rows, key=key)
+
+
+def bag_rows(result, life=None, params=None):
+    """
+    The verdict rows of one analysed bag (the single-bag report's table).
+
+    Parameters
+    ----------
+    result : BagResult
+        Output of :func:`~reducer_twin.analysis.pipeline.analyze_bag`.
+    life : LifeConfig, optional
+        Limit and thresholds it was analysed with (default the defaults).
+    params : ReducerParams, optional
+        Reducer parameters.
+
+    Returns
+    -------
+    list of dict
+        :func:`fleet_row` rows (robot ''), ranked.
+
+    """
+    from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES
+    from reducer_twin.core.params import ReducerParams
+    from reducer_twin.core.pipeline import LifeConfig
+    from reducer_twin.fleet.store import Reducer
+    life = life or LifeConfig()
+    params = params or ReducerParams()
+    exposure = TE_FEATURES.fields.index('exposure_s')
+    censored = REMAINING_LIFE.fields.index('p10_censored')
+    rows = []
+    for joint, res in result.joints.items():
+        state = (result.states or {}).get(joint)
+        summary = res.summary()
+        has_life = res.life is not None and len(res.life)
+        summary['rul_censored'] = bool(has_life and res.life[-1][censored] > 0)
+        feats = res.features if res.features is not None else np.zeros((0, exposure + 1))
+        reducer = Reducer(0, '', joint, None, None, state, None, 0, 1, len(feats),
+                          float(np.sum(feats[:, exposure])) if len(feats) else 0.0, summary,
+                          life.lost_motion_limit, life.warn_s, life.error_s)
+        rows.append(fleet_row(reducer, params))
+    return rank(rows)
