@@ -222,7 +222,7 @@ def write_report(result, out_dir, limit=None, life=None):
 
 
 def _verdicts(result, life):
-    """The verdict table of the fleet view, with the date, the input and the rules."""
+    """Return the verdict table of the fleet view, with the date, the input and the rules."""
     from reducer_twin.fleet.report import rules_html, verdict_table
     from reducer_twin.fleet.store import utc_now
     from reducer_twin.fleet.verdict import bag_rows

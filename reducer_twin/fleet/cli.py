@@ -36,7 +36,7 @@ def add_store_options(parser):
                              'given ones (for a bag older than the stored history)')
     parser.add_argument('--engine', choices=('local', 'ray'), default='local',
                         help="'local' processes (default) or 'ray' tasks: robots in "
-                             'parallel, each robot\'s bags in order')
+                             "parallel, each robot's bags in order")
     parser.add_argument('--ray-address', metavar='ADDR', default=None,
                         help='with --engine ray: join this Ray cluster instead of starting '
                              'one of --jobs CPUs on 127.0.0.1')

@@ -152,7 +152,7 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
         if not robot:
             raise InvalidParameter(
                 f'{path}: no robot name for the fleet store: pass --robot NAME, or set '
-                f'twin.robot in --config (the bag\'s custom_data has no {ROBOT_KEY})')
+                f"twin.robot in --config (the bag's custom_data has no {ROBOT_KEY})")
         plan = plan_joints(bag, settings)
         first = None
         batches = bag.iter_raw([plan.link_topic])
@@ -212,14 +212,14 @@ def plan_chains(store, infos, settings, rebuild=False, scratch=None):
         reducers = {r.joint: r for r in store.reducers() if r.robot == robot and r.in_service}
         forget = ()
         if rebuild:
-            forget = tuple(r.id for r in reducers.values() if r.bags)
+            forget = tuple(r.row_id for r in reducers.values() if r.bags)
             bags = bags + _stored_again(store, robot, bags, settings, scratch)
         bags = sorted(bags, key=lambda b: (b.first_ns, b.fingerprint))
-        last = {j: (None if r.id in forget else r.last_ns) for j, r in reducers.items()}
-        have = {j: (set() if r.id in forget else _fingerprints(store, r.id))
+        last = {j: (None if r.row_id in forget else r.last_ns) for j, r in reducers.items()}
+        have = {j: (set() if r.row_id in forget else _fingerprints(store, r.row_id))
                 for j, r in reducers.items()}
-        revision = {j: r.revision + (1 if r.id in forget else 0) for j, r in reducers.items()}
-        start[robot] = {j: r.state for j, r in reducers.items() if r.id not in forget}
+        revision = {j: r.revision + (1 if r.row_id in forget else 0) for j, r in reducers.items()}
+        start[robot] = {j: r.state for j, r in reducers.items() if r.row_id not in forget}
         seen, items = set(), []
         for info in bags:
             if info.fingerprint in seen:
@@ -272,7 +272,7 @@ def _fingerprints(store, reducer_id):
 
 
 def _stored_again(store, robot, given, settings, scratch):
-    """BagInfo of the robot's stored bags not given, to analyse them again."""
+    """Return the BagInfo of the robot's stored bags not given, to analyse them again."""
     known = {b.fingerprint for b in given}
     out = []
     for row in store.bags_of(robot):
@@ -283,7 +283,7 @@ def _stored_again(store, robot, given, settings, scratch):
                 f'--rebuild needs the stored bag {row.path} of robot {robot} (analysed '
                 f'{row.analysed_utc}), which does not exist any more; give its new path '
                 'among the BAGs')
-        name = f'stored_{row.id}'
+        name = f'stored_{row.row_id}'
         info = inspect_bag(row.path, name, str(Path(scratch) / name), settings, robot)
         out.append(info)
     return out
@@ -332,8 +332,8 @@ def analyse_in_chain(item, chain, settings, overwrite=False, stage_worker=False,
                              reader_process, initial_states=initial)
     except ReducerTwinError as err:
         why = f'the earlier bag {item.info.path} of robot {item.info.robot} failed ({err})'
-        return Done(item, err, worker_identity(node)), {'ok': False, 'why': why,
-                                                       'states': states}
+        chain = {'ok': False, 'why': why, 'states': states}
+        return Done(item, err, worker_identity(node)), chain
     for joint in item.joints:
         states[joint] = result.states.get(joint)
     return Done(item, result, worker_identity(node)), {'ok': True, 'why': '', 'states': states}

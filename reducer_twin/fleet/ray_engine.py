@@ -30,7 +30,7 @@ def _ray():
     try:
         import ray
     except ImportError:
-        raise InvalidParameter("--engine ray needs Ray, which is not installed: pip install "
+        raise InvalidParameter('--engine ray needs Ray, which is not installed: pip install '
                                "'reducer_twin[fleet]' (or pip install ray)") from None
     return ray
 

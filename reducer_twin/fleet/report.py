@@ -25,7 +25,8 @@ COLOURS = {'REPLACE': '#f4b6b6', 'PLAN': '#f9dc9c', 'OK': '#bfe3bf',
 
 STYLE = ('body{font-family:sans-serif;margin:1.5em;max-width:1100px}'
          'table{border-collapse:collapse;margin:0.5em 0}'
-         'td,th{border:1px solid #bbb;padding:3px 7px;text-align:right;font-size:13px}'
+         'td,th{border:1px solid #bbb;padding:3px 7px;text-align:right;font-size:13px;'
+         'white-space:nowrap}td.rule{white-space:normal}'
          'td.t,th.t{text-align:left}img{max-width:100%}dt{font-weight:bold}'
          'dd{margin:0 0 0.3em 1.5em}.rule{font-size:12px;color:#333}')
 """The pages' style sheet (inline)."""
@@ -216,7 +217,7 @@ def write_fleet_report(store, rows, out_dir):
         if reducer is None or row['verdict'] == 'RETIRED' or not reducer.bags:
             continue
         title = f'{row["robot"]} / {row["joint"]}: {row["verdict"]}'
-        image = _png(trend_figure(store.trend(reducer.id), title,
+        image = _png(trend_figure(store.trend(reducer.row_id), title,
                                   reducer.lost_motion_limit_rad))
         sections.append(f'<h3>{html.escape(title)}</h3><p class="rule">'
                         f'{html.escape(row["reason"])}</p><img alt="{html.escape(title)}" '
@@ -245,4 +246,3 @@ def write_fleet_report(store, rows, out_dir):
     except OSError as err:
         raise BagError(f'cannot write the fleet report into {out}: {err}') from err
     return path
-

@@ -40,7 +40,7 @@ LAYOUTS = {'features': TE_FEATURES, 'wear': WEAR_ESTIMATE, 'life': REMAINING_LIF
 BUSY_TIMEOUT_S = 60.0
 """How long a statement waits for another connection's write transaction [s]."""
 
-_V1 = '''
+_V1 = """
 CREATE TABLE store_info (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE reducers (
     id INTEGER PRIMARY KEY,
@@ -95,7 +95,7 @@ CREATE TABLE events (
     installed_id INTEGER REFERENCES reducers (id),
     recorded_utc TEXT NOT NULL
 );
-'''
+"""
 
 # Version 2: which engine, node and process analysed each segment.
 _V2 = 'ALTER TABLE segments ADD COLUMN worker TEXT;'
@@ -188,7 +188,7 @@ class Reducer:
 
     Attributes
     ----------
-    id : int
+    row_id : int
         Row id.
     robot, joint : str
         Where it is mounted.
@@ -214,7 +214,7 @@ class Reducer:
 
     """
 
-    id: int
+    row_id: int
     robot: str
     joint: str
     installed_ns: int
@@ -245,7 +245,7 @@ class Reducer:
 class BagRow:
     """A bag the store holds results of (see the ``bags`` table)."""
 
-    id: int
+    row_id: int
     fingerprint: str
     robot: str
     path: str
@@ -472,14 +472,14 @@ class FleetStore:
 
     # ----------------------------------------------------------------- reading
 
-    _REDUCER_SQL = '''
+    _REDUCER_SQL = """
         SELECT r.id, r.robot, r.joint, r.installed_ns, r.retired_ns, r.state, r.last_ns,
                r.revision, COUNT(s.bag_id), COALESCE(SUM(s.windows), 0),
                COALESCE(SUM(s.exposure_s), 0.0),
                (SELECT summary FROM segments WHERE reducer_id = r.id
                 ORDER BY last_ns DESC LIMIT 1),
                r.lost_motion_limit_rad, r.warn_s, r.error_s
-        FROM reducers r LEFT JOIN segments s ON s.reducer_id = r.id'''
+        FROM reducers r LEFT JOIN segments s ON s.reducer_id = r.id"""
 
     @staticmethod
     def _reducer(row):
@@ -718,14 +718,14 @@ class FleetStore:
                     f'{robot}/{joint} ({iso_from_ns(floor)}, {floor} ns); a replacement '
                     'must follow the analysed history')
             conn.execute('UPDATE reducers SET retired_ns = ?, revision = revision + 1 '
-                         'WHERE id = ?', (int(at), old.id))
+                         'WHERE id = ?', (int(at), old.row_id))
             new_id = conn.execute('INSERT INTO reducers (robot, joint, installed_ns) '
                                   'VALUES (?, ?, ?)', (robot, joint, int(at))).lastrowid
             conn.execute('INSERT INTO events (robot, joint, kind, at_ns, note, retired_id, '
                          'installed_id, recorded_utc) VALUES (?, ?, ?, ?, ?, ?, ?, ?)',
-                         (robot, joint, 'replaced', int(at), note, old.id, new_id, utc_now()))
-            return old.id, new_id
+                         (robot, joint, 'replaced', int(at), note, old.row_id, new_id, utc_now()))
+            return old.row_id, new_id
 
         old_id, new_id = self._transaction(work)
-        by_id = {r.id: r for r in self.reducers()}
+        by_id = {r.row_id: r for r in self.reducers()}
         return by_id[old_id], by_id[new_id]

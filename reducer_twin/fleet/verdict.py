@@ -204,7 +204,7 @@ def rank(rows):
 
 def bag_rows(result, life=None, params=None):
     """
-    The verdict rows of one analysed bag (the single-bag report's table).
+    Judge every joint of one analysed bag (the single-bag report's table).
 
     Parameters
     ----------
