@@ -26,7 +26,7 @@ COLOURS = {'REPLACE': '#f4b6b6', 'PLAN': '#f9dc9c', 'OK': '#bfe3bf',
 STYLE = ('body{font-family:sans-serif;margin:1.5em;max-width:1100px}'
          'table{border-collapse:collapse;margin:0.5em 0}'
          'td,th{border:1px solid #bbb;padding:3px 7px;text-align:right;font-size:13px;'
-         'white-space:nowrap}td.rule{white-space:normal}'
+         'white-space:nowrap}td.rule{white-space:normal;min-width:240px;font-size:12px}'
          'td.t,th.t{text-align:left}img{max-width:100%}dt{font-weight:bold}'
          'dd{margin:0 0 0.3em 1.5em}.rule{font-size:12px;color:#333}')
 """The pages' style sheet (inline)."""
@@ -54,9 +54,9 @@ def verdict_table(rows, with_robot=True):
 
     """
     head = (['robot'] if with_robot else []) + ['joint'] + (
-        ['bags', 'last seen'] if with_robot else []) + [
+        ['bags', 'last seen (UTC)'] if with_robot else []) + [
         'hours observed', 'wear (µm)', 'lost motion / limit (arcmin)',
-        'remaining life P10 / P50 / P90 (h)', 'verdict', 'why']
+        'RUL P10 / P50 / P90 (h)', 'verdict', 'why']
     out = ['<table><tr>' + ''.join(
         f'<th class="t">{html.escape(h)}</th>' if h in ('robot', 'joint', 'verdict', 'why')
         else f'<th>{html.escape(h)}</th>' for h in head) + '</tr>']
@@ -71,7 +71,8 @@ def verdict_table(rows, with_robot=True):
         colour = COLOURS.get(r['verdict'], '#ffffff')
         cells = ([f'<td class="t">{html.escape(r["robot"])}</td>'] if with_robot else []) + [
             f'<td class="t">{html.escape(r["joint"])}</td>'] + (
-            [f'<td>{r["bags"]}</td>', f'<td>{html.escape(r["last_seen"] or "–")}</td>']
+            [f'<td>{r["bags"]}</td>',
+             f'<td>{html.escape((r["last_seen"] or "–")[:16].replace("T", " "))}</td>']
             if with_robot else []) + [
             f'<td>{_fmt(r["hours_observed"], ",.0f")}</td>', f'<td>{wear}</td>',
             f'<td>{lm}</td>', f'<td>{rul}</td>',
@@ -105,12 +106,13 @@ def _png(fig):
     return base64.b64encode(buffer.getvalue()).decode('ascii')
 
 
-def life_axis_limits(p10, p50, p90, skip=3):
+def life_axis_limits(p10, p50, p90, skip=None):
     """
     Y range of a remaining-life plot that the first windows' transients do not squash.
 
-    The first ``skip`` windows (the filter's start from the prior) are left out of the
-    range, and so are censored or non-finite values; zero (the limit) is always shown.
+    The first ``skip`` windows (default a tenth of them, at least 3: the filter's start
+    from the prior) are left out of the range, and so are non-finite values and the top
+    5 % (censored draws at the horizon); zero (the limit) is always shown.
 
     Returns
     -------
@@ -118,11 +120,13 @@ def life_axis_limits(p10, p50, p90, skip=3):
         ``(bottom, top)`` [h], None when nothing is left to show.
 
     """
+    if skip is None:
+        skip = max(3, len(p50) // 10)
     values = np.concatenate([np.asarray(a, float)[skip:] for a in (p10, p50, p90)])
     values = values[np.isfinite(values)]
     if not values.size:
         return None
-    lo, hi = min(0.0, float(np.percentile(values, 1))), float(np.percentile(values, 99))
+    lo, hi = min(0.0, float(np.percentile(values, 1))), float(np.percentile(values, 95))
     span = max(hi - lo, 1.0)
     return lo - 0.05 * span, hi + 0.1 * span
 

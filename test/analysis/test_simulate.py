@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from reducer_twin.analysis.bag import open_bag
 from reducer_twin.analysis.simulate import AGING_KEY, ROBOT_KEY, SIMULATION_KEY, SimulationSpec
-from reducer_twin.analysis.simulate import START_HOURS_KEY
-from reducer_twin.analysis.simulate import simulate_bag, START_NS
+from reducer_twin.analysis.simulate import simulate_bag, START_HOURS_KEY, START_NS
 from reducer_twin.cli import main
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
@@ -227,7 +226,7 @@ def test_the_stream_length_follows_hours_and_aging_factor():
 
 
 def _contents(bag_dir):
-    """JointState rows and ground-truth records of a bag, and its custom_data."""
+    """Return the JointState rows, ground-truth records and custom_data of a bag."""
     with open_bag(bag_dir) as bag:
         js = bag.read_joint_states()['/joint_states']
         custom = dict(bag.metadata)
@@ -240,9 +239,9 @@ def _contents(bag_dir):
 
 @pytest.mark.parametrize('rate_hz, aging', [(500.0, 360_000.0), (250.0, 9_000.0)],
                          ids=['whole blocks', 'partial blocks'])
-def test_two_segments_of_a_life_join_exactly_into_one_bag_of_the_whole_span(tmp_path, rate_hz,
-                                                                           aging):
-    common = dict(aging_factor=aging, joints=2, rate_hz=rate_hz, seed=11, robot='r1')
+def test_two_segments_of_a_life_join_exactly_into_one_bag_of_the_whole_span(
+        tmp_path, rate_hz, aging):
+    common = {'aging_factor': aging, 'joints': 2, 'rate_hz': rate_hz, 'seed': 11, 'robot': 'r1'}
     first = simulate_bag(tmp_path / 'a', SimulationSpec(hours=2000.0, **common))
     second = simulate_bag(tmp_path / 'b', SimulationSpec(hours=2000.0, start_hours=2000.0,
                                                          **common))

@@ -17,7 +17,8 @@ from reducer_twin.fleet.store import FleetStore
 
 ROOT = Path(__file__).resolve().parents[2]
 # One robot's life in three bags of 2000 h (5000 ticks each at 250 Hz).
-LIFE = dict(hours=2000.0, aging_factor=360_000.0, joints=2, rate_hz=250.0, seed=11)
+LIFE = {'hours': 2000.0, 'aging_factor': 360_000.0, 'joints': 2, 'rate_hz': 250.0,
+        'seed': 11}
 
 
 @pytest.fixture(scope='module')
@@ -100,14 +101,14 @@ def test_an_older_bag_is_refused_until_rebuild_takes_it_into_the_history(bags, t
 
 
 @pytest.mark.parametrize('how', ['flag', 'config', 'none'])
-def test_the_robot_comes_from_the_flag_or_the_config_else_a_clear_error(bags, tmp_path,
-                                                                          capsys, how):
+def test_the_robot_comes_from_the_flag_or_the_config_else_a_clear_error(
+        bags, tmp_path, capsys, how):
     extra = []
     if how == 'flag':
         extra = ['--robot', 'cell3-r7']
     elif how == 'config':
         config = tmp_path / 'twin.yaml'
-        config.write_text("twin:\n  robot: cell3-r7\n")
+        config.write_text('twin:\n  robot: cell3-r7\n')
         extra = ['--config', config]
     code, _, err = _analyze([bags['anonymous']], tmp_path / 'f.db', tmp_path / 'out', capsys,
                             *extra)
@@ -155,7 +156,7 @@ def _consistent(store_path):
         for reducer in store.reducers():
             exposure = reducer.state['estimator']['exposure_s'] if reducer.state else 0.0
             assert exposure == pytest.approx(reducer.exposure_s, rel=1e-9, abs=1e-6)
-            assert reducer.bags == len(store.segment_bags(reducer.id)) <= 3
+            assert reducer.bags == len(store.segment_bags(reducer.row_id)) <= 3
         return sum(r.bags for r in store.reducers())
 
 

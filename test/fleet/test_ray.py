@@ -8,7 +8,7 @@ import ray  # noqa: F401 - the 'fleet' extra the Makefile installs; missing Ray 
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 
-LIFE = dict(hours=1500.0, aging_factor=360_000.0, joints=2, rate_hz=250.0)
+LIFE = {'hours': 1500.0, 'aging_factor': 360_000.0, 'joints': 2, 'rate_hz': 250.0}
 
 
 def _run(argv, capsys):

@@ -90,7 +90,7 @@ def test_windows_and_states_read_back_exactly_and_trends_span_bags(tmp_path):
         [reducer] = store.reducers()
         assert reducer.bags == 2 and reducer.windows == 7 and reducer.revision == 2
         assert reducer.state == b.state and reducer.last_ns == T0 + 14
-        trend = store.trend(reducer.id)
+        trend = store.trend(reducer.row_id)
     np.testing.assert_array_equal(trend.features, np.concatenate([a.features, b.features]))
     np.testing.assert_array_equal(trend.wear, np.concatenate([a.wear, b.wear]))
     assert trend.levels == ['OK'] * 7 and len(trend.bag_starts_h) == 2

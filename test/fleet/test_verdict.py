@@ -66,8 +66,8 @@ def test_the_overdue_life_is_the_closed_form_at_a_certain_state():
     state = _state(w_lim * 1.2, var=0.0)['estimator']
     state['P'] = [[0.0, 0.0], [0.0, 0.0]]
     p10, p50, p90 = overdue_life(state, PARAMS, LIMIT)
-    expected = (run_in_free_wear(w_lim, PARAMS.wear) - run_in_free_wear(w_lim * 1.2, PARAMS.wear)) \
-        / 1e-13
+    wp = PARAMS.wear
+    expected = (run_in_free_wear(w_lim, wp) - run_in_free_wear(w_lim * 1.2, wp)) / 1e-13
     np.testing.assert_allclose([p10, p50, p90], [expected] * 3, rtol=1e-12)
     state['duty_exposure'] = 0.0
     assert all(math.isnan(v) for v in overdue_life(state, PARAMS, LIMIT))
