@@ -4,7 +4,8 @@ Benchmark of a fleet's bags into a store (a script, not a test).
 
 Simulates 4 robots x 6 consecutive bags x 6 joints (``simulate --robot rK --start-hours``,
 1 kHz, ``--seconds`` of stream per bag covering 1500 operating hours each, wear-rate
-scales that differ per joint so the verdicts differ), then analyses all 24 bags, shuffled, into a fresh fleet store with:
+scales that differ per joint so the verdicts differ), then analyses all 24 bags,
+shuffled, into a fresh fleet store with:
 
 * ``analyze --engine local --jobs 1`` (one chain after the other, the stage worker and
   the reader in processes of their own, as by default);
