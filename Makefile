@@ -36,7 +36,7 @@ $(STAMP): setup.py setup.cfg requirements-ros.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install -r requirements-ros.txt
-	$(PY) -m pip install -e '.[test]'
+	$(PY) -m pip install -e '.[test,fleet]'
 	touch $@
 
 # Removes colcon output left in the checkout; the venv stays (rm -rf .venv for that).

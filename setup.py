@@ -40,6 +40,8 @@ setup(
         'matplotlib',
     ],
     extras_require={
+        # The fleet on Ray: analyze --engine ray (a local cluster on demand, or an existing one).
+        'fleet': ['ray'],
         'test': [
             'rosbags',
             'pytest',

@@ -12,7 +12,7 @@ import sys
 
 from reducer_twin.core.errors import ReducerTwinError
 
-COMMANDS = ('paper', 'model', 'simulate', 'analyze', 'demo')
+COMMANDS = ('paper', 'model', 'simulate', 'analyze', 'demo', 'fleet', 'replace')
 
 
 class _Parser(argparse.ArgumentParser):

@@ -549,6 +549,9 @@ class BagResult:
         Problems met while reading.
     damaged : bool
         Whether reading stopped early or skipped data (truncated or corrupt files).
+    states : dict of str to dict
+        Per joint, where its estimator and life stages ended (``JointBack.state``): the
+        ``initial_states`` of the reducer's next bag.
 
     """
 
@@ -561,6 +564,7 @@ class BagResult:
     aging_factor: float
     warnings: list
     damaged: bool
+    states: dict = field(default_factory=dict)
 
     @property
     def messages_per_s(self):
@@ -962,7 +966,7 @@ class _Run:
 
 
 def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False,
-                reader_process=False):
+                reader_process=False, initial_states=None):
     """
     Analyse one rosbag2 recording and write the derived bag.
 
@@ -981,6 +985,9 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         or the one given (forked early by the caller, reusable for the next bag).
     reader_process : bool
         Read and decode the bag in a forked process, a few chunks ahead.
+    initial_states : dict of str to dict, optional
+        Per joint, the state an earlier bag of the same reducer ended in
+        (``BagResult.states``): the estimator continues from it instead of a new reducer.
 
     Returns
     -------
@@ -1007,7 +1014,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                 backs = stage_worker
             else:  # forked only now: a bag that cannot be analysed costs no process
                 backs = WorkerBacks() if stage_worker else LocalBacks()
-            backs.configure(settings.params, settings.life)
+            backs.configure(settings.params, settings.life, initial_states)
             topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
             chunks = _Chunks(bag, topics, CHUNK_MESSAGES)
             if reader_process:   # forked before the writer opens its file and threads
@@ -1030,4 +1037,4 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         backs.close()
     return BagResult(Path(path), Path(out_dir), plan, joints, run.messages_read,
                      time.perf_counter() - start, aging, warnings,
-                     any(is_damage(w) for w in warnings))
+                     any(is_damage(w) for w in warnings), dict(backs.states))

@@ -1,13 +1,16 @@
 """
 The analysis report: PNG plots and one self-contained HTML page per bag.
 
-Plots (matplotlib, Agg backend, no display needed): TE over the output angle and over
-time (thinned to :data:`~reducer_twin.analysis.pipeline.REPORT_TE_POINTS` samples per
-joint), the lost-motion trend (observed per window and the estimate, against the truth
-when the bag has it), the wear estimate with its ±2σ band against the truth, and the
-remaining life P50 with its P10–P90 band against the true remaining life. Edge units:
-arc minutes, µm, hours. The HTML page embeds the PNGs (data URIs), so it can be mailed
-or archived alone; the PNG files sit beside it.
+The page starts with the date, the input path and the verdict table of the fleet view
+(:mod:`reducer_twin.fleet.verdict`: REPLACE / PLAN / OK / NOT OBSERVED with the rule
+that gave it). Plots (matplotlib, Agg backend, no display needed): TE over the output
+angle (thinned to :data:`~reducer_twin.analysis.pipeline.REPORT_TE_POINTS` samples per
+joint; the hysteresis the lost motion is read from), the lost-motion trend (observed
+per window and the estimate, against the truth when the bag has it), the wear estimate
+with its ±2σ band against the truth, and the remaining life P50 with its P10–P90 band
+against the true remaining life, its range set without the first windows' transients.
+Legends sit beside the axes. Edge units: arc minutes, µm, hours. The HTML page embeds
+the PNGs (data URIs), so it can be mailed or archived alone; the PNG files sit beside it.
 """
 
 import base64
@@ -21,7 +24,6 @@ from reducer_twin.core.errors import BagError
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 
 PLOTS = (('te_angle', 'Transmission error over the output angle'),
-         ('te_time', 'Transmission error over time'),
          ('lost_motion', 'Lost motion trend'),
          ('wear', 'Wear estimate'),
          ('remaining_life', 'Remaining life'))
@@ -53,17 +55,6 @@ def _te_angle(ax, joint, res):
     ax.set_ylabel('TE (arcmin)')
     ax.set_title(joint)
     ax.legend(fontsize=7, markerscale=6)
-
-
-def _te_time(ax, joint, res, t0):
-    te = res.te
-    if not len(te):
-        ax.text(0.5, 0.5, 'no TE samples', ha='center', transform=ax.transAxes)
-        return
-    ax.plot(te[:, 0] - t0, te[:, 2] / ARCMIN, lw=0.4)
-    ax.set_xlabel('stream time (s)')
-    ax.set_ylabel('TE (arcmin)')
-    ax.set_title(joint)
 
 
 def _hours(res):
@@ -112,17 +103,15 @@ def _life(ax, joint, res):
                 color=line.get_color(), label=f'{joint} truth')
 
 
-def _life_top(results):
-    """Top of the remaining-life axis: the bands after the first window, not the horizon."""
-    tops = []
-    for res in results:
-        p90 = _col(res.life, REMAINING_LIFE, 'p90_s')[1:] / HOUR
-        censored = _col(res.life, REMAINING_LIFE, 'p90_censored')[1:] > 0
-        tops += p90[~censored & np.isfinite(p90)].tolist()
-        if res.truth is not None and len(res.truth):
-            tops += (_col(res.truth, GROUND_TRUTH, 'true_rul_s') / HOUR).tolist()
-    tops = [t for t in tops if math.isfinite(t)]
-    return 1.2 * max(np.percentile(tops, 95), max(tops[-5:])) if tops else None
+def _life_limits(ax, results):
+    """Y range of the remaining-life plot without the first windows' transients."""
+    from reducer_twin.fleet.report import life_axis_limits
+    found = [life_axis_limits(*(_col(r.life, REMAINING_LIFE, k) / HOUR
+                                for k in ('p10_s', 'p50_s', 'p90_s'))) for r in results]
+    found = [f for f in found if f is not None]
+    if found:
+        ax.set_ylim(min(f[0] for f in found), max(f[1] for f in found))
+    ax.axhline(0.0, color='k', lw=0.8, ls=':')
 
 
 def _figures(result, limit):
@@ -130,19 +119,19 @@ def _figures(result, limit):
     plt = _pyplot()
     joints = result.joints
     n = max(1, len(joints))
-    t0 = min((float(r.te[0, 0]) for r in joints.values() if len(r.te)), default=0.0)
-    for stem, draw in (('te_angle', _te_angle), ('te_time', _te_time)):
-        fig, axes = plt.subplots(n, 1, figsize=(9, 2.8 * n), squeeze=False)
-        for ax, (joint, res) in zip(axes[:, 0], joints.items()):
-            draw(ax, joint, res) if stem == 'te_angle' else draw(ax, joint, res, t0)
-            ax.grid(alpha=0.3)
-        fig.tight_layout()
-        yield stem, fig
+    # TE over the output angle shows the hysteresis the lost motion is read from; TE over
+    # stream time told a maintainer nothing and is no longer drawn.
+    fig, axes = plt.subplots(n, 1, figsize=(9, 2.8 * n), squeeze=False)
+    for ax, (joint, res) in zip(axes[:, 0], joints.items()):
+        _te_angle(ax, joint, res)
+        ax.grid(alpha=0.3)
+    fig.tight_layout()
+    yield 'te_angle', fig
     for stem, draw, ylabel in (
             ('lost_motion', _lost_motion, 'lost motion (arcmin); dotted: limit'),
             ('wear', _wear, 'combined wear (µm), band ±2σ'),
             ('remaining_life', _life, 'remaining life (h), band P10–P90')):
-        fig, ax = plt.subplots(figsize=(9, 4.5))
+        fig, ax = plt.subplots(figsize=(10.5, 4.5))
         for joint, res in joints.items():
             if stem == 'lost_motion':
                 draw(ax, joint, res, limit)
@@ -151,9 +140,10 @@ def _figures(result, limit):
         ax.set_xlabel('operating hours (exposure)')
         ax.set_ylabel(ylabel)
         if stem == 'remaining_life':
-            ax.set_ylim(0.0, _life_top(joints.values()))
+            _life_limits(ax, joints.values())
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
+        # Outside the axes: a legend inside covered the curves and the axis label.
+        ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
         fig.tight_layout()
         yield stem, fig
 
@@ -184,7 +174,7 @@ def _table(result):
             + ''.join(rows) + '</table>')
 
 
-def write_report(result, out_dir, limit=None):
+def write_report(result, out_dir, limit=None, life=None):
     """
     Write the plots and the HTML page of one analysed bag.
 
@@ -196,6 +186,8 @@ def write_report(result, out_dir, limit=None):
         Directory for ``index.html`` and the PNGs (created if missing).
     limit : float, optional
         Lost-motion limit to draw [rad]; default the one of the remaining-life records.
+    life : LifeConfig, optional
+        Thresholds of the verdicts (default the defaults).
 
     Returns
     -------
@@ -223,13 +215,23 @@ def write_report(result, out_dir, limit=None):
             plt.close(fig)
             images[stem] = base64.b64encode(path.read_bytes()).decode('ascii')
         page = out / 'index.html'
-        page.write_text(_page(result, images), encoding='utf-8')
+        page.write_text(_page(result, images, life), encoding='utf-8')
     except OSError as err:
         raise BagError(f'cannot write the report into {out}: {err}') from err
     return page
 
 
-def _page(result, images):
+def _verdicts(result, life):
+    """Return the verdict table of the fleet view, with the date, the input and the rules."""
+    from reducer_twin.fleet.report import rules_html, verdict_table
+    from reducer_twin.fleet.store import utc_now
+    from reducer_twin.fleet.verdict import bag_rows
+    return (f'<p>Analysed {utc_now()} from <code>{html.escape(str(result.bag.resolve()))}'
+            '</code>.</p><h2>Verdicts</h2>' + verdict_table(bag_rows(result, life), False)
+            + '<details><summary>Rules</summary>' + rules_html() + '</details>')
+
+
+def _page(result, images, life=None):
     title = f'reducer_twin analysis of {result.bag.name}'
     notes = ''.join(f'<li>{html.escape(str(w))}</li>' for w in result.warnings)
     sections = ''.join(
@@ -250,6 +252,8 @@ def _page(result, images):
         f'<p>Bag: <code>{html.escape(str(result.bag))}</code>; derived bag: '
         f'<code>{html.escape(str(result.out))}</code>; JointState {topics}; aging factor '
         f'{result.aging_factor:g}; {result.messages:,} messages in {result.seconds:.2f} s.</p>',
+        _verdicts(result, life),
+        '<h2>Details</h2>',
         _table(result),
         f'<h2>Warnings</h2><ul>{notes}</ul>' if notes else '',
         sections,

@@ -15,6 +15,13 @@ truth's lost motion comes from the same table (within 0.1 arcsec of the exact me
 The bag is deterministic: stamps start at :data:`START_NS` and the seed fixes the noise.
 Its ``custom_data`` records the aging factor (:data:`AGING_KEY`), which the analysis
 applies without being told, and the simulation settings (:data:`SIMULATION_KEY`, JSON).
+
+A life in several bags: ``start_hours`` H continues the same joints (same seed and
+settings) from operating hour H, so bags of [0, 2000] h and [2000, 4000] h join exactly
+(the truth and the stamps at the start of one equal those at the end of the other, and
+the samples equal those of one [0, 4000] h bag). The robot's name and the start hours
+are recorded in ``custom_data`` (:data:`ROBOT_KEY`, :data:`START_HOURS_KEY`), where the
+fleet store reads them.
 """
 
 from dataclasses import asdict, dataclass, field
@@ -39,6 +46,14 @@ AGING_KEY = 'reducer_twin.aging_factor'
 
 SIMULATION_KEY = 'reducer_twin.simulation'
 """``custom_data`` key of the simulation settings (JSON)."""
+
+ROBOT_KEY = 'reducer_twin.robot'
+"""``custom_data`` key of the robot's name (a reducer is a robot's joint)."""
+
+START_HOURS_KEY = 'reducer_twin.start_hours'
+"""``custom_data`` key of the operating hours at the bag's first sample."""
+
+MAX_ROBOT_NAME = 64
 
 TRUTH_PERIOD_S = 1.0
 """Stream seconds between ground-truth messages (the simulator node's ``truth_period_s``)."""
@@ -91,6 +106,11 @@ class SimulationSpec:
     compression : str
         MCAP chunk compression; ``'none'`` is what ``ros2 bag record -s mcap`` writes by
         default (and reads fastest: decompression would double the read cost).
+    start_hours : float
+        Operating hours of the joints' life at the bag's first sample [h]; the bag
+        continues the life of the same seed from there.
+    robot : str
+        The robot's name ('' for none), recorded in ``custom_data``.
 
     """
 
@@ -105,6 +125,8 @@ class SimulationSpec:
     load_torque_nm: float = None
     lost_motion_limit: float = 3.0 * ARCMIN
     compression: str = 'none'
+    start_hours: float = 0.0
+    robot: str = ''
 
     def __post_init__(self):
         """Check the ranges (the CLI's values arrive here unchanged)."""
@@ -118,6 +140,12 @@ class SimulationSpec:
         finite('--hours', self.hours, 'h', 0.0, 1e6)
         finite('--aging-factor', self.aging_factor, '', 0.0, 1e9)
         finite('--rate-hz', self.rate_hz, 'Hz', 0.0, 1e5)
+        finite('--start-hours', self.start_hours, 'h', 0.0, 1e6, lo_open=False)
+        if not isinstance(self.robot, str) or len(self.robot) > MAX_ROBOT_NAME or \
+                any(c.isspace() or not c.isprintable() for c in self.robot):
+            raise InvalidParameter(out_of_range(
+                '--robot', self.robot, '', f'a name of 1 .. {MAX_ROBOT_NAME} printable '
+                'characters without spaces'))
         if isinstance(self.joints, bool) or not isinstance(self.joints, int) or \
                 not 1 <= self.joints <= MAX_JOINTS:
             raise InvalidParameter(out_of_range('--joints', self.joints, '', f'1 .. {MAX_JOINTS}'))
@@ -156,9 +184,17 @@ class SimulationSpec:
         return self.hours * HOUR / self.aging_factor
 
     @property
+    def first_sample(self):
+        """Index of the bag's first tick in the joints' life (0 unless ``start_hours``)."""
+        return self._ticks(self.start_hours)
+
+    @property
     def messages(self):
         """Ticks in the bag (JointState messages per topic)."""
-        return int(math.floor(self.stream_s * self.rate_hz + 1e-9))
+        return self._ticks(self.start_hours + self.hours) - self.first_sample
+
+    def _ticks(self, hours):
+        return int(math.floor(hours * HOUR / self.aging_factor * self.rate_hz + 1e-9))
 
     @property
     def names(self):
@@ -211,8 +247,12 @@ def _custom_data(spec):
     settings = asdict(spec)
     settings['wear_rate_scales'] = list(spec.wear_rate_scales)
     settings['joint_names'] = spec.names
-    return {AGING_KEY: repr(float(spec.aging_factor)),
-            SIMULATION_KEY: json.dumps(settings, sort_keys=True)}
+    out = {AGING_KEY: repr(float(spec.aging_factor)),
+           SIMULATION_KEY: json.dumps(settings, sort_keys=True),
+           START_HOURS_KEY: repr(float(spec.start_hours))}
+    if spec.robot:
+        out[ROBOT_KEY] = spec.robot
+    return out
 
 
 def _truth_rows(sims, batches, first, n, spec, tables):
@@ -273,7 +313,11 @@ def simulate_bag(out_dir, spec, params=None, overwrite=False):
     tables = model_tables(params)
     sims = _simulators(spec, params)
     names = spec.names
-    n_total = spec.messages
+    # Sample indices of the joints' life: [first, n_total).
+    first = spec.first_sample
+    n_total = first + spec.messages
+    for sim in sims:
+        sim.advance(first)
     written = 0
     with BagDirWriter(out_dir, compression=spec.compression, custom_data=_custom_data(spec),
                       overwrite=overwrite) as writer:
@@ -282,7 +326,6 @@ def simulate_bag(out_dir, spec, params=None, overwrite=False):
             if spec.layout == 'split' else None
         truth_ch = [writer.add_topic(joint_topic(name, 'ground_truth'), MULTIARRAY, LATEST_QOS)
                     for name in names]
-        first = 0
         while first < n_total:
             n = min(BLOCK_SAMPLES, n_total - first)
             batches = [sim.step(n) for sim in sims]
@@ -304,7 +347,7 @@ def simulate_bag(out_dir, spec, params=None, overwrite=False):
         truth[sim.config.name] = {'true_wear_um': m_to_um(tr.wear),
                                   'true_rul_h': sim.true_rul_s() / HOUR,
                                   'wear_rate_scale': tr.wear_rate_scale}
-    return SimulationResult(writer.out_dir, written, truth, n_total / spec.rate_hz)
+    return SimulationResult(writer.out_dir, written, truth, spec.messages / spec.rate_hz)
 
 
 def _write_joint_states(writer, link_ch, motor_ch, names, batches, stamps):

@@ -11,6 +11,8 @@ analyses the next chunk; both give identical results, since each stage sees the 
 records in the same order.
 """
 
+from types import SimpleNamespace
+
 from msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 import numpy as np
@@ -223,14 +225,41 @@ class JointBack:
         Reducer parameters.
     life_config : LifeConfig
         Limit and thresholds.
+    state : dict, optional
+        Where an earlier analysis of the same reducer ended (:meth:`state`); default a
+        new reducer.
 
     """
 
-    def __init__(self, joint, params, life_config):
+    def __init__(self, joint, params, life_config, state=None):
+        from reducer_twin.core.estimator import WearEstimator
         from reducer_twin.core.pipeline import EstimatorStage, LifeStage
         self.joint = joint
         self.stage = EstimatorStage(params)
         self.life = LifeStage(params, life_config)
+        if state is not None:
+            self.stage.estimator = WearEstimator.from_state(params, state['estimator'])
+            obs = state.get('lost_motion_obs_rad')
+            self.stage.last_observation = float('nan') if obs is None else float(obs)
+            duty = state.get('duty')
+            self.life.duty = None if duty is None else SimpleNamespace(**duty)
+
+    def state(self):
+        """
+        Return where this reducer's stages are, to continue with its next bag.
+
+        Returns
+        -------
+        dict
+            JSON-able: ``estimator`` (``WearEstimator.state_dict``), ``duty`` (the life
+            stage's last duty summary or None) and ``lost_motion_obs_rad`` (or None).
+
+        """
+        obs = self.stage.last_observation
+        duty = self.life.duty
+        return {'estimator': self.stage.estimator.state_dict(),
+                'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
+                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None}
 
     def initial(self, stamp_s):
         """Return the outputs the nodes publish when they start (no window yet)."""
@@ -303,10 +332,12 @@ class LocalBacks:
     def __init__(self, params=None, life_config=None):
         self.configure(params, life_config)
 
-    def configure(self, params, life_config):
-        """Start over for a new bag with these parameters."""
+    def configure(self, params, life_config, states=None):
+        """Start over for a new bag with these parameters (and reducers' earlier states)."""
         self.params = params
         self.life_config = life_config
+        self.initial = dict(states or {})
+        self.states = {}
         self.backs = {}
         self._done = []
 
@@ -314,7 +345,8 @@ class LocalBacks:
         """Process ``'start'`` (a stamp [s]) or ``'windows'`` (``te_features`` records)."""
         back = self.backs.get(joint)
         if back is None:
-            back = self.backs[joint] = JointBack(joint, self.params, self.life_config)
+            back = self.backs[joint] = JointBack(joint, self.params, self.life_config,
+                                                 self.initial.get(joint))
         if kind == 'start':
             self._done.append((joint, [back.initial(items)]))
         else:
@@ -326,7 +358,8 @@ class LocalBacks:
         return done
 
     def finish(self):
-        """Return the outputs of everything submitted."""
+        """Return the outputs of everything submitted; :attr:`states` holds the end states."""
+        self.states = {joint: back.state() for joint, back in self.backs.items()}
         return self.poll()
 
     def close(self):
@@ -345,9 +378,12 @@ def _back_worker(inbox, outbox):
             if item is None:
                 break
             if item[0] == _CONFIG:
-                local.configure(item[1], item[2])
+                local.configure(item[1], item[2], item[3])
             elif item[0] == _FLUSH:
-                outbox.put((_FLUSH, None))
+                done = local.finish()
+                for joint_done in done:
+                    outbox.put(joint_done)
+                outbox.put((_FLUSH, local.states))
             else:
                 local.submit(*item)
                 for done in local.poll():
@@ -374,15 +410,17 @@ class WorkerBacks:
         self._proc = ctx.Process(target=_back_worker, name='reducer-twin-stages',
                                  args=(self._inbox, self._outbox), daemon=True)
         self._proc.start()
+        self.states = {}
 
     @property
     def alive(self):
         """Whether the worker process runs."""
         return self._proc.is_alive()
 
-    def configure(self, params, life_config):
-        """Start over for a new bag with these parameters."""
-        self._inbox.put((_CONFIG, params, life_config))
+    def configure(self, params, life_config, states=None):
+        """Start over for a new bag with these parameters (and reducers' earlier states)."""
+        self.states = {}
+        self._inbox.put((_CONFIG, params, life_config, states))
 
     def submit(self, joint, kind, items):
         """Send work (see :meth:`LocalBacks.submit`)."""
@@ -412,6 +450,7 @@ class WorkerBacks:
         while True:
             item = self._take(self._outbox.get())
             if item[0] == _FLUSH:
+                self.states = item[1]
                 return out
             out.append(item)
 

@@ -58,6 +58,8 @@ def add_parser(sub):
                    help="MCAP chunk compression of the derived bag (default 'none')")
     p.add_argument('--overwrite', action='store_true',
                    help='replace derived bags already in --out')
+    from reducer_twin.fleet.cli import add_store_options
+    add_store_options(p)
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
                    help='run the estimator and life stages, and the bag reading, in '
                         'processes of their own beside the analysing one (auto: one bag at '
@@ -119,6 +121,8 @@ def run(args):
     """Check the request, analyse every bag, write outputs and print the results."""
     if not 1 <= args.jobs <= MAX_JOBS:
         raise InvalidParameter(f'--jobs must be in 1 .. {MAX_JOBS} processes, got {args.jobs}')
+    from reducer_twin.fleet.cli import check_store_options
+    check_store_options(args)
     missing = [b for b in args.bags if not Path(b).exists()]
     if missing:
         raise InvalidParameter(f'BAG {missing[0]} does not exist; expected a rosbag2 bag '
@@ -130,7 +134,10 @@ def run(args):
     defer_filterpy_extras()
     # Forked before the rest is imported: the worker loads filterpy meanwhile.
     jobs = min(args.jobs, len(args.bags))
-    worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) else None
+    fleet = args.store is not None or args.engine == 'ray'
+    worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) and \
+        args.engine == 'local' else None
+    workers = {}
     try:
         from reducer_twin.analysis.pipeline import AnalysisSettings
         settings = AnalysisSettings.from_config(args.config)
@@ -140,7 +147,11 @@ def run(args):
         single = len(args.bags) == 1
         names = _names(args.bags)
         outs = [args.out] if single else [str(Path(args.out) / n) for n in names]
-        results = _analyze_all(args, settings, outs, worker)
+        if fleet:
+            from reducer_twin.fleet.history import analyze_into_store
+            results, workers = analyze_into_store(args, settings, names, outs, worker)
+        else:
+            results = _analyze_all(args, settings, outs, worker)
     finally:
         if worker is not None:
             worker.close()
@@ -149,6 +160,8 @@ def run(args):
     summary, failed = {}, {}
     for bag, name in zip(args.bags, names):
         result = results[bag]
+        if fleet and _fleet_note(result, name, failed):
+            continue
         if isinstance(result, Exception):
             sys.stderr.write(f'ERROR: {result}\n')
             failed[name] = str(result)
@@ -166,27 +179,56 @@ def run(args):
         if args.report:
             from reducer_twin.analysis.report import write_report
             page = write_report(result, Path(args.report) if single else
-                                Path(args.report) / name)
+                                Path(args.report) / name, life=settings.life)
             if not args.json:
                 print(f'report: {page}')
         summary[name] = result
     if args.json:
         if single:
             if summary:
-                print_json(summary[names[0]].as_json())
+                print_json(_with_worker(summary[names[0]].as_json(), args, fleet,
+                                        workers.get(args.bags[0])))
+            elif fleet:
+                note = failed[names[0]]
+                print_json({'engine': args.engine,
+                            **(note if isinstance(note, dict) else {'error': note})})
         else:
             total = sum(r.messages for r in summary.values())
             seconds = sum(r.seconds for r in summary.values())
             rate = total / seconds if seconds > 0 else float('nan')
-            bags = {n: {**r.as_json(), 'out': str(r.out)} for n, r in summary.items()}
-            bags.update({n: {'error': text} for n, text in failed.items()})
+            bags = {n: _with_worker({**summary[n].as_json(), 'out': str(summary[n].out)},
+                                    args, fleet, workers.get(b))
+                    for b, n in zip(args.bags, names) if n in summary}
+            bags.update({n: text if isinstance(text, dict) else {'error': text}
+                         for n, text in failed.items()})
+            extra = {'engine': args.engine} if fleet else {}
             print_json({'bags': {n: bags[n] for n in names},
-                        'messages_per_s': rate if math.isfinite(rate) else None})
+                        'messages_per_s': rate if math.isfinite(rate) else None, **extra})
     else:
         for name, result in summary.items():
             _print_summary(name, result)
     # 3: everything ran, but some reducer could not be observed (said on stderr and in JSON).
     return EXIT_NOT_OBSERVED if code == 0 and blind else code
+
+
+def _fleet_note(result, name, failed):
+    """Report a bag the fleet store skipped; True when it was one."""
+    from reducer_twin.fleet.history import BagSkipped
+    if not isinstance(result, BagSkipped):
+        return False
+    sys.stderr.write(f'NOTE: {result}\n')
+    failed[name] = {'skipped': str(result)}
+    return True
+
+
+def _with_worker(record, args, fleet, worker):
+    """Add ``engine`` and the bag's ``worker`` to a --json record of a fleet run."""
+    if not fleet:
+        return record
+    record = dict(record, engine=args.engine)
+    if worker:
+        record['worker'] = {'node': worker['node'], 'pid': worker['pid']}
+    return record
 
 
 def _fmt(value, spec):

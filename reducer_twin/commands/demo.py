@@ -21,7 +21,10 @@ from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 
 MAX_JOINTS = 12
 
-DEMO_LOAD_NM = 1.2 * 784.0
+RATED_TORQUE_NM = 784.0
+"""Rated output torque of the RV-80E [N·m] (the paper's; ``params.rating.rated_torque``)."""
+
+DEMO_LOAD_NM = 1.2 * RATED_TORQUE_NM
 """Gravity-load amplitude of the demo joints: a heavily loaded axis that ages visibly."""
 
 
@@ -87,6 +90,11 @@ def run(args):
     config['twin'].update({'joints': joints, 'aging_factor': aging, 'simulate': True,
                            'state_dir': state_dir})
     config['simulator'].update({'profile': args.profile, 'wear_rate_scales': scales})
+    if not args.json:
+        console().print(f'reducer_twin demo: {args.joints} joint(s) under a gravity load of '
+                        f'{DEMO_LOAD_NM / RATED_TORQUE_NM:.1f}x rated torque '
+                        f'({DEMO_LOAD_NM:.0f} N*m), aging factor {aging:,.0f}: '
+                        f'{args.hours:,g} h in {args.duration_s:g} s of stream', soft_wrap=True)
     rclpy.init(args=['--ros-args', '--log-level', 'warn'])
     history = {j: [] for j in joints}
     try:
@@ -220,19 +228,24 @@ def _fmt(value, spec):
 
 
 def _table(summary, title):
+    from rich import box
     from rich.table import Table
-    t = Table(title=title)
-    cols = ('joint', 'TE p-p (arcmin)', 'lost motion (arcmin)', 'wear (um)', 'true wear (um)',
-            'RUL P10 / P50 / P90 (h)', 'true RUL (h)', 'health', 'dropped')
-    for col in cols:
-        t.add_column(col, justify='right')
+    # Fits 80 columns: short headers, the units once in the caption, joint names never cut.
+    dropped = sum(int(r['dropped']) for r in summary.values())
+    t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False,
+              show_edge=False, collapse_padding=True, caption=(
+        f'arcmin: TE p-p, LM (lost motion); um: wear; h: RUL (remaining life); '
+        f'{dropped} dropped'), caption_justify='left')
+    t.add_column('joint', no_wrap=True, min_width=7)
+    for col in ('TE p-p', 'LM', 'wear', 'true', 'RUL P10/P50/P90', 'true RUL', 'health'):
+        t.add_column(col, justify='right', no_wrap=True)
     styles = {'OK': 'green', 'WARN': 'yellow', 'ERROR': 'bold red', 'STALE': 'dim'}
     for j, r in summary.items():
-        wear = (f"{_fmt(r['wear_um'], '.2f')} ± {_fmt(r['wear_std_um'], '.2f')}")
-        rul = ' / '.join(_fmt(r[k], ',.0f') for k in ('rul_p10_h', 'rul_p50_h', 'rul_p90_h'))
+        wear = (f"{_fmt(r['wear_um'], '.2f')}±{_fmt(r['wear_std_um'], '.2f')}")
+        rul = '/'.join(_fmt(r[k], ',.0f') for k in ('rul_p10_h', 'rul_p50_h', 'rul_p90_h'))
         t.add_row(j, _fmt(r['te_pp_arcmin'], '.3f'), _fmt(r['lost_motion_arcmin'], '.2f'), wear,
                   _fmt(r['true_wear_um'], '.2f'), rul, _fmt(r['true_rul_h'], ',.0f'),
-                  f"[{styles.get(r['level'], '')}]{r['level']}[/]", str(r['dropped']))
+                  f"[{styles.get(r['level'], '')}]{r['level']}[/]")
     return t
 
 

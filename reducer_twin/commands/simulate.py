@@ -9,6 +9,8 @@ the motor side on ``/motor_states``), ``/reducer_twin/<joint>/ground_truth`` the
 truth every stream second. ``--hours`` of wear exposure are compressed into
 ``hours·3600/aging_factor`` seconds of stream; the aging factor is stored in the bag's
 ``custom_data``, so ``reducer-twin analyze`` applies it without being told.
+``--robot NAME --start-hours H`` continues the same joints' life (same seed) from hour H,
+so consecutive bags join exactly; both are stored in ``custom_data`` for the fleet store.
 """
 
 import argparse
@@ -42,6 +44,11 @@ def add_parser(sub):
     p.add_argument('--rate-hz', type=float, default=1000.0,
                    help='JointState rate [Hz] (default 1000)')
     p.add_argument('--seed', type=int, default=0, help='noise seed of joint 1; joint k: seed+k-1')
+    p.add_argument('--robot', default='', metavar='NAME',
+                   help="robot name stored in the bag's custom_data (for analyze --store)")
+    p.add_argument('--start-hours', type=float, default=0.0, metavar='H',
+                   help='operating hours at the first sample: continues the life of the same '
+                        'seed from hour H (default 0)')
     p.add_argument('--wear-rate-scale', type=_scales, default=(1.0,), metavar='K[,K...]',
                    help='hidden Archard-rate multiplier, one for all joints or one per joint '
                         '(default 1)')
@@ -100,7 +107,8 @@ def run(args):
                           rate_hz=args.rate_hz, seed=args.seed,
                           wear_rate_scales=args.wear_rate_scale, profile=args.profile,
                           layout=args.layout, load_torque_nm=args.load_torque_nm,
-                          compression=args.compression)
+                          compression=args.compression, start_hours=args.start_hours,
+                          robot=args.robot)
     check_out_dir(args.out, args.overwrite)
     start = time.perf_counter()
     result = simulate_bag(args.out, spec, overwrite=args.overwrite)
@@ -108,9 +116,12 @@ def run(args):
     if args.json:
         print_json(result.as_json())
         return 0
+    span = f' (hours {spec.start_hours:,g} .. {spec.start_hours + spec.hours:,g}' + (
+        f' of robot {spec.robot})' if spec.robot else ')') if spec.start_hours or spec.robot \
+        else ''
     print(f'wrote {result.path}: {result.messages:,} JointState messages, {spec.joints} '
-          f'joint(s), {result.stream_s:,.1f} s of stream = {spec.hours:,g} h at aging factor '
-          f'{spec.aging_factor:g}, in {seconds:.2f} s ({result.messages / seconds:,.0f} '
+          f'joint(s), {result.stream_s:,.1f} s of stream = {spec.hours:,g} h{span} at aging '
+          f'factor {spec.aging_factor:g}, in {seconds:.2f} s ({result.messages / seconds:,.0f} '
           'msg/s)')
     for name, truth in result.truth.items():
         print(f'  {name}: true wear {truth["true_wear_um"]:.3f} um, true remaining life '

@@ -432,6 +432,65 @@ class JointSimulator:
             return SimBatch(**{name: a.copy() for name, a in parts[0].items()})
         return SimBatch(**{name: np.concatenate([p[name] for p in parts]) for name in parts[0]})
 
+    def advance(self, n):
+        """
+        Move on ``n`` samples without producing them (a later segment of the same life).
+
+        The wear and the noise streams advance exactly as :meth:`step` would advance
+        them, so the samples that follow are bit-identical to those of one continuous
+        run; whole blocks cost only the wear integration and the noise draws.
+
+        Parameters
+        ----------
+        n : int
+            Number of samples to pass over (>= 0).
+
+        Raises
+        ------
+        InvalidParameter
+            If ``n`` is not a non-negative whole number.
+
+        """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise InvalidParameter(out_of_range('n', n, 'samples', 'a whole number >= 0'))
+        stop = self._next + int(n)
+        lo = self._cache_block * BLOCK_SAMPLES
+        cached_end = lo + (self._cache['t'].size if self._cache is not None else 0)
+        if self._cache is not None and stop <= cached_end:
+            self._next = stop
+            return
+        # Whole blocks not computed yet, below the block that holds ``stop``.
+        block, target = self._next_block, stop // BLOCK_SAMPLES
+        if target > block:
+            while block < target:
+                m = min(target - block, _MAX_BLOCKS_PER_PASS)
+                self._advance_blocks(block, m)
+                block += m
+            self._cache = None
+            self._next = target * BLOCK_SAMPLES
+        if stop > self._next:
+            self.step(stop - self._next)
+
+    def _advance_blocks(self, first, m):
+        """Wear and noise draws of ``m`` whole blocks from ``first``, as in a real pass."""
+        cfg, size = self.config, BLOCK_SAMPLES
+        t = np.arange(first * size, (first + m) * size, dtype=float) / cfg.rate_hz
+        q, speed, accel = self.trajectory(t)
+        torque = load_torque(q, accel, cfg)
+        dt = np.full(size, 1.0 / cfg.rate_hz)
+        w = self._block_start_wear
+        for j in range(m):
+            sl = slice(j * size, (j + 1) * size)
+            after = integrate_wear(dt, torque[sl], speed[sl], self.params, wear0=w,
+                                   rate_scale=cfg.wear_rate_scale, aging=cfg.aging_factor)
+            w = float(max(after[-1], w))
+        scratch = np.empty(size)
+        for _ in range(m):
+            for rng in self._rngs:
+                rng.standard_normal(out=scratch)
+        self._block_start_wear = w
+        self._next_block = first + m
+
     def truth(self):
         """
         Return the hidden state at the next sample.

@@ -10,8 +10,8 @@ from msg_adapters.multiarray_cdr import decode_layout_batch
 import numpy as np
 import pytest
 from reducer_twin.analysis.bag import open_bag
-from reducer_twin.analysis.simulate import AGING_KEY, SIMULATION_KEY, SimulationSpec
-from reducer_twin.analysis.simulate import simulate_bag, START_NS
+from reducer_twin.analysis.simulate import AGING_KEY, ROBOT_KEY, SIMULATION_KEY, SimulationSpec
+from reducer_twin.analysis.simulate import simulate_bag, START_HOURS_KEY, START_NS
 from reducer_twin.cli import main
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
@@ -223,3 +223,66 @@ def test_an_existing_out_that_is_not_an_empty_directory_is_refused(tmp_path, cap
 def test_the_stream_length_follows_hours_and_aging_factor():
     spec = SimulationSpec(hours=1000.0, aging_factor=3600.0, rate_hz=1000.0)
     assert spec.messages == 1_000_000 and math.isclose(spec.stream_s, 1000.0)
+
+
+def _contents(bag_dir):
+    """Return the JointState rows, ground-truth records and custom_data of a bag."""
+    with open_bag(bag_dir) as bag:
+        js = bag.read_joint_states()['/joint_states']
+        custom = dict(bag.metadata)
+        truth = {}
+        for topic, raw in bag.iter_raw([t for t in bag.topics if t.endswith('ground_truth')]):
+            payloads = [raw.payload(i) for i in range(len(raw))]
+            truth.setdefault(topic, []).append(decode_layout_batch(GROUND_TRUTH, payloads))
+    return js, {t: np.concatenate(v) for t, v in truth.items()}, custom
+
+
+@pytest.mark.parametrize('rate_hz, aging', [(500.0, 360_000.0), (250.0, 9_000.0)],
+                         ids=['whole blocks', 'partial blocks'])
+def test_two_segments_of_a_life_join_exactly_into_one_bag_of_the_whole_span(
+        tmp_path, rate_hz, aging):
+    common = {'aging_factor': aging, 'joints': 2, 'rate_hz': rate_hz, 'seed': 11, 'robot': 'r1'}
+    first = simulate_bag(tmp_path / 'a', SimulationSpec(hours=2000.0, **common))
+    second = simulate_bag(tmp_path / 'b', SimulationSpec(hours=2000.0, start_hours=2000.0,
+                                                         **common))
+    whole = simulate_bag(tmp_path / 'ab', SimulationSpec(hours=4000.0, **common))
+    js_a, truth_a, custom_a = _contents(tmp_path / 'a')
+    js_b, truth_b, custom_b = _contents(tmp_path / 'b')
+    js_ab, truth_ab, _ = _contents(tmp_path / 'ab')
+    # The samples and stamps of the two segments are those of the whole life, in order.
+    np.testing.assert_array_equal(np.concatenate([js_a.stamps_ns, js_b.stamps_ns]),
+                                  js_ab.stamps_ns)
+    np.testing.assert_array_equal(np.concatenate([js_a.position, js_b.position]),
+                                  js_ab.position)
+    assert js_b.stamps_ns[0] > js_a.stamps_ns[-1]
+    for name in first.truth:
+        topic = f'/reducer_twin/{name}/ground_truth'
+        wear, hours = (GROUND_TRUTH.fields.index(k) for k in ('wear_m', 'exposure_s'))
+        # The truth at the second segment's start is the first segment's end, exactly.
+        assert truth_b[topic][0, wear] == truth_a[topic][-1, wear]
+        assert truth_b[topic][0, hours] == pytest.approx(2000.0 * HOUR)
+        assert truth_b[topic][-1, wear] == truth_ab[topic][-1, wear]
+        assert second.truth[name] == whole.truth[name]
+        assert 0.0 < first.truth[name]['true_wear_um'] < second.truth[name]['true_wear_um']
+    assert (custom_a[ROBOT_KEY], custom_a[START_HOURS_KEY]) == ('r1', '0.0')
+    assert (custom_b[ROBOT_KEY], custom_b[START_HOURS_KEY]) == ('r1', '2000.0')
+
+
+def test_the_cli_records_robot_and_start_hours_and_refuses_bad_ones(tmp_path, capsys):
+    out = tmp_path / 'later'
+    code, _, err = _run(['simulate', '--out', str(out), '--hours', '50', '--aging-factor',
+                         '180000', '--rate-hz', '100', '--robot', 'cell-7/r2',
+                         '--start-hours', '300'], capsys)
+    assert code == 0, err
+    _, truth, custom = _contents(out)
+    assert custom[ROBOT_KEY] == 'cell-7/r2' and float(custom[START_HOURS_KEY]) == 300.0
+    hours = truth['/reducer_twin/joint_1/ground_truth'][:, GROUND_TRUTH.fields.index(
+        'exposure_s')] / HOUR
+    assert hours[0] >= 300.0 and hours[-1] == pytest.approx(350.0)
+    for extra, fragment in ((['--start-hours', '-5'], '--start-hours'),
+                            (['--robot', 'two words'], '--robot')):
+        code, _, err = _run(['simulate', '--out', str(tmp_path / 'bad'), '--hours', '1',
+                             *extra], capsys)
+        errors = [line for line in err.splitlines() if line.startswith('ERROR:')]
+        assert code == 1 and len(errors) == 1 and fragment in errors[0], err
+        assert not (tmp_path / 'bad').exists()

@@ -243,3 +243,22 @@ def test_step_counts_must_be_whole_and_non_negative(n):
 def test_a_zero_step_returns_an_empty_batch_and_does_not_advance():
     sim = JointSimulator(PARAMS, fast())
     assert len(sim.step(0)) == 0 and sim.time_s == 0.0
+
+
+@pytest.mark.parametrize('before, skipped, after', [
+    (0, 5000, 3000), (100, 300_000, 700), (7, 2048 * 70 - 2, 9000), (2048 * 3, 4096, 1)],
+    ids=['from the start', 'many passes', 'block edge', 'whole blocks'])
+def test_advancing_gives_the_samples_and_truth_of_one_continuous_run(before, skipped, after):
+    cfg = SimConfig(exact_mesh=False, rate_hz=1000.0, aging_factor=3600.0, seed=3)
+    whole = JointSimulator(PARAMS, cfg)
+    full = whole.step(before + skipped + after)
+    later = JointSimulator(PARAMS, cfg)
+    later.step(before)
+    later.advance(skipped)
+    part = later.step(after)
+    for name in ('t', 'motor_angle', 'link_angle', 'link_velocity', 'effort', 'true_wear'):
+        np.testing.assert_array_equal(getattr(full, name)[before + skipped:],
+                                      getattr(part, name), err_msg=name)
+    assert later.truth() == whole.truth()
+    with pytest.raises(InvalidParameter, match='whole number'):
+        later.advance(-1)

@@ -1,0 +1,193 @@
+"""analyze --store: a reducer's life across bags, in time order, never counted twice."""
+
+import json
+import os
+from pathlib import Path
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+from reducer_twin.fleet.store import FleetStore
+
+ROOT = Path(__file__).resolve().parents[2]
+# One robot's life in three bags of 2000 h (5000 ticks each at 250 Hz).
+LIFE = {'hours': 2000.0, 'aging_factor': 360_000.0, 'joints': 2, 'rate_hz': 250.0,
+        'seed': 11}
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    root = tmp_path_factory.mktemp('life')
+    out = {}
+    for k, start in enumerate((0.0, 2000.0, 4000.0), 1):
+        out[f's{k}'] = str(simulate_bag(root / f's{k}', SimulationSpec(
+            start_hours=start, robot='r1', **LIFE)).path)
+    out['anonymous'] = str(simulate_bag(root / 'anonymous', SimulationSpec(**LIFE)).path)
+    return out
+
+
+def _run(argv, capsys):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def _fleet(store, capsys):
+    code, out, err = _run(['fleet', '--store', store, '--json'], capsys)
+    assert code == 0, err
+    return json.loads(out)['reducers']
+
+
+def _analyze(paths, store, out, capsys, *extra):
+    return _run(['analyze', *paths, '--store', store, '--out', out, '--json', *extra], capsys)
+
+
+def test_bags_given_in_any_order_continue_each_reducer_in_time_order(bags, tmp_path, capsys):
+    code, out, err = _analyze([bags['s3'], bags['s1'], bags['s2']], tmp_path / 'f.db',
+                              tmp_path / 'out', capsys)
+    assert code == 0, err
+    assert json.loads(out)['engine'] == 'local'
+    # The same chain by hand: each bag continues from the state the previous one ended in.
+    states = None
+    for k in (1, 2, 3):
+        result = analyze_bag(bags[f's{k}'], tmp_path / f'hand{k}', initial_states=states)
+        states = result.states
+    rows = {r['joint']: r for r in _fleet(tmp_path / 'f.db', capsys)}
+    for joint, res in result.joints.items():
+        s = res.summary()
+        assert rows[joint]['bags'] == 3 and rows[joint]['verdict'] == 'OK'
+        assert rows[joint]['wear_um'] == pytest.approx(s['wear_um'], rel=1e-12)
+        assert rows[joint]['rul_p50_h'] == s['rul_p50_h']
+        assert rows[joint]['hours_observed'] == pytest.approx(6000.0, rel=1e-3)
+        assert rows[joint]['last_seen'] == '2026-01-01T00:00:59Z'  # 60 s of stream
+
+
+def test_the_same_bags_again_are_skipped_reported_and_change_nothing(bags, tmp_path, capsys):
+    store = tmp_path / 'f.db'
+    assert _analyze([bags['s1'], bags['s2']], store, tmp_path / 'a', capsys)[0] == 0
+    before = _fleet(store, capsys)
+    code, out, err = _analyze([bags['s2'], bags['s1']], store, tmp_path / 'b', capsys)
+    assert code == 0, err
+    notes = [line for line in err.splitlines() if line.startswith('NOTE:')]
+    assert len(notes) == 2 and all('already in the fleet store' in n for n in notes), err
+    assert all('skipped' in b for b in json.loads(out)['bags'].values())
+    assert _fleet(store, capsys) == before
+    assert not (tmp_path / 'b' / 's1').exists()
+
+
+def test_an_older_bag_is_refused_until_rebuild_takes_it_into_the_history(bags, tmp_path,
+                                                                         capsys):
+    store = tmp_path / 'f.db'
+    assert _analyze([bags['s2'], bags['s3']], store, tmp_path / 'a', capsys)[0] == 0
+    code, _, err = _analyze([bags['s1']], store, tmp_path / 'b', capsys)
+    errors = [line for line in err.splitlines() if line.startswith('ERROR:')]
+    assert code == 1 and len(errors) == 1 and 'before the end of the stored history' in \
+        errors[0] and '--rebuild' in errors[0], err
+    assert [r['bags'] for r in _fleet(store, capsys)] == [2, 2]
+    code, _, err = _analyze([bags['s1']], store, tmp_path / 'c', capsys, '--rebuild')
+    assert code == 0, err
+    whole = tmp_path / 'whole.db'
+    assert _analyze([bags['s1'], bags['s2'], bags['s3']], whole, tmp_path / 'd', capsys)[0] == 0
+    assert _fleet(store, capsys) == _fleet(whole, capsys)
+
+
+@pytest.mark.parametrize('how', ['flag', 'config', 'none'])
+def test_the_robot_comes_from_the_flag_or_the_config_else_a_clear_error(
+        bags, tmp_path, capsys, how):
+    extra = []
+    if how == 'flag':
+        extra = ['--robot', 'cell3-r7']
+    elif how == 'config':
+        config = tmp_path / 'twin.yaml'
+        config.write_text('twin:\n  robot: cell3-r7\n')
+        extra = ['--config', config]
+    code, _, err = _analyze([bags['anonymous']], tmp_path / 'f.db', tmp_path / 'out', capsys,
+                            *extra)
+    if how == 'none':
+        errors = [line for line in err.splitlines() if line.startswith('ERROR:')]
+        assert code == 1 and len(errors) == 1 and '--robot' in errors[0] and \
+            'twin.robot' in errors[0] and 'Traceback' not in err, err
+        return
+    assert code == 0, err
+    assert {r['robot'] for r in _fleet(tmp_path / 'f.db', capsys)} == {'cell3-r7'}
+
+
+def test_after_a_replacement_later_bags_continue_the_new_reducer(bags, tmp_path, capsys):
+    store = tmp_path / 'f.db'
+    assert _analyze([bags['s1']], store, tmp_path / 'a', capsys)[0] == 0
+    code, out, err = _run(['replace', '--store', store, '--robot', 'r1', '--joint', 'joint_1',
+                           '--note', 'worn'], capsys)
+    assert code == 0 and 'replaced at' in out, err
+    rows = _fleet(store, capsys)
+    new = [r for r in rows if r['joint'] == 'joint_1' and r['verdict'] != 'RETIRED']
+    assert [(r['bags'], r['verdict']) for r in new] == [(0, 'NOT OBSERVED')]
+    assert _analyze([bags['s2']], store, tmp_path / 'b', capsys)[0] == 0
+    rows = {(r['joint'], r['verdict'] == 'RETIRED'): r for r in _fleet(store, capsys)}
+    assert rows['joint_1', True]['bags'] == 1 and rows['joint_1', False]['bags'] == 1
+    assert rows['joint_2', False]['bags'] == 2
+    # The new reducer's history starts at the replacement; joint_2 goes on.
+    assert rows['joint_1', False]['hours_observed'] == pytest.approx(2000.0, rel=1e-3)
+    assert rows['joint_2', False]['hours_observed'] == pytest.approx(4000.0, rel=1e-3)
+    assert rows['joint_1', True]['retired_at'] == rows['joint_1', False]['installed_at']
+
+
+def _cli(args, **kwargs):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, '-m', 'reducer_twin.cli', *map(str, args)],
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, **kwargs)
+
+
+def _consistent(store_path):
+    """Check what a crash may never leave: a broken file or a state without its segments."""
+    conn = sqlite3.connect(store_path)
+    assert conn.execute('PRAGMA integrity_check').fetchone()[0] == 'ok'
+    conn.close()
+    with FleetStore(store_path) as store:
+        for reducer in store.reducers():
+            exposure = reducer.state['estimator']['exposure_s'] if reducer.state else 0.0
+            assert exposure == pytest.approx(reducer.exposure_s, rel=1e-9, abs=1e-6)
+            assert reducer.bags == len(store.segment_bags(reducer.row_id)) <= 3
+        return sum(r.bags for r in store.reducers())
+
+
+def test_kill_9_at_any_moment_leaves_a_consistent_store_that_a_rerun_completes(
+        bags, tmp_path, capsys):
+    reference = tmp_path / 'clean.db'
+    assert _analyze([bags['s1'], bags['s2'], bags['s3']], reference, tmp_path / 'c',
+                    capsys)[0] == 0
+    seen = set()
+    for k, delay in enumerate((0.8, 1.6, 2.4, 3.2)):
+        store = tmp_path / f'k{k}.db'
+        proc = _cli(['analyze', bags['s1'], bags['s2'], bags['s3'], '--store', store, '--out',
+                     tmp_path / f'k{k}'])
+        time.sleep(delay)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        seen.add(_consistent(store) if store.exists() else 0)
+        code, _, err = _analyze([bags['s1'], bags['s2'], bags['s3']], store,
+                                tmp_path / f'r{k}', capsys)
+        assert code == 0, err
+        assert _fleet(store, capsys) == _fleet(reference, capsys)
+    assert seen, 'no kill happened'
+
+
+def test_two_writers_at_once_serialise_and_count_every_bag_once(bags, tmp_path, capsys):
+    store = tmp_path / 'f.db'
+    procs = [_cli(['analyze', bags['s1'], bags['s2'], bags['s3'], '--store', store, '--out',
+                   tmp_path / f'w{k}']) for k in range(2)]
+    outputs = [p.communicate(timeout=300) for p in procs]
+    for proc, (_, err) in zip(procs, outputs):
+        assert proc.returncode == 0, err.decode()
+    notes = sum(err.decode().count('already in the fleet store') for _, err in outputs)
+    assert notes == 3
+    assert [r['bags'] for r in _fleet(store, capsys)] == [3, 3]

@@ -1,0 +1,78 @@
+"""The fleet report: one offline page, rendered by a real headless Chromium."""
+
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+from reducer_twin.fleet.report import COLOURS
+
+CHROMIUM = shutil.which('chromium') or '/usr/bin/chromium'
+
+
+def _run(argv, capsys):
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def screenshot(page, png, profile, width=1200, height=1800):
+    """Render a page with Debian's headless Chromium, offline, into a PNG."""
+    subprocess.run([CHROMIUM, '--headless', '--no-sandbox', '--disable-gpu',
+                    '--disable-background-networking', '--disable-component-update',
+                    '--disable-sync', '--no-first-run', '--hide-scrollbars',
+                    f'--user-data-dir={profile}', f'--window-size={width},{height}',
+                    f'--screenshot={png}', page.as_uri()],
+                   check=True, capture_output=True, timeout=120)
+
+
+@pytest.fixture(scope='module')
+def fleet_report(tmp_path_factory):
+    root = tmp_path_factory.mktemp('fleet')
+    bags = [str(simulate_bag(root / f'b{k}', SimulationSpec(
+        hours=2000.0, start_hours=2000.0 * k, aging_factor=360_000.0, joints=2, rate_hz=250.0,
+        seed=5, robot='r1', wear_rate_scales=(1.0, 20.0))).path) for k in range(2)]
+    assert main(['analyze', *bags, '--store', str(root / 'f.db'), '--out',
+                 str(root / 'out')]) == 0
+    assert main(['replace', '--store', str(root / 'f.db'), '--robot', 'r1', '--joint',
+                 'joint_1']) == 0
+    assert main(['fleet', '--store', str(root / 'f.db'), '--report', str(root / 'report')]) == 0
+    return root
+
+
+def test_the_page_is_self_contained_with_the_ranked_table_rules_and_trends(fleet_report,
+                                                                           capsys):
+    page = (fleet_report / 'report' / 'index.html').read_text()
+    assert not re.search(r'(src|href)="(?!data:)', page), 'the page must not load anything'
+    assert page.count('data:image/png;base64,') == 1   # joint_2 (joint_1 is new: no data)
+    code, out, _ = _run(['fleet', '--store', fleet_report / 'f.db', '--json'], capsys)
+    rows = json.loads(out)['reducers']
+    assert rows[0]['verdict'] in ('REPLACE', 'PLAN', 'OK')
+    assert [r['verdict'] for r in rows[1:]] == ['NOT OBSERVED', 'RETIRED']
+    positions = [page.index(f'<b>{r["verdict"]}</b>') for r in rows]
+    assert positions == sorted(positions)
+    for rule in ('REPLACE', 'PLAN', 'OK', 'NOT OBSERVED'):
+        assert f'>{rule}</span></dt>' in page
+
+
+def test_headless_chromium_renders_the_report(fleet_report, tmp_path, capsys):
+    png = tmp_path / 'fleet.png'
+    screenshot(fleet_report / 'report' / 'index.html', png, tmp_path / 'profile')
+    import matplotlib.image
+    image = matplotlib.image.imread(png)
+    assert image.shape[:2] == (1800, 1200)
+    # Something was drawn: the verdict colours and the plots, not a blank page.
+    colours = np.unique((image[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0)
+    assert len(colours) > 50
+    _, out, _ = _run(['fleet', '--store', fleet_report / 'f.db', '--json'], capsys)
+    first = json.loads(out)['reducers'][0]['verdict']
+    rgb = [int(COLOURS[first][k:k + 2], 16) for k in (1, 3, 5)]
+    cell = np.all(np.abs(image[..., :3] * 255 - rgb) < 3, axis=-1)
+    assert cell.sum() > 200, f'the {first} cell is not drawn'

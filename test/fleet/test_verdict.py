@@ -1,0 +1,81 @@
+"""Verdicts: what to do with each reducer, by rules stated with the numbers that applied."""
+
+import math
+
+import numpy as np
+import pytest
+from reducer_twin.core.estimator import WearEstimator
+from reducer_twin.core.life import limit_wear
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.fleet.store import Reducer
+from reducer_twin.fleet.verdict import FIELDS, fleet_row, overdue_life, rank
+
+PARAMS = ReducerParams()
+LIMIT = 3.0 * ARCMIN
+
+
+def _state(wear_m, updates=5, var=1e-16, rate=1e-13):
+    state = WearEstimator(PARAMS).state_dict()
+    state['x'] = [wear_m, 0.0]
+    state['P'] = [[var, 0.0], [0.0, 1e-4]]
+    state['counters']['updates'] = updates
+    state['duty_increment'], state['duty_exposure'] = rate * 3600.0, 3600.0
+    return {'estimator': state}
+
+
+def _reducer(p10_h, lm=1.0, updates=5, bags=2, retired=None, wear_m=2e-6, joint='joint_1'):
+    summary = {'lost_motion_arcmin': lm, 'rul_p10_h': p10_h, 'rul_p50_h': p10_h and p10_h * 2,
+               'rul_p90_h': p10_h and p10_h * 3}
+    state = _state(wear_m, updates) if bags else None
+    return Reducer(1, 'r1', joint, None, retired, state, 10, 1, bags, 40, 4000 * HOUR,
+                   summary if bags else None, LIMIT, 1000 * HOUR, 200 * HOUR)
+
+
+@pytest.mark.parametrize('reducer, verdict, words', [
+    (_reducer(150.0), 'REPLACE', '150 h <= 200 h (error threshold)'),
+    (_reducer(200.0), 'REPLACE', '<= 200 h'),
+    (_reducer(900.0), 'PLAN', '900 h <= 1,000 h (warning threshold)'),
+    (_reducer(5000.0), 'OK', '5,000 h > 1,000 h'),
+    (_reducer(5000.0, updates=0), 'NOT OBSERVED', 'none with a lost motion'),
+    (_reducer(None, bags=0), 'NOT OBSERVED', 'no bag analysed'),
+    (_reducer(5000.0, retired=99), 'RETIRED', 'replaced at'),
+], ids=['P10 below the error threshold', 'P10 at the error threshold',
+        'P10 below the warning threshold', 'P10 above both', 'no accepted observation',
+        'no bag since installation', 'replaced'])
+def test_each_verdict_follows_its_rule_and_says_why(reducer, verdict, words):
+    row = fleet_row(reducer, PARAMS)
+    assert row['verdict'] == verdict and words in row['reason'], row
+    assert set(FIELDS) <= set(row) and row['rule']
+    if verdict == 'NOT OBSERVED':
+        assert row['wear_um'] is None and row['rul_p10_h'] is None
+
+
+def test_past_the_limit_the_remaining_life_is_negative_hours_past_it():
+    w_lim = limit_wear(PARAMS, LIMIT)
+    reducer = _reducer(0.0, lm=3.4, wear_m=w_lim * 1.1)
+    row = fleet_row(reducer, PARAMS)
+    assert row['verdict'] == 'REPLACE' and 'past its limit' in row['reason']
+    assert row['rul_p10_h'] < row['rul_p50_h'] < row['rul_p90_h'] < 0.0
+    assert f'about {-row["rul_p50_h"]:,.0f} h ago' in row['reason']
+
+
+def test_the_overdue_life_is_the_closed_form_at_a_certain_state():
+    from reducer_twin.core.estimator import run_in_free_wear
+    w_lim = limit_wear(PARAMS, LIMIT)
+    state = _state(w_lim * 1.2, var=0.0)['estimator']
+    state['P'] = [[0.0, 0.0], [0.0, 0.0]]
+    p10, p50, p90 = overdue_life(state, PARAMS, LIMIT)
+    wp = PARAMS.wear
+    expected = (run_in_free_wear(w_lim, wp) - run_in_free_wear(w_lim * 1.2, wp)) / 1e-13
+    np.testing.assert_allclose([p10, p50, p90], [expected] * 3, rtol=1e-12)
+    state['duty_exposure'] = 0.0
+    assert all(math.isnan(v) for v in overdue_life(state, PARAMS, LIMIT))
+
+
+def test_the_fleet_is_ranked_by_p10_with_unobserved_and_retired_last():
+    rows = [fleet_row(r, PARAMS) for r in (
+        _reducer(5000.0, joint='a'), _reducer(None, bags=0, joint='b'),
+        _reducer(150.0, joint='c'), _reducer(900.0, joint='d'),
+        _reducer(100.0, retired=5, joint='e'))]
+    assert [r['joint'] for r in rank(rows)] == ['c', 'd', 'a', 'b', 'e']
