@@ -15,7 +15,7 @@ DEFAULTS = {
     'twin': {'joints': ['joint_1'], 'link_topic': '/joint_states', 'motor_topic': '',
              'motor_suffix': '_motor', 'motor_angles': 'raw', 'aging_factor': 1.0,
              'window_s': 2.0, 'state_dir': '', 'simulate': False,
-             'intra_process': True},
+             'intra_process': True, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
 }
 
