@@ -102,8 +102,9 @@ def load_definitions(msgtype, text, encoding='ros2msg'):
     except InvalidInput:
         raise
     except Exception as err:  # noqa: B902 - rosbags' parser raises several kinds
+        detail = ' '.join(str(err).split())[:300]
         raise InvalidInput(f'the message definition of {msgtype} stored in the bag cannot be '
-                           f'parsed: {type(err).__name__}: {err}') from None
+                           f'parsed: {type(err).__name__}: {detail}') from None
     if msgtype not in types:
         raise InvalidInput(f'the message definition stored for {msgtype} defines '
                            f'{sorted(types)} but not {msgtype}')

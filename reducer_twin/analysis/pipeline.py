@@ -270,8 +270,8 @@ def plan_joints(bag, settings):
     """
     states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
     if not states:
-        raise BagError(f'{bag.path}: no {" or ".join(JOINT_STATE_TYPES)} topic; found: '
-                       f'{_topic_list(bag)}')
+        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
+                       f'(and no {JOINT_STATE_TYPES[1]})')
     names = {}
 
     def names_of(topic):
