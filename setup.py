@@ -36,10 +36,12 @@ setup(
         'pyyaml',
         'rich',
         'matplotlib',
+        # ROS 1 .bag files and stored message definitions (DynamicJointState) are read
+        # with rosbags' rosbag1 reader and typesys.
+        'rosbags',
     ],
     extras_require={
         'test': [
-            'rosbags',
             'pytest',
             'pytest-timeout',
             'hypothesis',

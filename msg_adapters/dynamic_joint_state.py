@@ -22,10 +22,9 @@ one topic: ``<joint>`` with the joint interfaces (position, velocity, effort) an
 
 from dataclasses import dataclass, fields
 
-import numpy as np
-
 from msg_adapters.jointstate_cdr import JointStateBatch
 from msg_adapters.jointstate_ros1 import join_groups, stamps_of
+import numpy as np
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 
 MSGTYPE = 'control_msgs/msg/DynamicJointState'

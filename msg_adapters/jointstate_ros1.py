@@ -15,9 +15,8 @@ decode_joint_states` reads CDR. The result follows the same rules: NaN where a f
 empty or not as long as the names, the union of names across layouts.
 """
 
-import numpy as np
-
 from msg_adapters.jointstate_cdr import concat_batches, empty_batch, FIELDS, JointStateBatch
+import numpy as np
 from reducer_twin.core.errors import InvalidInput
 
 MSGTYPE = 'sensor_msgs/msg/JointState'

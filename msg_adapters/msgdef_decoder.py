@@ -97,7 +97,7 @@ def load_definitions(msgtype, text, encoding='ros2msg'):
         elif encoding in ('ros2msg', 'ros1msg'):
             types = get_types_from_msg(text, msgtype)
         else:
-            raise InvalidInput(f"the message definition of {msgtype} has encoding "
+            raise InvalidInput(f'the message definition of {msgtype} has encoding '
                                f"{encoding!r}; expected 'ros2msg', 'ros1msg' or 'ros2idl'")
     except InvalidInput:
         raise

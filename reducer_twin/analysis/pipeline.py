@@ -306,9 +306,13 @@ def plan_joints(bag, settings):
         raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
                        f'{problems}')
     found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)
+    hint = (f'; a DynamicJointState joint gives <joint>{suffix} from its interface '
+            f'{settings.interfaces.motor_position!r} (twin.interfaces.motor_position)'
+            if dynamic else '')
     raise BagError(f'{bag.path}: no motor/link encoder pairs: expected <joint> and '
                    f'<joint>{suffix} in one JointState message, or a motor JointState topic '
-                   f'(twin.motor_topic in --config); JointState topics and names: {found}')
+                   f'(twin.motor_topic in --config){hint}; JointState topics and names: '
+                   f'{found}')
 
 
 def _motor_entries(link_names, motor_names, suffix):

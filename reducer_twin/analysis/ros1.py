@@ -30,7 +30,7 @@ _OP_MSGDATA, _OP_CONNECTION = 2, 7
 
 
 def _reader_class():
-    """rosbags' rosbag1 Reader, keeping each chunk's index as arrays."""
+    """Return rosbags' rosbag1 Reader, keeping each chunk's index as arrays."""
     from rosbags.rosbag1.reader import Header, read_bytes, read_uint32, Reader, ReaderError
     from rosbags.rosbag1.reader import RecordType
 

@@ -34,7 +34,7 @@ STORE1 = _store(ros1=True)
 
 
 def _decoder(store, msgtype, wire='cdr'):
-    """A decoder built from the definition rosbags writes into a bag for the type."""
+    """Build a decoder from the definition rosbags writes into a bag for the type."""
     text, _ = store.generate_msgdef(msgtype, ros_version=1 if wire == 'ros1' else 2)
     return MessageDecoder(msgtype, load_definitions(msgtype, text,
                                                     'ros1msg' if wire == 'ros1' else 'ros2msg'),
@@ -42,7 +42,7 @@ def _decoder(store, msgtype, wire='cdr'):
 
 
 def _plain(template, node=None):
-    """The template's values with every Block replaced by its numbers."""
+    """Return the template's values with every Block replaced by its numbers."""
     node = template.values if node is None else node
     if isinstance(node, Block):
         values = template.value(node)
@@ -55,7 +55,7 @@ def _plain(template, node=None):
 
 
 def _rosbags_plain(msg):
-    """A rosbags message as nested dicts and lists, in the same form as ``_plain``."""
+    """Return a rosbags message as nested dicts and lists, in the same form as ``_plain``."""
     if hasattr(msg, '__dataclass_fields__'):
         return {k: _rosbags_plain(getattr(msg, k)) for k in msg.__dataclass_fields__
                 if k != '__msgtype__'}
@@ -236,8 +236,8 @@ BAD_DEFINITIONS = [
 
 @pytest.mark.parametrize('what, text, encoding, reason', BAD_DEFINITIONS,
                          ids=[b[0] for b in BAD_DEFINITIONS])
-def test_an_unusable_definition_is_refused_with_a_reason_on_one_line(what, text, encoding,
-                                                                      reason):
+def test_an_unusable_definition_is_refused_with_a_reason_on_one_line(
+        what, text, encoding, reason):
     with pytest.raises(InvalidInput, match=reason) as err:
         load_definitions(DJS, text, encoding)
     assert '\n' not in str(err.value)

@@ -28,7 +28,7 @@ def _joint_state(i, names=NAMES):
 
 
 def _write(path, count=600, compression=None, chunk=16_384):
-    """A bag as rosbag writes one: JointState from two publishers, a string topic between."""
+    """Write a bag as rosbag writes one: JointState from two publishers, a string topic between."""
     writer = Writer(path)
     if compression:
         writer.set_compression(getattr(Writer.CompressionFormat, compression))
