@@ -369,9 +369,9 @@ class Bag:
         """
         Iterate over raw messages, per storage file and chunk.
 
-        Payloads are CDR: messages of a ROS 1 bag (other than joint states, which
-        :meth:`iter_joint_states` reads directly) are converted by their connection's
-        definition.
+        Payloads are CDR: the messages of a ROS 1 bag are converted one by one by their
+        connection's definition (``std_msgs/Header`` loses its ``seq``, as in ROS 2);
+        :meth:`iter_joint_states` reads joint states of any bag column-wise instead.
 
         Parameters
         ----------
@@ -388,8 +388,7 @@ class Bag:
         for handle in self._files:
             for batch in handle.iter_batches(names):
                 for name, sub in self._split(handle, batch).items():
-                    if self.topics[name].msgtype not in JOINT_STATE_TYPES and \
-                            self.topic_details[name].serialization_format == ROS1:
+                    if self.topic_details[name].serialization_format == ROS1:
                         sub = self._ros1_to_cdr(handle, name, sub)
                     yield name, sub
             self._take_warnings(handle)
@@ -563,8 +562,11 @@ class Bag:
             store = get_typestore(Stores.EMPTY)
             msgtype = self.topics[topic].msgtype
             try:
-                store.register(load_definitions(msgtype, handle.definition(topic)[1],
-                                                'ros1msg'))
+                types = load_definitions(msgtype, handle.definition(topic)[1], 'ros1msg')
+                if 'std_msgs/msg/Header' in types:   # rosbags drops seq itself
+                    types['std_msgs/msg/Header'] = get_typestore(
+                        Stores.ROS2_JAZZY).fielddefs['std_msgs/msg/Header']
+                store.register(types)
             except (InvalidInput, ValueError) as err:
                 raise BagError(f'{handle.path}: {topic}: {err}') from None
             self._decoders[key] = (store, msgtype)
@@ -601,9 +603,11 @@ class Bag:
 
 
 def _merge_raw(first, second):
-    data = np.concatenate([first.data, second.data])
-    order = np.argsort(np.concatenate([first.offsets, second.offsets + first.data.shape[0]]),
-                       kind='stable')
+    # Parts of one chunk share its buffer: their offsets give the file order.
+    shared = first.data is second.data
+    shift = 0 if shared else first.data.shape[0]
+    data = first.data if shared else np.concatenate([first.data, second.data])
+    order = np.argsort(np.concatenate([first.offsets, second.offsets + shift]), kind='stable')
 
     def cat(a, b):
         return np.concatenate([a, b])[order]
@@ -612,7 +616,7 @@ def _merge_raw(first, second):
                     cat(first.sequence, second.sequence),
                     cat(first.log_time_ns, second.log_time_ns),
                     cat(first.publish_time_ns, second.publish_time_ns), data,
-                    cat(first.offsets, second.offsets + first.data.shape[0]),
+                    cat(first.offsets, second.offsets + shift),
                     cat(first.lengths, second.lengths))
 
 

@@ -2,7 +2,7 @@
 
 import struct
 
-from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
+from msg_adapters.jointstate_cdr import decode_joint_states, MSGTYPE as JOINT_STATE
 import numpy as np
 import pytest
 from reducer_twin.analysis.bag import open_bag
@@ -97,13 +97,20 @@ def test_the_joint_states_decode_like_rosbags_deserialises_them(tmp_path):
         np.testing.assert_array_equal(row, m.effort if len(m.effort) else np.nan)
 
 
-def test_other_topics_come_out_of_iter_raw_as_cdr(tmp_path):
+def test_iter_raw_gives_every_topic_as_ros2_cdr(tmp_path):
     path = _write(tmp_path / 'robot.bag', count=100)
     cdr = get_typestore(Stores.ROS2_JAZZY)
     with open_bag(path) as bag:
         texts = [cdr.deserialize_cdr(raw.payload(i), 'std_msgs/msg/String').data
                  for _, raw in bag.iter_raw(['/log']) for i in range(len(raw))]
+        # A Header loses its ROS 1 seq: the CDR is a ROS 2 JointState.
+        states = decode_joint_states([raw.payload(i) for _, raw in
+                                      bag.iter_raw(['/joint_states']) for i in range(len(raw))])
+        direct = bag.read_joint_states()['/joint_states']
     assert texts == [f'tick {i}' for i in range(0, 100, 11)]
+    assert states.names == direct.names and len(states) == 100
+    for field in ('stamps_ns', 'position', 'velocity', 'effort'):
+        np.testing.assert_array_equal(getattr(states, field), getattr(direct, field))
 
 
 def test_an_index_entry_at_a_connection_record_is_followed_to_its_message(tmp_path):
