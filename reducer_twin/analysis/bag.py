@@ -506,11 +506,12 @@ class Bag:
                 for name, sub in self._split(handle, batch).items():
                     decode = self._decoder(handle, name)
                     decoded = decode(sub.data, sub.offsets, sub.lengths, errors)
-                    keep = np.ones(len(sub), bool)
+                    logs = sub.log_time_ns
                     if decoded.rejected:
+                        keep = np.ones(len(sub), bool)
                         keep[[i for i, _ in decoded.rejected]] = False
-                    decoded.log_time_ns = sub.log_time_ns[keep] if decoded.rejected \
-                        else sub.log_time_ns
+                        logs = logs[keep]
+                    decoded.log_time_ns = logs
                     yield name, decoded, handle.path
             self._take_warnings(handle)
 
@@ -716,8 +717,10 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
         else:
             files = sorted([*path.glob('*.mcap'), *path.glob('*.db3')], key=_natural_key)
             if not files:
+                ros1 = sorted(p.name for p in path.glob('*.bag'))
+                hint = f'; ROS 1 bags are given as files: {ros1[:3]}' if ros1 else ''
                 raise BagError(f'{path} has no metadata.yaml and no .mcap or .db3 file; '
-                               'expected a rosbag2 bag directory')
+                               f'expected a rosbag2 bag directory{hint}')
             warnings.append(ReadWarning(str(path), None, f'no metadata.yaml in {path}; reading '
                                         f'the {len(files)} storage file(s) found'))
     else:

@@ -192,3 +192,9 @@ def test_a_bag_that_cannot_be_read_is_refused_with_the_reason(tmp_path, what, da
     with pytest.raises(BagError, match=reason) as err:
         open_bag(path)
     assert '\n' not in str(err.value)
+
+
+def test_a_directory_of_ros1_bags_is_refused_naming_them(tmp_path):
+    _write(tmp_path / 'robot.bag', count=10)
+    with pytest.raises(BagError, match=r"ROS 1 bags are given as files: \['robot.bag'\]"):
+        open_bag(tmp_path)
