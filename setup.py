@@ -38,12 +38,14 @@ setup(
         'pyyaml',
         'rich',
         'matplotlib',
+        # ROS 1 .bag files and stored message definitions (DynamicJointState) are read
+        # with rosbags' rosbag1 reader and typesys.
+        'rosbags',
     ],
     extras_require={
         # The fleet on Ray: analyze --engine ray (a local cluster on demand, or an existing one).
         'fleet': ['ray'],
         'test': [
-            'rosbags',
             'pytest',
             'pytest-timeout',
             'hypothesis',

@@ -2,10 +2,14 @@
 rosbag2 bags: open any recording the analysis may get, write the ones it produces.
 
 ``open_bag`` accepts a bag directory (``metadata.yaml`` of version 1 to 9, possibly split
-over several storage files), a bare ``.mcap`` file, or an sqlite3 ``.db3`` bag of older
-distributions. QoS may be written with integer or string policies. The returned
-:class:`Bag` lists topics and reads JointState topics as vectorised
-:class:`~msg_adapters.jointstate_cdr.JointStateBatch` es in receive-time order.
+over several storage files), a bare ``.mcap`` file, an sqlite3 ``.db3`` bag of older
+distributions, or a ROS 1 ``.bag`` file (:mod:`reducer_twin.analysis.ros1`). QoS may be
+written with integer or string policies. The returned :class:`Bag` lists topics and reads
+joint state topics as vectorised :class:`~msg_adapters.jointstate_cdr.JointStateBatch` es
+in receive-time order: ``sensor_msgs/msg/JointState`` (CDR or ROS 1) and ros2_control's
+``control_msgs/msg/DynamicJointState``, the latter walked by the message definition the
+bag stores and turned into ``<joint>`` and ``<joint><motor_suffix>`` entries
+(:mod:`msg_adapters.dynamic_joint_state`).
 
 Problems that leave data readable (a listed file missing, counts that disagree, a
 recording cut short, a corrupt chunk) become :class:`~reducer_twin.analysis.mcap_io.
@@ -22,16 +26,23 @@ import re
 import sqlite3
 from typing import NamedTuple
 
+from msg_adapters import dynamic_joint_state as djs
 from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states, empty_batch
 from msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
+from msg_adapters.jointstate_ros1 import decode_ros1_joint_states
+from msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 import numpy as np
 from reducer_twin.analysis.mcap_io import (
     bag_metadata, custom_data_strings, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, MAGIC,
     McapBagReader, McapBagWriter, parse_qos_profiles, RawBatch, ReadWarning)
+from reducer_twin.analysis.ros1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
+from reducer_twin.analysis.ros1 import VERSION as ROS1_VERSION
 from reducer_twin.core.errors import BagError, InvalidInput
 import yaml
 
 SQLITE_MAGIC = b'SQLite format 3\x00'
+JOINT_STATE_TYPES = (JOINT_STATE, djs.MSGTYPE)
+"""Message types read as joint states: JointState, and ros2_control's DynamicJointState."""
 MAX_METADATA_VERSION = 9
 _BAG_ARTEFACTS = re.compile(r'(metadata\.yaml|.*\.mcap|.*\.db3|.*\.mcap\.zstd|.*\.db3\.zstd|'
                             r'.*\.db3-(shm|wal|journal))')
@@ -86,10 +97,19 @@ def _sniff(path):
         return 'mcap'
     if head == SQLITE_MAGIC:
         return 'sqlite3'
+    if head.startswith(ROS1_MAGIC):
+        version = head[len(ROS1_MAGIC):].split(b'\n')[0]
+        if version != ROS1_VERSION:
+            raise BagError(f'{path} is a ROS 1 bag of format version '
+                           f'{version.decode("ascii", "replace")}; expected version 2.0 '
+                           '(ROS 1 since C Turtle)')
+        return 'rosbag1'
     if not head:
-        raise BagError(f'{path} is empty (0 bytes); expected an MCAP or sqlite3 rosbag2 file')
+        raise BagError(f'{path} is empty (0 bytes); expected an MCAP or sqlite3 rosbag2 file '
+                       'or a ROS 1 bag')
     raise BagError(f'{path} is neither MCAP nor sqlite3: byte 0 holds {head[:8].hex(" ")}, '
-                   f'expected the MCAP magic {MAGIC.hex(" ")} or "SQLite format 3"')
+                   f'expected the MCAP magic {MAGIC.hex(" ")}, "SQLite format 3" or a ROS 1 '
+                   'bag\'s "#ROSBAG V2.0"')
 
 
 class _Sqlite3File:
@@ -123,6 +143,16 @@ class _Sqlite3File:
 
     def topic_of(self, channel_id):
         return self.channels[channel_id]['name']
+
+    def definition(self, topic):
+        msgtype = next(t['type'] for t in self._topics if t['name'] == topic)
+        try:   # rosbag2 Iron and later store definitions; older bags do not
+            row = self._db.execute(
+                'SELECT encoding, encoded_message_definition FROM message_definitions '
+                'WHERE topic_type = ? ORDER BY id LIMIT 1', (msgtype,)).fetchone()
+        except sqlite3.Error:
+            row = None
+        return tuple(row) if row and row[1] else None
 
     def rosbag2_metadata(self):
         return None
@@ -174,6 +204,13 @@ class _McapFile:
     def topic_of(self, channel_id):
         return self.reader.channels[channel_id].topic
 
+    def definition(self, topic):
+        for channel in self.reader.channels.values():
+            schema = self.reader.schemas.get(channel.schema_id)
+            if channel.topic == topic and schema is not None and schema.data:
+                return schema.encoding, schema.data.decode('utf-8', 'replace')
+        return None
+
     def rosbag2_metadata(self):
         return self.reader.rosbag2_metadata()
 
@@ -184,9 +221,23 @@ class _McapFile:
         self.reader.close()
 
 
+class _Rosbag1(Rosbag1File):
+    """Adapter of Rosbag1File to the storage-file interface of Bag."""
+
+    def topics(self):
+        return {name: TopicDetails(name, msgtype, count, ROS1, (), '')
+                for name, (msgtype, count) in super().topics().items()}
+
+    def rosbag2_metadata(self):
+        return None
+
+
+_STORAGES = {'mcap': _McapFile, 'sqlite3': _Sqlite3File, 'rosbag1': _Rosbag1}
+
+
 class Bag:
     """
-    An opened rosbag2 recording (use :func:`open_bag`).
+    An opened recording (use :func:`open_bag`).
 
     Attributes
     ----------
@@ -195,7 +246,7 @@ class Bag:
     files : list of pathlib.Path
         Storage files, in recording order.
     storage : str
-        ``'mcap'`` or ``'sqlite3'``.
+        ``'mcap'``, ``'sqlite3'`` or ``'rosbag1'``.
     topics : dict of str to TopicSummary
         ``name -> (msgtype, count)``.
     topic_details : dict of str to TopicDetails
@@ -207,20 +258,28 @@ class Bag:
         ``rosbag2`` record), or an empty dict.
     warnings : list of ReadWarning
         Problems met while opening and reading.
+    interfaces : InterfaceMap
+        DynamicJointState interfaces of the joint and motor entries.
+    motor_suffix : str
+        Suffix of the motor entries made from DynamicJointState.
 
     """
 
-    def __init__(self, path, storage, files, info, validate_crc=True):
+    def __init__(self, path, storage, files, info, validate_crc=True, interfaces=None,
+                 motor_suffix='_motor'):
         self.path = Path(path)
         self.storage = storage
         self.info = info or {}
         self.warnings = []
+        self.interfaces = interfaces or djs.InterfaceMap()
+        self.motor_suffix = motor_suffix
+        self._decoders = {}
         self._files = []
         errors = []
         for file in files:
             try:
                 self._files.append(_McapFile(file, validate_crc) if storage == 'mcap'
-                                   else _Sqlite3File(file))
+                                   else _STORAGES[storage](file))
             except BagError as err:
                 errors.append(err)
         if errors and not self._files:
@@ -234,12 +293,12 @@ class Bag:
 
     def read_joint_states(self, topics=None, errors='skip'):
         """
-        Read JointState topics as arrays, in receive-time order across all files.
+        Read joint state topics as arrays, in receive-time order across all files.
 
         Parameters
         ----------
         topics : str or iterable of str, optional
-            Topic names; default every ``sensor_msgs/msg/JointState`` topic.
+            Topic names; default every topic of a :data:`JOINT_STATE_TYPES` type.
         errors : {'skip', 'raise'}
             Malformed messages are left out with a warning (``'skip'``) or raise
             InvalidInput.
@@ -252,32 +311,20 @@ class Bag:
         Raises
         ------
         BagError
-            If a topic is not in the bag or is not a JointState topic.
+            If a topic is not in the bag or is not a joint state topic.
 
         """
         names = self._joint_state_topics(topics)
         parts = {name: [] for name in names}
         rejected = {name: [] for name in names}
-        for handle in self._files:
-            for batch in handle.iter_batches(names):
-                by_topic = self._split(handle, batch)
-                for name, sub in by_topic.items():
-                    decoded = decode_joint_states(sub.data, sub.offsets, sub.lengths,
-                                                  errors=errors)
-                    if decoded.rejected:
-                        keep = np.ones(len(sub), bool)
-                        keep[[i for i, _ in decoded.rejected]] = False
-                        rejected[name] += [(handle.path, reason) for _, reason
-                                           in decoded.rejected]
-                        decoded.log_time_ns = sub.log_time_ns[keep]
-                    else:
-                        decoded.log_time_ns = sub.log_time_ns
-                    parts[name].append(decoded)
-            self._take_warnings(handle)
+        for name, decoded, path in self._iter_joint_states(names, errors):
+            rejected[name] += [(path, reason) for _, reason in decoded.rejected]
+            parts[name].append(decoded)
         for name, problems in rejected.items():
             if problems:
-                self._warn(f'{len(problems)} malformed JointState message(s) on {name} '
-                           f'skipped; the first: {problems[0][1]}', problems[0][0])
+                kind = self.topics[name].msgtype.rsplit('/', 1)[-1]
+                self._warn(f'{len(problems)} malformed {kind} message(s) on {name} skipped; '
+                           f'the first: {problems[0][1]}', problems[0][0])
         out = {}
         for name in names:
             batch = concat_batches(parts[name]) if parts[name] else empty_batch()
@@ -290,9 +337,41 @@ class Bag:
             out[name] = batch
         return out
 
+    def iter_joint_states(self, topics, errors='skip'):
+        """
+        Decode joint state topics piece by piece (per storage chunk), in file order.
+
+        Parameters
+        ----------
+        topics : str or iterable of str
+            Topics of a :data:`JOINT_STATE_TYPES` type.
+        errors : {'skip', 'raise'}
+            Leave malformed messages out (listed in ``rejected`` of the batch) or raise
+            InvalidInput.
+
+        Yields
+        ------
+        tuple
+            ``(topic, JointStateBatch)`` with ``log_time_ns`` of the decoded messages;
+            DynamicJointState as ``<joint>`` and ``<joint><motor_suffix>`` entries.
+
+        Raises
+        ------
+        BagError
+            If a topic is not a joint state topic, or its message definition is unusable.
+
+        """
+        for name, decoded, _ in self._iter_joint_states(self._joint_state_topics(topics),
+                                                        errors):
+            yield name, decoded
+
     def iter_raw(self, topics=None):
         """
         Iterate over raw messages, per storage file and chunk.
+
+        Payloads are CDR: the messages of a ROS 1 bag are converted one by one by their
+        connection's definition (``std_msgs/Header`` loses its ``seq``, as in ROS 2);
+        :meth:`iter_joint_states` reads joint states of any bag column-wise instead.
 
         Parameters
         ----------
@@ -308,7 +387,10 @@ class Bag:
         names = self._known_topics(topics)
         for handle in self._files:
             for batch in handle.iter_batches(names):
-                yield from self._split(handle, batch).items()
+                for name, sub in self._split(handle, batch).items():
+                    if self.topic_details[name].serialization_format == ROS1:
+                        sub = self._ros1_to_cdr(handle, name, sub)
+                    yield name, sub
             self._take_warnings(handle)
 
     def close(self):
@@ -410,13 +492,100 @@ class Bag:
 
     def _joint_state_topics(self, topics):
         if topics is None:
-            return [n for n, t in self.topics.items() if t.msgtype == JOINT_STATE]
+            return [n for n, t in self.topics.items() if t.msgtype in JOINT_STATE_TYPES]
         names = self._known_topics(topics)
         for name in names:
-            if self.topics[name].msgtype != JOINT_STATE:
+            if self.topics[name].msgtype not in JOINT_STATE_TYPES:
                 raise BagError(f'topic {name} in {self.path} is {self.topics[name].msgtype}, '
-                               f'expected {JOINT_STATE}')
+                               f'expected {" or ".join(JOINT_STATE_TYPES)}')
         return names
+
+    def _iter_joint_states(self, names, errors):
+        for handle in self._files:
+            for batch in handle.iter_batches(names):
+                for name, sub in self._split(handle, batch).items():
+                    decode = self._decoder(handle, name)
+                    decoded = decode(sub.data, sub.offsets, sub.lengths, errors)
+                    logs = sub.log_time_ns
+                    if decoded.rejected:
+                        keep = np.ones(len(sub), bool)
+                        keep[[i for i, _ in decoded.rejected]] = False
+                        logs = logs[keep]
+                    decoded.log_time_ns = logs
+                    yield name, decoded, handle.path
+            self._take_warnings(handle)
+
+    def _decoder(self, handle, topic):
+        """Return ``decode(data, offsets, lengths, errors)`` for a joint state topic."""
+        key = (id(handle), topic)
+        if key in self._decoders:
+            return self._decoders[key]
+        msgtype = self.topics[topic].msgtype
+        ros1 = self.topic_details[topic].serialization_format == ROS1
+        if msgtype == JOINT_STATE and not ros1:
+            def decode(data, offsets, lengths, errors):
+                return decode_joint_states(data, offsets, lengths, errors=errors)
+        else:
+            decoder = self._definition_decoder(handle, topic, msgtype, ros1)
+            if msgtype == JOINT_STATE:
+                def decode(data, offsets, lengths, errors):
+                    return decode_ros1_joint_states(decoder, data, offsets, lengths, errors)
+            else:
+                interfaces, suffix = self.interfaces, self.motor_suffix
+
+                def decode(data, offsets, lengths, errors):
+                    return djs.decode_dynamic_joint_states(decoder, data, offsets, lengths,
+                                                           interfaces, suffix, errors)
+        self._decoders[key] = decode
+        return decode
+
+    def _definition_decoder(self, handle, topic, msgtype, ros1):
+        stored = handle.definition(topic)
+        if stored is None and msgtype == djs.MSGTYPE:
+            self._warn(f'{topic}: the bag stores no message definition of {msgtype} (rosbag2 '
+                       'before Iron does not); reading it with the definition of control_msgs '
+                       '4 to 5', handle.path)
+            stored = ('ros2msg', djs.DEFINITION)
+        if stored is None:
+            raise BagError(f'{handle.path}: no message definition of {msgtype} stored for '
+                           f'{topic}; cannot read it')
+        try:
+            types = load_definitions(msgtype, stored[1], stored[0])
+            return MessageDecoder(msgtype, types, 'ros1' if ros1 else 'cdr')
+        except InvalidInput as err:
+            raise BagError(f'{handle.path}: {topic}: {err}') from None
+
+    def _ros1_to_cdr(self, handle, topic, sub):
+        """Convert the ROS 1 payloads of one topic to CDR, by the connection's definition."""
+        key = (id(handle), topic, 'cdr')
+        if key not in self._decoders:
+            from rosbags.typesys import get_typestore, Stores
+            store = get_typestore(Stores.EMPTY)
+            msgtype = self.topics[topic].msgtype
+            try:
+                types = load_definitions(msgtype, handle.definition(topic)[1], 'ros1msg')
+                if 'std_msgs/msg/Header' in types:   # rosbags drops seq itself
+                    types['std_msgs/msg/Header'] = get_typestore(
+                        Stores.ROS2_JAZZY).fielddefs['std_msgs/msg/Header']
+                store.register(types)
+            except (InvalidInput, ValueError) as err:
+                raise BagError(f'{handle.path}: {topic}: {err}') from None
+            self._decoders[key] = (store, msgtype)
+        store, msgtype = self._decoders[key]
+        payloads, keep = [], np.ones(len(sub), bool)
+        for i in range(len(sub)):
+            try:
+                payloads.append(bytes(store.ros1_to_cdr(sub.payload(i), msgtype)))
+            except Exception as err:  # noqa: B902 - rosbags raises several kinds
+                keep[i] = False
+                self._warn(f'{topic}: a {msgtype} message cannot be converted to CDR '
+                           f'({type(err).__name__}: {err}); skipping it', handle.path)
+        lengths = np.array([len(p) for p in payloads], np.int64)
+        offsets = np.zeros(len(payloads), np.int64)
+        np.cumsum(lengths[:-1], out=offsets[1:])
+        return RawBatch(sub.channel_id[keep], sub.sequence[keep], sub.log_time_ns[keep],
+                        sub.publish_time_ns[keep],
+                        np.frombuffer(b''.join(payloads), np.uint8), offsets, lengths)
 
     def _split(self, handle, batch):
         if len(batch) == 0:
@@ -435,9 +604,11 @@ class Bag:
 
 
 def _merge_raw(first, second):
-    data = np.concatenate([first.data, second.data])
-    order = np.argsort(np.concatenate([first.offsets, second.offsets + first.data.shape[0]]),
-                       kind='stable')
+    # Parts of one chunk share its buffer: their offsets give the file order.
+    shared = first.data is second.data
+    shift = 0 if shared else first.data.shape[0]
+    data = first.data if shared else np.concatenate([first.data, second.data])
+    order = np.argsort(np.concatenate([first.offsets, second.offsets + shift]), kind='stable')
 
     def cat(a, b):
         return np.concatenate([a, b])[order]
@@ -446,7 +617,7 @@ def _merge_raw(first, second):
                     cat(first.sequence, second.sequence),
                     cat(first.log_time_ns, second.log_time_ns),
                     cat(first.publish_time_ns, second.publish_time_ns), data,
-                    cat(first.offsets, second.offsets + first.data.shape[0]),
+                    cat(first.offsets, second.offsets + shift),
                     cat(first.lengths, second.lengths))
 
 
@@ -499,16 +670,22 @@ def _files_of_directory(directory, info, warnings):
     return files
 
 
-def open_bag(path, validate_crc=True):
+def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
     """
-    Open a rosbag2 recording.
+    Open a rosbag2 recording or a ROS 1 bag.
 
     Parameters
     ----------
     path : str or os.PathLike
-        A bag directory, a ``metadata.yaml``, a ``.mcap`` file or a ``.db3`` file.
+        A bag directory, a ``metadata.yaml``, a ``.mcap`` file, a ``.db3`` file or a
+        ROS 1 ``.bag`` file.
     validate_crc : bool
         Check MCAP chunk CRCs where stored.
+    interfaces : InterfaceMap, optional
+        DynamicJointState interfaces of the joint and motor entries (default names
+        ``position``, ``velocity``, ``effort``, ``motor_position``, ...).
+    motor_suffix : str
+        Suffix of the motor entries made from DynamicJointState.
 
     Returns
     -------
@@ -518,15 +695,15 @@ def open_bag(path, validate_crc=True):
     Raises
     ------
     BagError
-        If the path does not exist, holds no storage file, is neither MCAP nor sqlite3,
-        uses rosbag2 file or message compression, or its metadata.yaml is unreadable or
-        lists only missing files.
+        If the path does not exist, holds no storage file, is neither MCAP, sqlite3 nor
+        an indexed ROS 1 bag, uses rosbag2 file or message compression, or its
+        metadata.yaml is unreadable or lists only missing files.
 
     """
     path = Path(path)
     if not path.exists():
-        raise BagError(f'{path} does not exist; expected a rosbag2 bag directory, a .mcap or '
-                       'a .db3 file')
+        raise BagError(f'{path} does not exist; expected a rosbag2 bag directory, a .mcap, '
+                       'a .db3 or a ROS 1 .bag file')
     warnings = []
     info = {}
     if path.is_file() and path.name == 'metadata.yaml':
@@ -540,8 +717,10 @@ def open_bag(path, validate_crc=True):
         else:
             files = sorted([*path.glob('*.mcap'), *path.glob('*.db3')], key=_natural_key)
             if not files:
+                ros1 = sorted(p.name for p in path.glob('*.bag'))
+                hint = f'; ROS 1 bags are given as files: {ros1[:3]}' if ros1 else ''
                 raise BagError(f'{path} has no metadata.yaml and no .mcap or .db3 file; '
-                               'expected a rosbag2 bag directory')
+                               f'expected a rosbag2 bag directory{hint}')
             warnings.append(ReadWarning(str(path), None, f'no metadata.yaml in {path}; reading '
                                         f'the {len(files)} storage file(s) found'))
     else:
@@ -559,14 +738,15 @@ def open_bag(path, validate_crc=True):
         warnings.append(ReadWarning(str(path), None, f'{err}; skipping that file'))
     files = readable
     if len(kinds) > 1:
-        raise BagError(f'{path} mixes MCAP and sqlite3 files; expected one storage format')
+        raise BagError(f'{path} mixes {" and ".join(sorted(kinds))} files; expected one '
+                       'storage format')
     storage = kinds.pop()
     declared = info.get('storage_identifier')
     if declared and declared != storage:
         warnings.append(ReadWarning(str(path), None, f'metadata.yaml says storage '
                                     f'{declared!r} but the files are {storage}; reading them '
                                     f'as {storage}'))
-    bag = Bag(path, storage, files, info, validate_crc)
+    bag = Bag(path, storage, files, info, validate_crc, interfaces, motor_suffix)
     bag.warnings[:0] = warnings
     return bag
 

@@ -46,14 +46,14 @@ import time
 
 from msg_adapters.diagnostic_cdr import encode_diagnostic_array, MSGTYPE as DIAGNOSTICS
 from msg_adapters.diagnostic_cdr import Status
-from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states
-from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
+from msg_adapters.dynamic_joint_state import InterfaceMap
+from msg_adapters.jointstate_cdr import concat_batches, MSGTYPE as JOINT_STATE
 from msg_adapters.layouts import GROUND_TRUTH, record_values, REMAINING_LIFE, TE_BATCH
 from msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
 from msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
 import numpy as np
-from reducer_twin.analysis.bag import BagDirWriter, open_bag
+from reducer_twin.analysis.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
 from reducer_twin.analysis.mcap_io import DEFAULT_QOS, ReadWarning
 from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
@@ -103,6 +103,9 @@ class AnalysisSettings:
         The motor entry's effort: ``'motor'`` (motor torque, times the ratio),
         ``'joint'`` (already output torque) or ``'auto'`` (motor torque when the
         motor angles are raw).
+    interfaces : InterfaceMap
+        DynamicJointState interfaces of the joint (``position``, ...) and the motor
+        (``motor_position``, ...) entries.
     aging_factor : float or None
         Seconds of wear exposure per stream second; None: the bag's own
         (``custom_data`` :data:`~reducer_twin.analysis.simulate.AGING_KEY`), else 1.
@@ -127,6 +130,7 @@ class AnalysisSettings:
     motor_angles: str = 'auto'
     effort_source: str = 'auto'
     motor_effort_units: str = 'auto'
+    interfaces: InterfaceMap = field(default_factory=InterfaceMap)
     aging_factor: float = None
     window_s: float = 2.0
     params: ReducerParams = field(default_factory=ReducerParams)
@@ -179,13 +183,18 @@ class AnalysisSettings:
                                    f'{sorted(LifeConfig.__dataclass_fields__)}') from None
         except ValueError as err:
             raise InvalidParameter(f'{path}: {err}') from None
+        try:
+            interfaces = InterfaceMap.from_mapping(twin['interfaces'], 'twin.interfaces')
+        except InvalidParameter as err:
+            raise InvalidParameter(f'{path}: {err}') from None
         return cls(joints=tuple(twin['joints']) if 'twin.joints' in given else None,
                    link_topic=str(twin['link_topic']), motor_topic=str(twin['motor_topic']),
                    motor_suffix=str(twin['motor_suffix']),
                    motor_angles=twin['motor_angles'] if 'twin.motor_angles' in given else 'auto',
                    effort_source=twin['effort_source'],
                    motor_effort_units=twin['motor_effort_units'],
-                   aging_factor=aging, window_s=window_s, params=params, life=life)
+                   interfaces=interfaces, aging_factor=aging, window_s=window_s,
+                   params=params, life=life)
 
 
 MOTOR_ANGLES = ('auto', 'raw', 'output')
@@ -237,10 +246,9 @@ def _topic_list(bag):
 
 def _first_names(bag, topic):
     """Joint names of the first readable messages of a topic."""
-    batches = bag.iter_raw([topic])
+    batches = bag.iter_joint_states([topic])
     try:
-        for _, raw in batches:
-            decoded = decode_joint_states(raw.data, raw.offsets, raw.lengths, errors='skip')
+        for _, decoded in batches:
             if len(decoded):
                 return decoded.names
     finally:
@@ -254,9 +262,12 @@ def plan_joints(bag, settings):
 
     Combined form: one topic whose messages name ``<joint>`` and
     ``<joint><motor_suffix>``. Split form: ``motor_topic`` (configured, or a
-    JointState topic whose name contains ``motor``) names the same joints as the link
-    topic. The configured ``link_topic`` is used when the bag has it, else the
-    JointState topic that holds pairs.
+    JointState topic whose name contains ``motor``, or a DynamicJointState topic)
+    names the same joints as the link topic (or ``<joint><motor_suffix>``). The
+    configured ``link_topic`` is used when the bag has it, else the topic that holds
+    pairs. A DynamicJointState topic counts as a JointState topic with ``<joint>`` and
+    ``<joint><motor_suffix>`` entries (:mod:`msg_adapters.dynamic_joint_state`): alone,
+    or beside ``/joint_states`` that has no motor entries, it gives the combined form.
 
     Parameters
     ----------
@@ -277,9 +288,10 @@ def plan_joints(bag, settings):
         lacks a configured joint or topic.
 
     """
-    states = [n for n, t in bag.topics.items() if t.msgtype == JOINT_STATE]
+    states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
     if not states:
-        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)}')
+        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
+                       f'(and no {JOINT_STATE_TYPES[1]})')
     names = {}
 
     def names_of(topic):
@@ -294,8 +306,8 @@ def plan_joints(bag, settings):
                 raise BagError(f'{bag.path}: configured JointState topic {topic} is not in the '
                                f'bag; its JointState topics: {states}')
         link, motor = settings.link_topic, settings.motor_topic
-        common = [n for n in names_of(link) if n in names_of(motor)]
-        return _pick(bag, settings, link, motor, common, common)
+        return _pick(bag, settings, link, motor,
+                     *_motor_entries(names_of(link), names_of(motor), suffix))
     candidates = [settings.link_topic] if settings.link_topic in states else []
     candidates += [t for t in states if t not in candidates]
     for link in candidates:
@@ -303,19 +315,37 @@ def plan_joints(bag, settings):
         pairs = [n for n in have if n + suffix in have]
         if pairs:
             return _pick(bag, settings, link, None, pairs, [n + suffix for n in pairs])
+    dynamic = [t for t in states if bag.topics[t].msgtype != JOINT_STATE]
     for link in candidates:
-        for motor in [t for t in states if t != link and 'motor' in t.lower()]:
-            common = [n for n in names_of(link) if n in names_of(motor)]
+        for motor in [t for t in states if t != link and ('motor' in t.lower() or t in dynamic)]:
+            common, motor_names = _motor_entries(names_of(link), names_of(motor), suffix)
             if common and 'motor' not in link.lower():
-                return _pick(bag, settings, link, motor, common, common)
+                return _pick(bag, settings, link, motor, common, motor_names)
     if not any(names_of(t) for t in states):
         problems = ''.join(f'; {w}' for w in bag.warnings)
         raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
                        f'{problems}')
     found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)
+    hint = (f'; a DynamicJointState joint gives <joint>{suffix} from its interface '
+            f'{settings.interfaces.motor_position!r} (twin.interfaces.motor_position)'
+            if dynamic else '')
     raise BagError(f'{bag.path}: no motor/link encoder pairs: expected <joint> and '
                    f'<joint>{suffix} in one JointState message, or a motor JointState topic '
-                   f'(twin.motor_topic in --config); JointState topics and names: {found}')
+                   f'(twin.motor_topic in --config){hint}; JointState topics and names: '
+                   f'{found}')
+
+
+def _motor_entries(link_names, motor_names, suffix):
+    """Joints of a link topic found on a motor topic, as ``<joint>`` or ``<joint><suffix>``."""
+    have = set(motor_names)
+    joints, entries = [], []
+    for name in link_names:
+        for entry in (name + suffix, name):
+            if entry in have:
+                joints.append(name)
+                entries.append(entry)
+                break
+    return joints, entries
 
 
 def _pick(bag, settings, link, motor, available, motor_names):
@@ -351,8 +381,7 @@ class _Chunks:
     def __iter__(self):
         parts = {t: [] for t in self.topics}
         pending = 0
-        for topic, raw in self.bag.iter_raw(self.topics):
-            decoded = decode_joint_states(raw.data, raw.offsets, raw.lengths, errors='skip')
+        for topic, decoded in self.bag.iter_joint_states(self.topics):
             if decoded.rejected:
                 self.malformed[topic] += len(decoded.rejected)
                 self.first_problem.setdefault(topic, decoded.rejected[0][1])
@@ -1007,7 +1036,8 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
     start = time.perf_counter()
     backs = chunks = None
     try:
-        with open_bag(path) as bag:
+        with open_bag(path, interfaces=settings.interfaces,
+                      motor_suffix=settings.motor_suffix) as bag:
             plan = plan_joints(bag, settings)
             aging = _bag_aging_factor(bag, settings)
             if isinstance(stage_worker, WorkerBacks):

@@ -1,11 +1,12 @@
 """
-``reducer-twin analyze``: the twin's pipeline offline on rosbag2 recordings.
+``reducer-twin analyze``: the twin's pipeline offline on rosbag2 recordings and ROS 1 bags.
 
 Reads bag directories and bare ``.mcap`` files (split bags, zstd/lz4 chunks, QoS as
-integers or strings) and sqlite3 ``.db3`` bags of older distributions; finds the JointState
-topics and motor/link pairs by the ingestion node's rules (or ``--config``, the bringup
-YAML); runs the core stages the live nodes run; writes the derived topics as a rosbag2
-MCAP bag (the rosbag-to-MCAP path), so a live recording and an offline analysis look
+integers or strings), sqlite3 ``.db3`` bags of older distributions and ROS 1 ``.bag``
+files; finds the JointState (or ros2_control DynamicJointState) topics and motor/link
+pairs by the ingestion node's rules (or ``--config``, the bringup YAML); runs the core
+stages the live nodes run; writes the derived topics as a rosbag2 MCAP bag (the
+rosbag-to-MCAP path, ROS 1 included), so a live recording and an offline analysis look
 alike in a viewer.
 
 Outputs: with one BAG, OUT is the derived bag and ``--report DIR`` the report; with
@@ -43,14 +44,15 @@ def add_parser(sub):
     p = sub.add_parser('analyze', help='the twin pipeline offline on rosbag2 bags',
                        description=__doc__)
     p.add_argument('bags', nargs='+', metavar='BAG',
-                   help='rosbag2 bag directory, .mcap or .db3 file')
+                   help='rosbag2 bag directory, .mcap or .db3 file, or ROS 1 .bag file')
     p.add_argument('--out', required=True, metavar='OUT',
                    help='derived bag directory (one BAG) or directory of derived bags')
     p.add_argument('--report', metavar='DIR', default=None,
                    help='write PNG plots and an HTML page per bag into DIR')
     p.add_argument('--config', metavar='YAML', default=None,
                    help='bringup configuration (config/twin.yaml): joints, topics, motor '
-                        'suffix, motor angles, aging factor, window, life thresholds, reducer')
+                        'suffix, motor angles, DynamicJointState interfaces, aging factor, '
+                        'window, life thresholds, reducer')
     p.add_argument('--json', action='store_true', help='print the results as one JSON object')
     p.add_argument('--jobs', type=int, default=1,
                    help=f'bags analysed in parallel processes, 1 .. {MAX_JOBS} (default 1)')
@@ -74,7 +76,7 @@ def _names(bags):
         path = Path(bag)
         if path.name == 'metadata.yaml':
             path = path.parent
-        base = (path.stem if path.suffix in ('.mcap', '.db3') else path.name) or 'bag'
+        base = (path.stem if path.suffix in ('.mcap', '.db3', '.bag') else path.name) or 'bag'
         seen[base] = seen.get(base, 0) + 1
         out.append(base if seen[base] == 1 else f'{base}_{seen[base]}')
     return out
@@ -126,7 +128,7 @@ def run(args):
     missing = [b for b in args.bags if not Path(b).exists()]
     if missing:
         raise InvalidParameter(f'BAG {missing[0]} does not exist; expected a rosbag2 bag '
-                               'directory, a .mcap or a .db3 file')
+                               'directory, a .mcap or a .db3 file, or a ROS 1 .bag file')
     check_out_dir(args.out, args.overwrite)
     if args.report:
         check_out_dir(args.report, True, '--report')

@@ -6,7 +6,13 @@ Subscribes to what robot controllers publish, in either form:
 * one ``sensor_msgs/JointState`` (ros2_control's ``/joint_states``) carrying
   ``<joint>`` (link side) and ``<joint><motor_suffix>`` (motor side), or
 * link and motor sides on two JointState topics with the same joint names
-  (``motor_topic`` set).
+  (``motor_topic`` set). ros2_control exports a motor encoder as a joint state
+  interface (``motor_position``), which only ``/dynamic_joint_states`` carries;
+  a second ``joint_state_broadcaster`` with ``use_local_topics: true`` and
+  ``map_interface_to_joint_state: {position: motor_position}`` publishes it as
+  such a motor topic (README, "ROS 2 nodes"). The node does not subscribe to
+  ``control_msgs`` types, so the package does not depend on them; recorded
+  DynamicJointState is read by ``reducer-twin analyze``.
 
 Motor angles are raw (input side) or already divided by the gear ratio
 (``motor_angles: output``). The torque is read from the link entry, the motor

@@ -9,7 +9,9 @@ EventsExecutor (single-threaded executor as fallback). Nodes are named
 ``<kind>_<joint>`` so several joints coexist. With ``twin.intra_process``
 (default) the ingest hands its clean pairs to the TE monitors directly, as
 rclcpp does for composed nodes; the pairs and TE topics are then published
-only while something subscribes to them.
+only while something subscribes to them. Motor encoders that ros2_control
+exports only on ``/dynamic_joint_states`` are fed through a second
+``joint_state_broadcaster`` as ``twin.motor_topic`` (see ``encoder_ingest``).
 """
 
 from rclpy.parameter import Parameter

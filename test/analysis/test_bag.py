@@ -391,3 +391,26 @@ def test_malformed_jointstate_messages_in_a_bag_are_skipped_with_one_warning(tmp
     assert '10 malformed JointState message(s) on /joint_states skipped' in str(warning)
     np.testing.assert_array_equal(got.position, np.delete(batch.position, np.arange(3, 100, 10),
                                                           axis=0))
+
+
+def test_two_publishers_of_one_topic_in_one_chunk_keep_their_file_order(tmp_path):
+    from mcap.writer import Writer as McapWriter
+    from msg_adapters.ros_schemas import message_definition
+    stamps = T0 + np.arange(40, dtype=np.int64) * 1_000_000
+    buf, bounds = encode_joint_states(stamps, ['j'], np.arange(40.0)[:, None])
+    with open(tmp_path / 'two.mcap', 'wb') as stream:
+        writer = McapWriter(stream)
+        writer.start('ros2', 'test')
+        schema = writer.register_schema(JOINT_STATE, 'ros2msg',
+                                        message_definition(JOINT_STATE).encode())
+        channels = [writer.register_channel('/joint_states', 'cdr', schema, {'n': str(k)})
+                    for k in range(2)]
+        for i in range(40):   # the publishers take turns, as two drivers on one topic do
+            writer.add_message(channels[i % 3 == 0], int(stamps[i]), bytes(
+                buf[bounds[i]:bounds[i + 1]]), int(stamps[i]))
+        writer.finish()
+    with open_bag(tmp_path / 'two.mcap') as bag:
+        order = [int(t) for _, raw in bag.iter_raw(['/joint_states']) for t in raw.log_time_ns]
+        (_, batch), = bag.iter_joint_states(['/joint_states'])
+    assert order == stamps.tolist()
+    np.testing.assert_array_equal(batch.position[:, 0], np.arange(40.0))
