@@ -141,9 +141,12 @@ def fleet_row(reducer, params):
             row[key] = None
     elif updates == 0:
         row['verdict'] = 'NOT OBSERVED'
+        # The analysis says why (no effort, too few samples per reversal, frozen stamps...).
+        why = summary.get('reason') or ('the joint never reversed under load, or no window '
+                                         'at all')
         row['reason'] = (f'{r.windows} window(s) over {row["hours_observed"]:.0f} h in '
-                         f'{r.bags} bag(s), none with a lost motion the estimator could use '
-                         '(the joint never reversed under load, or no window at all)')
+                         f'{r.bags} bag(s), none with a lost motion the estimator could use: '
+                         f'{why}')
         for key in ('wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h'):
             row[key] = None
     else:
