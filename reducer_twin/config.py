@@ -215,14 +215,16 @@ def _check_values(path, config):
     except InvalidParameter as err:
         raise InvalidParameter(f'{path}: {err}') from None
     if twin['motor_topic'] and twin['motor_topic'] == twin['link_topic']:
-        raise InvalidParameter(f"{path}: twin.motor_topic must differ from twin.link_topic "
-                               f"({twin['link_topic']!r}); leave it '' when the motor entries "
-                               'are in the link topic')
+        link = twin['link_topic']
+        raise InvalidParameter(f'{path}: twin.motor_topic must differ from twin.link_topic '
+                               f"({link!r}); leave it '' when the motor entries are in the "
+                               'link topic')
     if not twin['motor_topic'] and not twin['motor_suffix']:
-        raise InvalidParameter(f"{path}: twin.motor_suffix must not be empty when the motor "
-                               f"entries are in twin.link_topic ({twin['link_topic']!r}): "
-                               "<joint> and <joint><motor_suffix> would be the same entry; "
-                               "e.g. '_motor'")
+        link = twin['link_topic']
+        raise InvalidParameter(f'{path}: twin.motor_suffix must not be empty when the motor '
+                               f'entries are in twin.link_topic ({link!r}): <joint> and '
+                               '<joint><motor_suffix> would be the same entry; e.g. '
+                               "'_motor'")
 
 
 def load_config(path):

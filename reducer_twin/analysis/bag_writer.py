@@ -115,7 +115,7 @@ class BagDirWriter:
         self.name = name or self.output.target.name
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self.mcap_path = self.out_dir / f'{self.name}_0.mcap'
-        tmp = self.output.open()
+        tmp = self.output.start()
         try:
             path = tmp / self.mcap_path.name
             if framing == 'library':

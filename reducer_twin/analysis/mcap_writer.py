@@ -8,7 +8,9 @@ rosbag2's is added here, as ``ros2 bag record -s mcap`` writes it: profile ``ros
 ``ros2msg`` schemas, ``cdr`` channels whose metadata hold ``offered_qos_profiles`` (YAML,
 metadata version 9) and ``topic_type_hash``, and the ``rosbag2`` Metadata record (the
 serialised bag metadata with ``custom_data``), written through ``add_metadata`` when the
-file is closed. The Header names the library (``mcap-python/<version>``).
+file is closed. The Header names the library (``mcap-python/<version>``). Chunk CRCs are
+written (readers detect corruption with them); the data-section CRC is not, as neither
+rosbag2 nor the library writes it by default.
 
 The interface is the one of :class:`~reducer_twin.analysis.mcap_io.McapBagWriter`, whose
 own framing stays for ``simulate`` (about a million messages per bag, where building
@@ -68,7 +70,7 @@ class LibraryMcapWriter:
         self._file = open(self.path, 'xb')
         self._writer = Writer(self._file, chunk_size=int(chunk_size),
                               compression=_COMPRESSION[compression], enable_crcs=True,
-                              enable_data_crcs=True)
+                              enable_data_crcs=False)
         self._writer.start(profile=PROFILE)
         self._schemas = {}  # msgtype -> schema id
         self._topics = {}  # name -> _Topic
@@ -334,4 +336,3 @@ class LibraryMcapWriter:
         topic.count += logs.shape[0]
         topic.start = lo if topic.start is None else min(topic.start, lo)
         topic.end = hi if topic.end is None else max(topic.end, hi)
-

@@ -341,7 +341,7 @@ class OutputDir:
     """
     A directory output written whole or not at all, by one run at a time.
 
-    Use as a context manager, or call :meth:`open`, then :meth:`commit` or
+    Use as a context manager, or call :meth:`start`, then :meth:`commit` or
     :meth:`abort`. Files are written into :attr:`tmp`; :meth:`commit` renames it to
     the target (replacing a previous output of reducer-twin atomically where the system
     can exchange two directories).
@@ -388,7 +388,7 @@ class OutputDir:
 
     # ----------------------------------------------------------------- public API
 
-    def open(self):
+    def start(self):
         """
         Lock the target, remove stale temporaries, check it and create the temporary.
 
@@ -486,7 +486,7 @@ class OutputDir:
 
     def __enter__(self):
         """Open the output; return the temporary directory."""
-        return self.open()
+        return self.start()
 
     def __exit__(self, exc_type, exc, tb):
         """Commit after success; after an error, remove the temporary and translate OSError."""
