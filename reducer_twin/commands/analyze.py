@@ -15,6 +15,12 @@ total}`` (a bag that failed: ``{"error": message}``). Exit 1 when a bag has no
 JointState (the ERROR line names the topics found), cannot be read, or was truncated or
 corrupt: what was readable is still analysed and written, and a WARNING says at which
 byte reading stopped.
+
+Outputs never destroy data: OUT and DIR must be new or empty; ``--overwrite`` replaces a
+derived bag reducer-twin wrote (nothing else), DIR may hold a previous report, which is
+replaced; an output that is, contains or lies inside a BAG or the ``--config`` file is
+refused. Each output is written into a temporary beside it and renamed into place when
+complete, by one run at a time; a full disk is one ERROR line with the bytes needed.
 """
 
 import math
@@ -37,7 +43,8 @@ def add_parser(sub):
     p.add_argument('--out', required=True, metavar='OUT',
                    help='derived bag directory (one BAG) or directory of derived bags')
     p.add_argument('--report', metavar='DIR', default=None,
-                   help='write PNG plots and an HTML page per bag into DIR')
+                   help='write PNG plots and an HTML page per bag into DIR (new, empty or '
+                        'holding a previous report)')
     p.add_argument('--config', metavar='YAML', default=None,
                    help='bringup configuration (config/twin.yaml): joints, topics, motor '
                         'suffix, motor angles, aging factor, window, life thresholds, reducer')
@@ -47,7 +54,8 @@ def add_parser(sub):
     p.add_argument('--compression', choices=('none', 'zstd', 'lz4'), default='none',
                    help="MCAP chunk compression of the derived bag (default 'none')")
     p.add_argument('--overwrite', action='store_true',
-                   help='replace derived bags already in --out')
+                   help='replace derived bags that reducer-twin wrote in --out (nothing else '
+                        'is ever replaced; inputs never)')
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
                    help='run the estimator and life stages, and the bag reading, in '
                         'processes of their own beside the analysing one (auto: one bag at '

@@ -9,6 +9,10 @@ the motor side on ``/motor_states``), ``/reducer_twin/<joint>/ground_truth`` the
 truth every stream second. ``--hours`` of wear exposure are compressed into
 ``hours·3600/aging_factor`` seconds of stream; the aging factor is stored in the bag's
 ``custom_data``, so ``reducer-twin analyze`` applies it without being told.
+
+The size of the bag is estimated before anything is written; above ``--max-size`` (default
+5 GB) or the free space of the device the request is refused with the estimate. The bag is
+written into a temporary beside BAG and renamed into place when complete.
 """
 
 import argparse

@@ -220,6 +220,21 @@ def test_overwrite_replaces_a_previous_derived_bag_and_leaves_no_temporary(
     assert temporaries(tmp_path) == []
 
 
+def test_an_empty_out_directory_or_mount_point_receives_the_bag_in_place(
+        bag, tmp_path, capsys):
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    assert run_cli(['analyze', bag, '--out', empty], capsys)[0] == 0
+    bag_is_consistent(empty)
+    with small_tmpfs(tmp_path / 'mnt', 20_000_000) as mount:
+        assert run_cli(['analyze', bag, '--out', mount], capsys)[0] == 0
+        assert sorted(p.name for p in mount.iterdir()) == ['metadata.yaml', 'mnt_0.mcap']
+        bag_is_consistent(mount)
+        assert run_cli(['analyze', bag, '--out', mount, '--overwrite'], capsys)[0] == 0
+        assert sorted(p.name for p in mount.iterdir()) == ['metadata.yaml', 'mnt_0.mcap']
+    assert temporaries(tmp_path) == []
+
+
 def test_overwrite_never_replaces_a_bag_reducer_twin_did_not_write(bag, tmp_path, capsys):
     theirs = tmp_path / 'talker'
     shutil.copytree(REAL_BAGS / 'talker', theirs)
