@@ -189,7 +189,7 @@ class LibraryMcapWriter:
         if bounds[0] < 0 or bounds[-1] > raw.shape[0] or (np.diff(bounds) < 0).any():
             raise InvalidInput(f'offsets must rise from >= 0 to <= {raw.shape[0]} (the buffer '
                                f'size), got {bounds[0]} .. {bounds[-1]}')
-        data = raw.tobytes()
+        data = memoryview(np.ascontiguousarray(raw))   # slices are views: one copy less
         add = self._writer.add_message
         for log, pub, start, end in zip(logs.tolist(), pubs.tolist(), bounds[:-1].tolist(),
                                         bounds[1:].tolist()):
