@@ -367,7 +367,7 @@ class OutputDir:
 
     def __init__(self, target, recognise, what, flag='--out', overwrite=False, needed=None,
                  replace_note=''):
-        self.target = Path(os.path.abspath(target))
+        self.target = Path(os.path.realpath(os.path.abspath(target)))   # a link: its place
         self.recognise = recognise
         self.what = what
         self.flag = flag
