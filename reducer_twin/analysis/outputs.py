@@ -453,6 +453,9 @@ class OutputDir:
         except OSError as err:
             self.abort()
             raise self.error(err) from err
+        except BaseException:
+            self.abort()
+            raise
         finally:
             self._unlock()
 
@@ -557,7 +560,11 @@ class OutputDir:
             return
         old = self.home / f'.{self.target.name}.{TEMP_TAG}-old-{os.getpid()}'
         os.rename(self.target, old)
-        os.rename(self.tmp, self.target)
+        try:
+            os.rename(self.tmp, self.target)
+        except OSError:
+            os.rename(old, self.target)   # the previous output stays where it was
+            raise
         _remove(old)
 
     def _commit_inside(self):

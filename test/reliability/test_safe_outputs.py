@@ -24,7 +24,7 @@ import time
 from full_disk import fill, FillingFile, small_tmpfs
 from mcap.reader import make_reader
 import pytest
-from reducer_twin.analysis import mcap_io, mcap_writer
+from reducer_twin.analysis import mcap_io, mcap_writer, outputs
 from reducer_twin.analysis.bag import open_bag
 from reducer_twin.analysis.bag_writer import foreign_bag_entries
 from reducer_twin.analysis.outputs import DiskFull, OutputDir, TEMP_TAG
@@ -32,6 +32,7 @@ from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.report import write_report
 from reducer_twin.analysis.simulate import estimated_bytes, simulate_bag, SimulationSpec
 from reducer_twin.cli import main
+from reducer_twin.core.errors import InvalidParameter
 import yaml
 
 pytestmark = pytest.mark.timeout(300, method='thread')
@@ -283,6 +284,34 @@ def test_two_overwrite_runs_racing_into_one_out_never_leave_files_of_both(
                 assert 'another reducer-twin run' in one_error(err), err
         bag_is_consistent(out)
         assert temporaries(tmp_path) == []
+
+
+def test_without_an_atomic_exchange_the_previous_output_is_replaced_by_two_renames(
+        bag, one_joint, tmp_path, monkeypatch):
+    out = tmp_path / 'd'
+    analyze_bag(bag, out)
+    monkeypatch.setattr(outputs, 'exchange', lambda a, b: False)
+    analyze_bag(one_joint, out, overwrite=True)
+    bag_is_consistent(out)
+    with open_bag(out) as derived:
+        assert derived.metadata['reducer_twin.joints'] == 'joint_1'
+    assert temporaries(tmp_path) == []
+
+
+def test_a_foreign_file_that_appears_while_writing_stops_the_commit_and_is_kept(tmp_path):
+    out = tmp_path / 'd'
+    out.mkdir()
+    (out / 'metadata.yaml').write_text('rosbag2_bagfile_information:\n  custom_data:\n'
+                                       '    reducer_twin.joints: joint_1\n'
+                                       '  relative_file_paths: [d_0.mcap]\n')
+    (out / 'd_0.mcap').write_bytes(b'old')
+    writer = OutputDir(out, foreign_bag_entries, 'derived bag', overwrite=True)
+    (writer.start() / 'd_0.mcap').write_bytes(b'new')
+    (out / 'mine.txt').write_text('mine')
+    with pytest.raises(InvalidParameter, match='mine.txt'):
+        writer.commit()
+    assert (out / 'd_0.mcap').read_bytes() == b'old' and (out / 'mine.txt').exists()
+    assert temporaries(tmp_path) == []
 
 
 def test_analyze_killed_mid_write_leaves_a_named_temporary_the_next_run_removes(tmp_path):
