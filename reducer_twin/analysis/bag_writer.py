@@ -24,45 +24,9 @@ import numpy as np
 from reducer_twin.analysis.mcap_io import (
     bag_metadata, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, McapBagWriter)
 from reducer_twin.analysis.mcap_writer import LibraryMcapWriter
-from reducer_twin.analysis.outputs import OutputDir
-import yaml
+from reducer_twin.analysis.outputs import foreign_bag_entries, OUTPUT_KEY_PREFIX, OutputDir
 
-OWN_KEY_PREFIX = 'reducer_twin.'
-"""``custom_data`` keys of every bag reducer-twin writes start so."""
-
-
-def foreign_bag_entries(path):
-    """
-    Return the entries of a directory that are not part of a bag written by reducer-twin.
-
-    Parameters
-    ----------
-    path : str or os.PathLike
-        A non-empty directory.
-
-    Returns
-    -------
-    list of str
-        Entry names; empty when the directory holds exactly a reducer-twin bag
-        (``metadata.yaml`` with ``reducer_twin.*`` custom_data, and the storage files it
-        lists).
-
-    """
-    path = Path(path)
-    entries = sorted(p.name for p in path.iterdir())
-    ours = set()
-    try:
-        info = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
-        info = info['rosbag2_bagfile_information']
-        custom = info.get('custom_data') or {}
-        if any(str(key).startswith(OWN_KEY_PREFIX) for key in custom):
-            ours = {'metadata.yaml'} | {Path(str(f)).name
-                                        for f in info.get('relative_file_paths') or []}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError,
-            AttributeError):
-        ours = set()
-    return [name for name in entries if name not in ours or not (path / name).is_file()
-            or (path / name).is_symlink()]
+__all__ = ['BagDirWriter', 'write_bag_dir', 'foreign_bag_entries', 'OUTPUT_KEY_PREFIX']
 
 
 class BagDirWriter:

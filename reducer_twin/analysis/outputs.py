@@ -33,6 +33,9 @@ from reducer_twin.core.errors import BagError, InvalidParameter
 TEMP_TAG = 'reducer-twin'
 """Marker in the names of temporaries and locks beside a target."""
 
+OUTPUT_KEY_PREFIX = 'reducer_twin.'
+"""``custom_data`` keys of every bag reducer-twin writes start so (how a bag is recognised)."""
+
 _FULL = (errno.ENOSPC, errno.EDQUOT)
 
 
@@ -337,6 +340,41 @@ def _remove(path):
             pass
 
 
+def foreign_bag_entries(path):
+    """
+    Return the entries of a directory that are not part of a bag written by reducer-twin.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A non-empty directory.
+
+    Returns
+    -------
+    list of str
+        Entry names; empty when the directory holds exactly a reducer-twin bag
+        (``metadata.yaml`` with ``reducer_twin.*`` custom_data, and the storage files it
+        lists).
+
+    """
+    import yaml
+    path = Path(path)
+    entries = sorted(p.name for p in path.iterdir())
+    ours = set()
+    try:
+        info = yaml.safe_load((path / 'metadata.yaml').read_text(encoding='utf-8'))
+        info = info['rosbag2_bagfile_information']
+        custom = info.get('custom_data') or {}
+        if any(str(key).startswith(OUTPUT_KEY_PREFIX) for key in custom):
+            ours = {'metadata.yaml'} | {Path(str(f)).name
+                                        for f in info.get('relative_file_paths') or []}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, TypeError, KeyError,
+            AttributeError):
+        ours = set()
+    return [name for name in entries if name not in ours or not (path / name).is_file()
+            or (path / name).is_symlink()]
+
+
 class OutputDir:
     """
     A directory output written whole or not at all, by one run at a time.
@@ -581,5 +619,6 @@ class OutputDir:
 
 
 __all__ = ['OutputDir', 'OutputBusy', 'DiskFull', 'check_target', 'check_input_kind',
+           'foreign_bag_entries',
            'refuse_inside_inputs', 'disk_full_error', 'free_bytes', 'human_bytes',
            'is_disk_full', 'exchange']

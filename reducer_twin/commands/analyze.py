@@ -123,8 +123,8 @@ def _check_outputs(args, names):
         Derived bag directories and report directories, one per bag.
 
     """
-    from reducer_twin.analysis.bag_writer import foreign_bag_entries
-    from reducer_twin.analysis.outputs import check_target, refuse_inside_inputs
+    from reducer_twin.analysis.outputs import check_target, foreign_bag_entries
+    from reducer_twin.analysis.outputs import refuse_inside_inputs
     from reducer_twin.analysis.report import foreign_report_entries
     inputs = [('input bag', bag) for bag in args.bags]
     if args.config:
@@ -185,13 +185,13 @@ def run(args):
     single = len(args.bags) == 1
     names = _names(args.bags)
     outs, reports = _check_outputs(args, names)
-    settings = _settings(args)
     from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
     defer_filterpy_extras()
     # Forked before the rest is imported: the worker loads filterpy meanwhile.
     jobs = min(args.jobs, len(args.bags))
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) else None
     try:
+        settings = _settings(args)
         results = _analyze_all(args, settings, [str(out) for out in outs], worker)
     finally:
         if worker is not None:
