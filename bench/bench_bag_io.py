@@ -62,7 +62,8 @@ def make_batch(n, seed=0):
 def time_write(out_dir, batch):
     """Write the batch into a bag directory; return (wall, CPU) seconds."""
     start, cpu = time.perf_counter(), time.process_time()
-    with BagDirWriter(out_dir, overwrite=True, custom_data={'bench': 'bag_io'}) as writer:
+    with BagDirWriter(out_dir, overwrite=True, framing='fast',
+                      custom_data={'reducer_twin.bench': 'bag_io'}) as writer:
         channel = writer.add_topic('/joint_states', JOINT_STATE)
         writer.write_joint_states(channel, batch)
     return time.perf_counter() - start, time.process_time() - cpu

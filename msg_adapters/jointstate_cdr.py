@@ -23,7 +23,7 @@ columns of the whole group at once. Messages that do not fit a template take a p
 message path that handles any layout.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import struct
 
 import numpy as np
@@ -61,6 +61,9 @@ class JointStateBatch:
     rejected : tuple
         ``(index, reason)`` of malformed messages left out (decode with
         ``errors='skip'``); the index counts in the input batch.
+    repeated_names : int
+        Entries left out because their message named the joint before (the first entry
+        of a name counts).
 
     """
 
@@ -72,6 +75,7 @@ class JointStateBatch:
     frame_id: str = ''
     log_time_ns: object = None
     rejected: tuple = ()
+    repeated_names: int = 0
 
     def __len__(self):
         """Return the number of messages N."""
@@ -686,11 +690,20 @@ def _assemble(n, pieces):
         return batch
     items = sorted(pieces.items, key=lambda item: int(item[0][0]) if item[0].size else n)
     first_layout = items[0][1]
+    repeated = 0
+    for k, (index, layout, stamps, values) in enumerate(items):
+        names = tuple(dict.fromkeys(layout.names))
+        if len(names) != len(layout.names):  # a name given twice: its first entry counts
+            keep = [layout.names.index(name) for name in names]
+            repeated += (len(layout.names) - len(names)) * len(index)
+            items[k] = (index, replace(layout, names=names), stamps,
+                        [None if v is None else v[:, keep] for v in values])
     if len(items) == 1 and not pieces.rejected:
         index, layout, stamps, values = items[0]
         shape = (n, len(layout.names))
         out = [v if v is not None else np.full(shape, np.nan) for v in values]
-        return JointStateBatch(stamps, layout.names, *out, frame_id=layout.frame_id)
+        return JointStateBatch(stamps, layout.names, *out, frame_id=layout.frame_id,
+                               repeated_names=repeated)
     columns = {}
     for _, layout, _, _ in items:
         for name in layout.names:
@@ -710,7 +723,7 @@ def _assemble(n, pieces):
             if value is not None:
                 target[rows[:, None], cols[None, :]] = value
     return JointStateBatch(stamps_out, tuple(columns), *out, frame_id=first_layout.frame_id,
-                           rejected=tuple(sorted(pieces.rejected)))
+                           rejected=tuple(sorted(pieces.rejected)), repeated_names=repeated)
 
 
 def concat_batches(batches):
@@ -755,4 +768,5 @@ def concat_batches(batches):
     frame_id = next((b.frame_id for b in batches if len(b)), batches[0].frame_id)
     return JointStateBatch(np.concatenate([b.stamps_ns for b in batches]), names, *fields,
                            frame_id=frame_id, log_time_ns=logs,
-                           rejected=tuple(r for b in batches for r in b.rejected))
+                           rejected=tuple(r for b in batches for r in b.rejected),
+                           repeated_names=sum(b.repeated_names for b in batches))

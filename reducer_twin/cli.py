@@ -3,7 +3,8 @@ The ``reducer-twin`` command.
 
 Each subcommand lives in :mod:`reducer_twin.commands` as a module with
 ``add_parser(subparsers)`` and ``run(args) -> int``. Usage errors exit 2,
-invalid values exit 1; both print one ``ERROR: ...`` line, no traceback.
+invalid values and failed writes (a full disk included) exit 1; both print one
+``ERROR: ...`` line, no traceback.
 """
 
 import argparse
@@ -76,6 +77,10 @@ def main(argv=None):
         return 130
     except BrokenPipeError:
         return 0
+    except OSError as err:   # a file the command did not expect to fail: still one line
+        where = f' ({err.filename})' if err.filename else ''
+        sys.stderr.write(f'ERROR: {err.strerror or err}{where}\n')
+        return 1
 
 
 if __name__ == '__main__':

@@ -16,25 +16,27 @@ recording cut short, a corrupt chunk) become :class:`~reducer_twin.analysis.mcap
 ReadWarning` s in ``Bag.warnings``; problems that leave nothing to read raise
 :class:`~reducer_twin.core.errors.BagError`.
 
-``BagDirWriter`` writes ``<out_dir>/<name>_0.mcap`` and a ``metadata.yaml`` of version 9
-as rosbag2 Jazzy does; the output of the analysis is always MCAP.
+Writing lives in :mod:`reducer_twin.analysis.bag_writer` (``BagDirWriter`` and
+``write_bag_dir`` are importable from here too); the output of the analysis is always MCAP.
 """
 
 from dataclasses import dataclass
+import os
 from pathlib import Path
 import re
 import sqlite3
+import stat
 from typing import NamedTuple
 
 from msg_adapters import dynamic_joint_state as djs
 from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states, empty_batch
-from msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
+from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from msg_adapters.jointstate_ros1 import decode_ros1_joint_states
 from msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 import numpy as np
+from reducer_twin.analysis.bag_writer import BagDirWriter, write_bag_dir  # noqa: F401
 from reducer_twin.analysis.mcap_io import (
-    bag_metadata, custom_data_strings, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, MAGIC,
-    McapBagReader, McapBagWriter, parse_qos_profiles, RawBatch, ReadWarning)
+    custom_data_strings, MAGIC, McapBagReader, parse_qos_profiles, RawBatch, ReadWarning)
 from reducer_twin.analysis.ros1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
 from reducer_twin.analysis.ros1 import VERSION as ROS1_VERSION
 from reducer_twin.core.errors import BagError, InvalidInput
@@ -44,8 +46,6 @@ SQLITE_MAGIC = b'SQLite format 3\x00'
 JOINT_STATE_TYPES = (JOINT_STATE, djs.MSGTYPE)
 """Message types read as joint states: JointState, and ros2_control's DynamicJointState."""
 MAX_METADATA_VERSION = 9
-_BAG_ARTEFACTS = re.compile(r'(metadata\.yaml|.*\.mcap|.*\.db3|.*\.mcap\.zstd|.*\.db3\.zstd|'
-                            r'.*\.db3-(shm|wal|journal))')
 
 
 class TopicSummary(NamedTuple):
@@ -88,6 +88,14 @@ def _natural_key(path):
 
 
 def _sniff(path):
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as err:
+        raise BagError(f'cannot read {path}: {err.strerror}') from err
+    if not stat.S_ISREG(mode):  # a FIFO would block the open, a device never end
+        kind = 'a named pipe (FIFO)' if stat.S_ISFIFO(mode) else 'a socket' \
+            if stat.S_ISSOCK(mode) else 'a directory' if stat.S_ISDIR(mode) else 'a device'
+        raise BagError(f'{path} is {kind}; expected an MCAP or sqlite3 rosbag2 file')
     try:
         with open(path, 'rb') as stream:
             head = stream.read(16)
@@ -768,218 +776,3 @@ def _check_metadata(meta, info, warnings):
     if storage not in ('mcap', 'sqlite3'):
         raise BagError(f"{meta}: storage_identifier must be 'mcap' or 'sqlite3', "
                        f'got {storage!r}')
-
-
-# --------------------------------------------------------------------------- writing
-
-
-def _prepare_out_dir(out_dir, overwrite):
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise BagError(f'{out_dir} exists and is not a directory; expected a bag directory path')
-    if out_dir.is_dir() and any(out_dir.iterdir()):
-        entries = sorted(p.name for p in out_dir.iterdir())
-        if not overwrite:
-            raise BagError(f'{out_dir} exists and is not empty ({len(entries)} entries); pass '
-                           'overwrite=True to replace the bag in it')
-        foreign = [name for name in entries if not _BAG_ARTEFACTS.fullmatch(name)
-                   or (out_dir / name).is_dir()]
-        if foreign:
-            raise BagError(f'refusing to overwrite {out_dir}: it holds entries that are not part '
-                           f'of a rosbag2 bag: {foreign}')
-        for name in entries:
-            (out_dir / name).unlink()
-    try:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as err:
-        raise BagError(f'cannot create {out_dir}: {err.strerror}') from err
-    return out_dir
-
-
-class BagDirWriter:
-    """
-    Write a rosbag2 bag directory: ``<name>_0.mcap`` and ``metadata.yaml`` (version 9).
-
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-        Bag directory; created if missing.
-    name : str, optional
-        File stem; default the directory name (as ``ros2 bag record -o`` does).
-    compression : {'zstd', 'lz4', 'none'}
-        MCAP chunk compression.
-    chunk_size : int
-        Uncompressed bytes per chunk.
-    custom_data : dict of str to str, optional
-        rosbag2 ``custom_data``; may also be changed through ``custom_data`` until close.
-    overwrite : bool
-        Replace the bag in a non-empty ``out_dir`` (only bag files may be in it).
-
-    Raises
-    ------
-    BagError
-        If ``out_dir`` is not empty and ``overwrite`` is false, or holds other files.
-
-    """
-
-    def __init__(self, out_dir, name=None, compression='zstd', chunk_size=DEFAULT_CHUNK_SIZE,
-                 custom_data=None, overwrite=False):
-        self.out_dir = _prepare_out_dir(out_dir, overwrite)
-        self.name = name or self.out_dir.resolve().name
-        self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
-        self.mcap_path = self.out_dir / f'{self.name}_0.mcap'
-        self._writer = McapBagWriter(self.mcap_path, compression=compression,
-                                     chunk_size=chunk_size, custom_data=self.custom_data)
-        self._closed = False
-
-    def add_topic(self, name, msgtype, qos=DEFAULT_QOS):
-        """
-        Declare a topic.
-
-        Parameters
-        ----------
-        name : str
-            Topic name.
-        msgtype : str
-            ROS type, e.g. ``'sensor_msgs/msg/JointState'``.
-        qos : sequence of QosProfile
-            Offered QoS profiles.
-
-        Returns
-        -------
-        int
-            Channel id for the write methods.
-
-        """
-        return self._writer.add_topic(name, msgtype, qos)
-
-    def write(self, channel_id, log_time_ns, data, publish_time_ns=None):
-        """
-        Write one serialised message (see ``McapBagWriter.write``).
-
-        Parameters
-        ----------
-        channel_id : int
-            From ``add_topic``.
-        log_time_ns : int
-            Receive time in ns.
-        data : bytes-like
-            CDR payload.
-        publish_time_ns : int, optional
-            Send time in ns.
-
-        """
-        self._writer.write(channel_id, log_time_ns, data, publish_time_ns)
-
-    def write_batch(self, channel_id, log_times_ns, buffer, offsets, publish_times_ns=None):
-        """
-        Write N serialised messages held in one buffer (see ``McapBagWriter.write_batch``).
-
-        Parameters
-        ----------
-        channel_id : int
-            From ``add_topic``.
-        log_times_ns : array_like of int
-            int64[N] receive times in ns.
-        buffer : bytes-like or numpy.ndarray
-            Payloads back to back.
-        offsets : array_like of int
-            int64[N + 1] boundaries.
-        publish_times_ns : array_like of int, optional
-            int64[N] send times in ns.
-
-        """
-        self._writer.write_batch(channel_id, log_times_ns, buffer, offsets, publish_times_ns)
-
-    def write_joint_states(self, channel_id, batch, log_times_ns=None):
-        """
-        Encode and write a JointStateBatch, building the messages in the chunk buffers.
-
-        Parameters
-        ----------
-        channel_id : int
-            From ``add_topic`` (a ``sensor_msgs/msg/JointState`` topic).
-        batch : JointStateBatch
-            Messages; all-NaN velocity/effort columns are written as empty fields.
-        log_times_ns : array_like of int, optional
-            Receive times; default ``batch.log_time_ns`` or else the header stamps.
-
-        Raises
-        ------
-        InvalidInput
-            On arrays of the wrong shape or stamps outside the int32 seconds range.
-
-        """
-        logs = log_times_ns if log_times_ns is not None else batch.log_time_ns
-        logs = np.asarray(batch.stamps_ns if logs is None else logs, np.int64)
-        fields = [None if values.size and np.isnan(values).all() else values
-                  for values in (batch.position, batch.velocity, batch.effort)]
-        template, columns = joint_state_columns(batch.stamps_ns, batch.names, *fields,
-                                                frame_id=batch.frame_id)
-        self._writer.write_template_batch(channel_id, logs, template, columns)
-
-    def close(self):
-        """
-        Finish the MCAP file and write ``metadata.yaml``.
-
-        Returns
-        -------
-        pathlib.Path
-            The bag directory.
-
-        """
-        if self._closed:
-            return self.out_dir
-        self._closed = True
-        self._writer.set_custom_data(self.custom_data)
-        summary = self._writer.close()
-        info = bag_metadata(self._writer.topic_summaries(), [summary], self.custom_data)
-        text = dump_yaml({'rosbag2_bagfile_information': info})
-        try:
-            (self.out_dir / 'metadata.yaml').write_text(text, encoding='utf-8')
-        except OSError as err:
-            raise BagError(f'cannot write {self.out_dir / "metadata.yaml"}: '
-                           f'{err.strerror}') from err
-        return self.out_dir
-
-    def __enter__(self):
-        """Return the writer."""
-        return self
-
-    def __exit__(self, *exc):
-        """Finish the bag, also after an error, so that what was written stays readable."""
-        self.close()
-
-
-def write_bag_dir(out_dir, joint_states, custom_data=None, compression='zstd',
-                  overwrite=False, qos=DEFAULT_QOS):
-    """
-    Write JointState batches into a new rosbag2 bag directory.
-
-    Parameters
-    ----------
-    out_dir : str or os.PathLike
-        Bag directory to create.
-    joint_states : dict of str to JointStateBatch
-        Topic name to messages; log times from ``log_time_ns`` or the header stamps.
-    custom_data : dict of str to str, optional
-        rosbag2 ``custom_data`` (e.g. the simulator's parameters).
-    compression : {'zstd', 'lz4', 'none'}
-        MCAP chunk compression.
-    overwrite : bool
-        Replace an existing bag in ``out_dir``.
-    qos : sequence of QosProfile
-        Offered QoS of every topic.
-
-    Returns
-    -------
-    pathlib.Path
-        The bag directory.
-
-    """
-    with BagDirWriter(out_dir, compression=compression, custom_data=custom_data,
-                      overwrite=overwrite) as writer:
-        for topic, batch in joint_states.items():
-            channel = writer.add_topic(topic, JOINT_STATE, qos)
-            writer.write_joint_states(channel, batch)
-    return writer.out_dir

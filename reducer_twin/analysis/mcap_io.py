@@ -439,6 +439,41 @@ def _decompress(compression, data, size):
     return parts[0] if len(parts) == 1 else b''.join(parts)
 
 
+def message_times(log_times_ns, publish_times_ns=None):
+    """
+    Check the log and publish times of N messages.
+
+    Parameters
+    ----------
+    log_times_ns : array_like of int
+        int64[N] receive times in ns.
+    publish_times_ns : array_like of int, optional
+        int64[N] send times in ns; default the log times.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(log, publish)`` as uint64[N].
+
+    Raises
+    ------
+    InvalidInput
+        On arrays that are not 1-D integers of one shape, or negative times.
+
+    """
+    logs = np.asarray(log_times_ns)
+    if logs.ndim != 1 or not np.issubdtype(logs.dtype, np.integer):
+        raise InvalidInput(f'log_times_ns must be a 1-D integer array in ns, got dtype '
+                           f'{logs.dtype} and shape {logs.shape}')
+    pubs = logs if publish_times_ns is None else np.asarray(publish_times_ns)
+    if pubs.shape != logs.shape or not np.issubdtype(pubs.dtype, np.integer):
+        raise InvalidInput(f'publish_times_ns must be integers of shape {logs.shape}, got '
+                           f'{pubs.dtype} {pubs.shape}')
+    if logs.shape[0] and (logs.min() < 0 or pubs.min() < 0):
+        raise InvalidInput('log_times_ns and publish_times_ns must be >= 0 ns')
+    return logs.astype(np.uint64), pubs.astype(np.uint64)
+
+
 @dataclass
 class _Topic:
     channel_id: int
@@ -794,6 +829,16 @@ class McapBagWriter:
                 self._pool.shutdown()
         return self.file_summary()
 
+    def discard(self):
+        """Close the file without finishing it (after an error; the caller removes it)."""
+        self._closed = True
+        try:
+            self._file.close()
+        except OSError:
+            pass  # a full disk fails the flush again: the file is removed anyway
+        if self._pool is not None:
+            self._pool.shutdown(cancel_futures=True)
+
     def __enter__(self):
         """Return the writer."""
         return self
@@ -817,17 +862,7 @@ class McapBagWriter:
                            f'channels: {[t.channel_id for t in self._topics.values()]}')
 
     def _times(self, log_times_ns, publish_times_ns):
-        logs = np.asarray(log_times_ns)
-        if logs.ndim != 1 or not np.issubdtype(logs.dtype, np.integer):
-            raise InvalidInput(f'log_times_ns must be a 1-D integer array in ns, got dtype '
-                               f'{logs.dtype} and shape {logs.shape}')
-        pubs = logs if publish_times_ns is None else np.asarray(publish_times_ns)
-        if pubs.shape != logs.shape or not np.issubdtype(pubs.dtype, np.integer):
-            raise InvalidInput(f'publish_times_ns must be integers of shape {logs.shape}, got '
-                               f'{pubs.dtype} {pubs.shape}')
-        if logs.shape[0] and (logs.min() < 0 or pubs.min() < 0):
-            raise InvalidInput('log_times_ns and publish_times_ns must be >= 0 ns')
-        return logs.astype(np.uint64), pubs.astype(np.uint64)
+        return message_times(log_times_ns, publish_times_ns)
 
     def _write(self, data):
         self._file.write(data)

@@ -15,13 +15,17 @@ the PNGs (data URIs), so it can be mailed or archived alone; the PNG files sit b
 
 import base64
 import html
+import io
 import math
 from pathlib import Path
 
 from msg_adapters.layouts import GROUND_TRUTH, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
-from reducer_twin.core.errors import BagError
+from reducer_twin.analysis.outputs import OutputDir
 from reducer_twin.core.units import ARCMIN, HOUR, UM
+
+GENERATOR = '<meta name="generator" content="reducer-twin">'
+"""The tag that marks an ``index.html`` as a report of reducer-twin."""
 
 PLOTS = (('te_angle', 'Transmission error over the output angle'),
          ('lost_motion', 'Lost motion trend'),
@@ -174,9 +178,45 @@ def _table(result):
             + ''.join(rows) + '</table>')
 
 
-def write_report(result, out_dir, limit=None, life=None):
+def foreign_report_entries(path):
     """
-    Write the plots and the HTML page of one analysed bag.
+    Return the entries of a directory that are not part of a report of reducer-twin.
+
+    A report is ``index.html`` carrying the :data:`GENERATOR` tag and the PNGs of
+    :data:`PLOTS`; anything else (another page, the user's own plot) is foreign.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A non-empty directory.
+
+    Returns
+    -------
+    list of str
+        Entry names that reducer-twin did not write.
+
+    """
+    path = Path(path)
+    entries = sorted(p.name for p in path.iterdir())
+    page = path / 'index.html'
+    ours = False
+    if page.is_file() and not page.is_symlink():
+        try:
+            with open(page, 'rb') as stream:
+                ours = GENERATOR.encode() in stream.read(4096)
+        except OSError:
+            ours = False
+    allowed = {'index.html'} | {f'{stem}.png' for stem, _ in PLOTS} if ours else set()
+    return [name for name in entries if name not in allowed or not (path / name).is_file()
+            or (path / name).is_symlink()]
+
+
+def write_report(result, out_dir, limit=None, life=None, flag='--report'):
+    """
+    Write the plots and the HTML page of one analysed bag, whole or not at all.
+
+    The directory must be new, empty or hold a previous report (which is replaced);
+    the files are written into a temporary sibling and renamed into place.
 
     Parameters
     ----------
@@ -188,6 +228,8 @@ def write_report(result, out_dir, limit=None, life=None):
         Lost-motion limit to draw [rad]; default the one of the remaining-life records.
     life : LifeConfig, optional
         Thresholds of the verdicts (default the defaults).
+    flag : str
+        Option name of the directory, for messages.
 
     Returns
     -------
@@ -196,8 +238,10 @@ def write_report(result, out_dir, limit=None, life=None):
 
     Raises
     ------
+    InvalidParameter
+        If the directory holds files that are not a previous report.
     BagError
-        If the directory cannot be written.
+        If the directory cannot be written (``DiskFull`` when the disk is full).
 
     """
     out = Path(out_dir)
@@ -205,20 +249,22 @@ def write_report(result, out_dir, limit=None, life=None):
         limits = [r.life[-1][REMAINING_LIFE.fields.index('lost_motion_limit_rad')]
                   for r in result.joints.values() if r.life is not None and len(r.life)]
         limit = limits[0] if limits else 3.0 * ARCMIN
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        images = {}
-        plt = _pyplot()
-        for stem, fig in _figures(result, limit):
-            path = out / f'{stem}.png'
-            fig.savefig(path, dpi=100)
-            plt.close(fig)
-            images[stem] = base64.b64encode(path.read_bytes()).decode('ascii')
-        page = out / 'index.html'
-        page.write_text(_page(result, images, life), encoding='utf-8')
-    except OSError as err:
-        raise BagError(f'cannot write the report into {out}: {err}') from err
-    return page
+    files, images = {}, {}
+    plt = _pyplot()
+    for stem, fig in _figures(result, limit):
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format='png', dpi=100)
+        plt.close(fig)
+        files[f'{stem}.png'] = buffer.getvalue()
+        images[stem] = base64.b64encode(files[f'{stem}.png']).decode('ascii')
+    files['index.html'] = _page(result, images, life).encode('utf-8')
+    output = OutputDir(out, foreign_report_entries, 'report', flag, overwrite=True,
+                       needed=sum(len(data) for data in files.values()),
+                       replace_note='a report written by reducer-twin')
+    with output as tmp:
+        for name, data in files.items():
+            (tmp / name).write_bytes(data)
+    return out / 'index.html'
 
 
 def _verdicts(result, life):
@@ -242,7 +288,7 @@ def _page(result, images, life=None):
         topics += f' and <code>{html.escape(result.plan.motor_topic)}</code>'
     parts = [
         '<!DOCTYPE html>',
-        '<html lang="en"><head><meta charset="utf-8">',
+        f'<html lang="en"><head><meta charset="utf-8">{GENERATOR}',
         f'<title>{html.escape(title)}</title>',
         '<style>body{font-family:sans-serif;margin:2em;max-width:1000px}',
         'table{border-collapse:collapse}',

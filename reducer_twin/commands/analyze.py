@@ -22,6 +22,12 @@ reversal, stamps that do not advance, ...) is reported with ``"observed": false`
 ``"windows"`` and ``"reason"`` in ``--json`` (and no number for its wear or life), a
 ``WARNING: <joint>: not observed ...`` line on stderr, and exit status 3 when nothing
 else failed.
+
+Outputs never destroy data: OUT and DIR must be new or empty; ``--overwrite`` replaces a
+derived bag reducer-twin wrote (nothing else), DIR may hold a previous report, which is
+replaced; an output that is, contains or lies inside a BAG or the ``--config`` file is
+refused. Each output is written into a temporary beside it and renamed into place when
+complete, by one run at a time; a full disk is one ERROR line with the bytes needed.
 """
 
 import math
@@ -30,7 +36,6 @@ from pathlib import Path
 import sys
 
 from reducer_twin.commands.common import print_json
-from reducer_twin.commands.simulate import check_out_dir
 from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
 
 MAX_JOBS = 64
@@ -48,7 +53,8 @@ def add_parser(sub):
     p.add_argument('--out', required=True, metavar='OUT',
                    help='derived bag directory (one BAG) or directory of derived bags')
     p.add_argument('--report', metavar='DIR', default=None,
-                   help='write PNG plots and an HTML page per bag into DIR')
+                   help='write PNG plots and an HTML page per bag into DIR (new, empty or '
+                        'holding a previous report)')
     p.add_argument('--config', metavar='YAML', default=None,
                    help='bringup configuration (config/twin.yaml): joints, topics, motor '
                         'suffix, motor angles, DynamicJointState interfaces, aging factor, '
@@ -59,7 +65,8 @@ def add_parser(sub):
     p.add_argument('--compression', choices=('none', 'zstd', 'lz4'), default='none',
                    help="MCAP chunk compression of the derived bag (default 'none')")
     p.add_argument('--overwrite', action='store_true',
-                   help='replace derived bags already in --out')
+                   help='replace derived bags that reducer-twin wrote in --out (nothing else '
+                        'is ever replaced; inputs never)')
     from reducer_twin.fleet.cli import add_store_options
     add_store_options(p)
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
@@ -119,6 +126,64 @@ def _analyze_all(args, settings, outs, worker):
     return results
 
 
+def _check_outputs(args, names):
+    """
+    Check every output before any work: never an input, never foreign files.
+
+    Returns
+    -------
+    tuple of list
+        Derived bag directories and report directories, one per bag.
+
+    """
+    from reducer_twin.analysis.outputs import check_target, foreign_bag_entries
+    from reducer_twin.analysis.outputs import refuse_inside_inputs
+    from reducer_twin.analysis.report import foreign_report_entries
+    inputs = [('input bag', bag) for bag in args.bags]
+    if args.config:
+        inputs.append(('--config file', args.config))
+    flags = [('--out', args.out)] + ([('--report', args.report)] if args.report else [])
+    refuse_inside_inputs(flags, inputs)
+    if args.report:   # the report and the derived bag each need a place of their own
+        try:
+            refuse_inside_inputs([('--report', args.report)], [('--out directory', args.out)])
+        except InvalidParameter:
+            raise InvalidParameter(f'--report {args.report} and --out {args.out} overlap; the '
+                                   'report and the derived bag need places of their own') \
+                from None
+    single = len(args.bags) == 1
+    outs = [Path(args.out)] if single else [Path(args.out) / name for name in names]
+    reports = [] if not args.report else [Path(args.report)] if single else [
+        Path(args.report) / name for name in names]
+    if not single:
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise InvalidParameter(f'--out {out} exists and is not a directory; expected a '
+                                   'directory for the derived bags')
+        if out.is_dir() and any(out.iterdir()) and not args.overwrite:
+            raise InvalidParameter(f'--out {out} exists and is not empty; expected a new or '
+                                   'empty directory, or --overwrite to replace the derived '
+                                   'bags of these BAGs in it')
+    for out in outs:
+        check_target(out, foreign_bag_entries, '--out', args.overwrite,
+                     'a bag written by reducer-twin')
+    for report in reports:
+        check_target(report, foreign_report_entries, '--report', True)
+    return outs, reports
+
+
+def _settings(args):
+    from reducer_twin.analysis.pipeline import AnalysisSettings
+    try:
+        settings = AnalysisSettings.from_config(args.config)
+    except InvalidParameter as err:
+        raise InvalidParameter(f'--config {err}') from None
+    if args.compression != settings.compression:
+        from dataclasses import replace
+        settings = replace(settings, compression=args.compression)
+    return settings
+
+
 def run(args):
     """Check the request, analyse every bag, write outputs and print the results."""
     if not 1 <= args.jobs <= MAX_JOBS:
@@ -129,9 +194,12 @@ def run(args):
     if missing:
         raise InvalidParameter(f'BAG {missing[0]} does not exist; expected a rosbag2 bag '
                                'directory, a .mcap or a .db3 file, or a ROS 1 .bag file')
-    check_out_dir(args.out, args.overwrite)
-    if args.report:
-        check_out_dir(args.report, True, '--report')
+    from reducer_twin.analysis.outputs import check_input_kind
+    for bag in args.bags:
+        check_input_kind(bag)
+    single = len(args.bags) == 1
+    names = _names(args.bags)
+    outs, reports = _check_outputs(args, names)
     from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
     defer_filterpy_extras()
     # Forked before the rest is imported: the worker loads filterpy meanwhile.
@@ -141,14 +209,8 @@ def run(args):
         args.engine == 'local' else None
     workers = {}
     try:
-        from reducer_twin.analysis.pipeline import AnalysisSettings
-        settings = AnalysisSettings.from_config(args.config)
-        if args.compression != settings.compression:
-            from dataclasses import replace
-            settings = replace(settings, compression=args.compression)
-        single = len(args.bags) == 1
-        names = _names(args.bags)
-        outs = [args.out] if single else [str(Path(args.out) / n) for n in names]
+        settings = _settings(args)
+        outs = [str(out) for out in outs]
         if fleet:
             from reducer_twin.fleet.history import analyze_into_store
             results, workers = analyze_into_store(args, settings, names, outs, worker)
@@ -180,10 +242,14 @@ def run(args):
                 blind = True
         if args.report:
             from reducer_twin.analysis.report import write_report
-            page = write_report(result, Path(args.report) if single else
-                                Path(args.report) / name, life=settings.life)
-            if not args.json:
-                print(f'report: {page}')
+            try:
+                page = write_report(result, reports[names.index(name)], life=settings.life)
+            except ReducerTwinError as err:
+                sys.stderr.write(f'ERROR: {err}\n')
+                code = 1
+            else:
+                if not args.json:
+                    print(f'report: {page}')
         summary[name] = result
     if args.json:
         if single:

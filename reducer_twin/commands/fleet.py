@@ -45,9 +45,7 @@ def run(args):
         rows = fleet_rows(store)
         page = None
         if args.report:
-            from reducer_twin.commands.simulate import check_out_dir
             from reducer_twin.fleet.report import write_fleet_report
-            check_out_dir(args.report, True, '--report')
             page = write_fleet_report(store, rows, args.report)
     if args.json:
         print_json({'reducers': rows})

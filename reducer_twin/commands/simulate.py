@@ -11,10 +11,15 @@ truth every stream second. ``--hours`` of wear exposure are compressed into
 ``custom_data``, so ``reducer-twin analyze`` applies it without being told.
 ``--robot NAME --start-hours H`` continues the same joints' life (same seed) from hour H,
 so consecutive bags join exactly; both are stored in ``custom_data`` for the fleet store.
+
+The size of the bag is estimated before anything is written; above ``--max-size`` (default
+5 GB) or the free space of the device the request is refused with the estimate. The bag is
+written into a temporary beside BAG and renamed into place when complete.
 """
 
 import argparse
-from pathlib import Path
+import math
+import re
 import time
 
 from reducer_twin.commands.common import print_json
@@ -28,6 +33,26 @@ def _scales(text):
         raise argparse.ArgumentTypeError(
             f'expected a number or numbers separated by commas, got {text!r}') from None
     return values
+
+
+DEFAULT_MAX_SIZE = 5_000_000_000
+"""Default of ``--max-size`` [bytes]: 5 GB, about 30 M ticks of one joint."""
+
+_UNITS = {'': 1, 'b': 1, 'k': 1e3, 'kb': 1e3, 'm': 1e6, 'mb': 1e6, 'g': 1e9, 'gb': 1e9,
+          't': 1e12, 'tb': 1e12, 'kib': 2**10, 'mib': 2**20, 'gib': 2**30, 'tib': 2**40}
+
+
+def _size(text):
+    match = re.fullmatch(r'\s*([0-9.]+(?:[eE][+-]?[0-9]+)?)\s*([A-Za-z]*)\s*', text)
+    unit = match.group(2).lower() if match else None
+    try:
+        value = float(match.group(1)) * _UNITS[unit] if match else None
+    except (KeyError, ValueError):
+        value = None
+    if value is None or not value > 0 or not math.isfinite(value):
+        raise argparse.ArgumentTypeError(
+            f"expected a size > 0 in bytes, or with k, M, G or T (e.g. '20G'), got {text!r}")
+    return int(value)
 
 
 def add_parser(sub):
@@ -61,46 +86,22 @@ def add_parser(sub):
     p.add_argument('--compression', choices=('none', 'zstd', 'lz4'), default='none',
                    help="MCAP chunk compression (default 'none', as ros2 bag record)")
     p.add_argument('--overwrite', action='store_true',
-                   help='replace a bag already in --out (only bag files may be in it)')
+                   help='replace a bag that reducer-twin wrote in --out (nothing else is '
+                        'ever replaced)')
+    p.add_argument('--max-size', type=_size, default=DEFAULT_MAX_SIZE, metavar='SIZE',
+                   help='refuse, before writing anything, a bag estimated larger than SIZE '
+                        "(bytes, or with k, M, G, T; default '5G')")
     p.add_argument('--json', action='store_true',
                    help='print {"joints": {name: {true_wear_um, true_rul_h, '
                         'wear_rate_scale}}, "messages": N}')
     p.set_defaults(run=run)
 
 
-def check_out_dir(path, overwrite, flag='--out'):
-    """
-    Refuse an output path that exists and holds something, unless told to replace it.
-
-    Parameters
-    ----------
-    path : str
-        The path given.
-    overwrite : bool
-        ``--overwrite`` was given.
-    flag : str
-        Option name for the message.
-
-    Raises
-    ------
-    InvalidParameter
-        If the path is a file, or a non-empty directory without ``overwrite``.
-
-    """
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise InvalidParameter(f'{flag} {out} exists and is not a directory; expected a new '
-                               'or empty directory')
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        entries = sum(1 for _ in out.iterdir())
-        raise InvalidParameter(f'{flag} {out} exists and is not empty ({entries} entries); '
-                               'expected a new or empty directory (or pass --overwrite to '
-                               'replace the bag in it)')
-
-
 def run(args):
     """Validate the request, simulate, write the bag and print the summary."""
-    from reducer_twin.analysis.simulate import SimulationSpec, simulate_bag
+    from reducer_twin.analysis.bag_writer import foreign_bag_entries
+    from reducer_twin.analysis.outputs import check_target, DiskFull, free_bytes, human_bytes
+    from reducer_twin.analysis.simulate import estimated_bytes, SimulationSpec, simulate_bag
     if args.seed < 0:
         raise InvalidParameter(f'--seed must be a whole number >= 0, got {args.seed}')
     spec = SimulationSpec(hours=args.hours, aging_factor=args.aging_factor, joints=args.joints,
@@ -109,7 +110,21 @@ def run(args):
                           layout=args.layout, load_torque_nm=args.load_torque_nm,
                           compression=args.compression, start_hours=args.start_hours,
                           robot=args.robot)
-    check_out_dir(args.out, args.overwrite)
+    check_target(args.out, foreign_bag_entries, '--out', args.overwrite,
+                 'a bag written by reducer-twin')
+    needed = estimated_bytes(spec)
+    if needed > args.max_size:
+        raise InvalidParameter(
+            f'--hours {spec.hours:g} at --aging-factor {spec.aging_factor:g}, {spec.joints} '
+            f'joint(s) at --rate-hz {spec.rate_hz:g} would write about {human_bytes(needed)} '
+            f'({spec.messages:,} ticks), more than --max-size {human_bytes(args.max_size)}; '
+            'raise --max-size, or ask for fewer hours or joints, a lower rate or a higher '
+            'aging factor')
+    free = free_bytes(args.out)
+    if free is not None and needed > free:
+        raise DiskFull(f'the simulated bag --out {args.out} needs about {human_bytes(needed)} '
+                       f'({needed:,} bytes), but only {human_bytes(free)} ({free:,} bytes) are '
+                       'free on its device; nothing was written')
     start = time.perf_counter()
     result = simulate_bag(args.out, spec, overwrite=args.overwrite)
     seconds = time.perf_counter() - start

@@ -65,6 +65,7 @@ a restored filter continues bit-identically.
 """
 
 from dataclasses import asdict, dataclass, fields
+import errno
 from functools import lru_cache
 import hashlib
 import json
@@ -970,6 +971,16 @@ def write_state_file(path, data):
                 _atomic_write(backup, previous)
         _atomic_write(path, data)
     except OSError as err:
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            try:
+                stats = os.statvfs(path.parent)
+                free = f', {stats.f_bavail * stats.f_frsize:,} free'
+            except OSError:
+                free = ''
+            raise StateFileError(
+                f'{"disk quota exceeded" if err.errno == errno.EDQUOT else "no space left"} '
+                f'writing the estimator state {path}: {len(data):,} bytes needed{free}; the '
+                'previous state file is kept') from err
         raise StateFileError(f'cannot write estimator state to {path}: {err}') from err
 
 

@@ -174,8 +174,10 @@ class StateWriter:
 
     The state is snapshotted (encoded) by the caller at once; only the file
     work (backup, temporary file, fsync, rename) runs on the thread, so a
-    1 kHz executor never waits for the disk. A write that fails is kept as
-    :attr:`error` and counted; the next one is tried as usual.
+    1 kHz executor never waits for the disk. A write that fails (a full disk)
+    leaves the previous file in place, is kept as :attr:`error` and counted;
+    the next one is tried as usual, and the first that succeeds clears
+    :attr:`error` and counts a recovery.
 
     """
 
@@ -185,6 +187,7 @@ class StateWriter:
         self._queue = queue.Queue()
         self.error = None
         self.failures = 0
+        self.recoveries = 0
         self.written = 0
         self._thread = threading.Thread(target=self._run, name='state-writer', daemon=True)
         self._thread.start()
@@ -204,6 +207,9 @@ class StateWriter:
             try:
                 write_state_file(path, data)
                 self.written += 1
+                if self.error is not None:
+                    self.error = None
+                    self.recoveries += 1
             except StateFileError as err:
                 self.error = err
                 self.failures += 1

@@ -16,7 +16,6 @@ import math
 from pathlib import Path
 
 import numpy as np
-from reducer_twin.core.errors import BagError
 from reducer_twin.core.units import ARCMIN, HOUR
 
 COLOURS = {'REPLACE': '#f4b6b6', 'PLAN': '#f9dc9c', 'OK': '#bfe3bf',
@@ -206,10 +205,13 @@ def write_fleet_report(store, rows, out_dir):
 
     Raises
     ------
+    InvalidParameter
+        If the directory holds files that are not a previous report of reducer-twin.
     BagError
-        If the directory cannot be written.
+        If the directory cannot be written (``DiskFull`` when the disk is full).
 
     """
+    from reducer_twin.analysis.report import GENERATOR
     from reducer_twin.fleet.store import utc_now
     by_key = {}
     for reducer in store.reducers():
@@ -231,7 +233,7 @@ def write_fleet_report(store, rows, out_dir):
         counts[row['verdict']] = counts.get(row['verdict'], 0) + 1
     tally = ', '.join(f'{n} {v}' for v, n in counts.items()) or 'no reducer'
     page = '\n'.join([
-        '<!DOCTYPE html>', '<html lang="en"><head><meta charset="utf-8">',
+        '<!DOCTYPE html>', f'<html lang="en"><head><meta charset="utf-8">{GENERATOR}',
         '<title>reducer_twin fleet report</title>', f'<style>{STYLE}</style></head><body>',
         '<h1>Fleet report</h1>',
         f'<p>Store <code>{html.escape(str(store.path))}</code>, written {utc_now()}: '
@@ -240,13 +242,12 @@ def write_fleet_report(store, rows, out_dir):
         verdict_table(rows), '<h2>Rules</h2>', rules_html(),
         '<h2>Trends across bags</h2>', ''.join(sections) or '<p>No reducer observed yet.</p>',
         '</body></html>', ''])
+    from reducer_twin.analysis.outputs import OutputDir
+    from reducer_twin.analysis.report import foreign_report_entries
+    data = page.encode('utf-8')
     out = Path(out_dir)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        path = out / 'index.html'
-        tmp = out / '.index.html.tmp'
-        tmp.write_text(page, encoding='utf-8')
-        tmp.replace(path)
-    except OSError as err:
-        raise BagError(f'cannot write the fleet report into {out}: {err}') from err
-    return path
+    # Whole or not at all, and only into an empty directory or over a previous report.
+    with OutputDir(out, foreign_report_entries, 'fleet report', '--report', overwrite=True,
+                   needed=len(data), replace_note='a report written by reducer-twin') as tmp:
+        (tmp / 'index.html').write_bytes(data)
+    return out / 'index.html'

@@ -613,6 +613,42 @@ def spin_until_shutdown(executor, context=None, stop=None):
         executor.spin_until_future_complete(never, timeout_sec=0.2)
 
 
+def check_params_files(argv):
+    """
+    Check every ``--params-file`` of ``--ros-args`` before rcl reads it.
+
+    rcl reports a missing or broken file as a traceback of ``rclpy.init``; here it is
+    one line with the file, and for a YAML error its line and column.
+
+    Parameters
+    ----------
+    argv : list of str
+        Command line.
+
+    Raises
+    ------
+    InvalidParameter
+        If a parameter file is missing, unreadable, not YAML or not a mapping.
+
+    """
+    from reducer_twin.config import read_yaml
+    inside = False
+    for i, arg in enumerate(argv):
+        if arg == '--ros-args':
+            inside = True
+        elif arg == '--':
+            inside = False
+        elif inside and arg == '--params-file' and i + 1 < len(argv):
+            path = argv[i + 1]
+            try:
+                data = read_yaml(path, 'a ROS 2 parameter file')
+            except InvalidParameter as err:
+                raise InvalidParameter(f'--params-file {err}') from None
+            if not isinstance(data, dict):
+                raise InvalidParameter(f'--params-file {path}: expected a mapping of node names '
+                                       f'to ros__parameters, got {type(data).__name__}')
+
+
 def run_nodes(factory, args=None):
     """
     Run nodes built by ``factory`` until shutdown; the body of every ``main()``.
@@ -633,9 +669,20 @@ def run_nodes(factory, args=None):
         Exit code: 0 on a clean shutdown, 1 on an invalid parameter.
 
     """
+    try:
+        check_params_files(sys.argv if args is None else args)
+    except ReducerTwinError as err:
+        sys.stderr.write(f'ERROR: {err}\n')
+        return 1
     stop = StopRequest()
     previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as err:  # noqa: B902 - rcl refuses its arguments: one line, no traceback
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        sys.stderr.write(f'ERROR: cannot start: {str(err).splitlines()[0]}\n')
+        return 1
     nodes = []
     try:
         made = factory()
@@ -665,4 +712,5 @@ def run_nodes(factory, args=None):
 
 __all__ = ['Node', 'SpecParameters', 'RejectCounter', 'encoder_qos', 'stream_qos',
            'latest_qos', 'diagnostics_qos', 'joint_topic', 'make_executor', 'run_nodes',
+           'check_params_files',
            'spin_until_shutdown', 'StopRequest']

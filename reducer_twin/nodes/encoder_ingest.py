@@ -180,6 +180,14 @@ class EncoderIngest(Node):
                 f"batch_period_s must be in [0, 1] s, got {out['batch_period_s']!r}")
         if not out['joints'] or any(not j for j in out['joints']):
             raise InvalidParameter(f"joints must be non-empty names, got {out['joints']!r}")
+        if out['motor_topic'] and out['motor_topic'] == out['link_topic']:
+            link = out['link_topic']
+            raise InvalidParameter(f'motor_topic must differ from link_topic ({link!r}); '
+                                   "leave it '' when the motor entries are in link_topic")
+        if not out['motor_topic'] and not out['motor_suffix']:
+            raise InvalidParameter('motor_suffix must not be empty when the motor entries are '
+                                   'in link_topic: <joint> and <joint><motor_suffix> would be '
+                                   "the same entry; e.g. '_motor'")
         return out
 
     def _on_link(self, payload):

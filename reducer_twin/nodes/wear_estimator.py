@@ -132,18 +132,23 @@ class WearEstimatorNode(Node):
                   'rejected_messages': self.rejects.total,
                   'state_writes_failed': (self.stage.writer.failures
                                           if self.stage.writer else 0),
+                  'state_writes_recovered': (self.stage.writer.recoveries
+                                             if self.stage.writer else 0),
                   'state_file': str(self.stage.state_path or 'none'),
                   'restored_from': self.stage.restored_from or 'new reducer'}
         level = 'OK' if self.rejects.total == 0 else 'WARN'
         writer = self.stage.writer
-        if writer is not None and writer.error is not None:
+        error = writer.error if writer is not None else None
+        if error is not None:   # the file on disk is the last good state
             level = 'ERROR'
-            values['state_write_error'] = str(writer.error)
+            values['state_write_error'] = str(error)
+        message = f'wear {values["wear_um"]:.2f} +/- {values["wear_std_um"]:.2f} um'
+        if error is not None:
+            message = f'{error}; {message}'
         self.diag_pub.publish(diagnostic_array(
             self.get_clock().now().nanoseconds,
             [diagnostic_status(f'reducer_twin: {self.joint} wear estimator', self.joint, level,
-                               f'wear {values["wear_um"]:.2f} +/- {values["wear_std_um"]:.2f} um',
-                               values)]))
+                               message, values)]))
 
 
 def main(args=None):

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
 from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
-from reducer_twin.core.errors import BagError, ReducerTwinError
+from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
@@ -161,26 +161,35 @@ def test_metadata_yaml_is_version_9_as_rosbag2_jazzy_writes_it(tmp_path):
 
 
 def test_a_non_empty_output_directory_is_refused_unless_overwrite(tmp_path):
-    out = write_bag_dir(tmp_path / 'sim', {'/joint_states': _batch(10)})
-    with pytest.raises(BagError, match='not empty.*overwrite=True'):
-        write_bag_dir(out, {'/joint_states': _batch(10)})
-    write_bag_dir(out, {'/joint_states': _batch(20)}, overwrite=True)
+    own = {'reducer_twin.run': '1'}
+    out = write_bag_dir(tmp_path / 'sim', {'/joint_states': _batch(10)}, custom_data=own)
+    with pytest.raises(InvalidParameter, match='not empty.*--overwrite'):
+        write_bag_dir(out, {'/joint_states': _batch(10)}, custom_data=own)
+    write_bag_dir(out, {'/joint_states': _batch(20)}, custom_data=own, overwrite=True)
     with open_bag(out) as bag:
         assert bag.topics['/joint_states'].count == 20
     (out / 'notes.txt').write_text('mine')
-    with pytest.raises(BagError, match='refusing to overwrite.*notes.txt'):
+    with pytest.raises(InvalidParameter, match='did not write.*notes.txt'):
         write_bag_dir(out, {'/joint_states': _batch(10)}, overwrite=True)
-    assert (out / 'notes.txt').exists()
+    assert (out / 'notes.txt').read_text() == 'mine'
 
 
-def test_the_writer_context_keeps_a_readable_bag_after_an_error(tmp_path):
+def test_overwrite_never_replaces_a_bag_that_reducer_twin_did_not_write(tmp_path):
+    theirs = write_bag_dir(tmp_path / 'theirs', {'/joint_states': _batch(10)},
+                           custom_data={'k': 'v'})
+    before = {p.name: p.read_bytes() for p in theirs.iterdir()}
+    with pytest.raises(InvalidParameter, match='did not write'):
+        write_bag_dir(theirs, {'/joint_states': _batch(20)}, overwrite=True)
+    assert {p.name: p.read_bytes() for p in theirs.iterdir()} == before
+
+
+def test_a_failed_write_leaves_nothing_at_the_bag_directory(tmp_path):
     with pytest.raises(RuntimeError):
         with BagDirWriter(tmp_path / 'crash', custom_data={'run': '1'}) as writer:
             channel = writer.add_topic('/joint_states', JOINT_STATE)
             writer.write_joint_states(channel, _batch(50))
             raise RuntimeError('simulator failed')
-    with open_bag(tmp_path / 'crash') as bag:
-        assert bag.topics['/joint_states'].count == 50 and bag.metadata == {'run': '1'}
+    assert list(tmp_path.iterdir()) == [], 'no bag, no temporary, no lock'
 
 
 def _split_bag(root, reverse=False):

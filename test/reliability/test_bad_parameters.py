@@ -27,6 +27,8 @@ BAD_START_VALUES = [
     ('wear_estimator', 'estimator.gate_nis:=0.5', 'estimator.gate_nis'),
     ('life_publisher', 'life.warn_s:=-1.0', 'life.warn_s'),
     ('twin_bringup', 'config:=/nonexistent/twin.yaml', '/nonexistent/twin.yaml'),
+    ('encoder_ingest', "motor_suffix:=''", 'motor_suffix'),   # joint and motor alike
+    ('encoder_ingest', 'motor_topic:=/joint_states', 'motor_topic'),   # the link topic
 ]
 
 
@@ -41,6 +43,26 @@ def test_an_invalid_parameter_at_start_stops_the_program_naming_it(
     assert 'Traceback' not in result.stderr
     errors = [x for x in result.stderr.splitlines() if x.startswith('ERROR: ')]
     assert len(errors) == 1 and named in errors[0], result.stderr
+
+
+@pytest.mark.parametrize('text, named', [
+    (None, 'does not exist'),
+    ('wear_estimator:\n  ros__parameters:\n    joint: [a\n',
+     'YAML syntax error at line 4, column 1'),
+    ('- just\n- a list\n', 'expected a mapping of node names'),
+], ids=['missing', 'syntax error', 'not a mapping'])
+def test_a_bad_params_file_stops_the_program_with_one_line_naming_the_file(
+        node_program, tmp_path, text, named):
+    path = tmp_path / 'params.yaml'
+    if text is not None:
+        path.write_text(text)
+    result = subprocess.run([str(node_program('wear_estimator')), '--ros-args', '--params-file',
+                             str(path), '-p', f'state_dir:={tmp_path}'],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1 and 'Traceback' not in result.stderr
+    errors = [x for x in result.stderr.splitlines() if x.startswith('ERROR: ')]
+    assert len(errors) == 1 and f'--params-file {path}' in errors[0], result.stderr
+    assert named in errors[0], errors[0]
 
 
 def test_a_bad_value_set_on_a_running_program_is_rejected_and_the_old_value_stays(

@@ -1,0 +1,163 @@
+"""
+Bad messages in a bag count, never abort: repeated names, stamps that stand, non-files.
+
+A JointState that names a joint twice (a controller configuration error) has its later
+entries dropped and counted, and the joint is analysed as from a clean recording; header
+stamps that do not advance (all zero, a frozen clock) give a WARNING naming the topic and
+the count; a named pipe, a socket or a device given as a bag is refused at once instead of
+blocking the reader.
+"""
+
+import json
+import os
+from pathlib import Path
+import socket
+import subprocess
+import sys
+
+from msg_adapters.jointstate_cdr import JointStateBatch
+import numpy as np
+import pytest
+from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+import yaml
+
+pytestmark = pytest.mark.timeout(120, method='thread')
+
+JOINT_STATE = 'sensor_msgs/msg/JointState'
+SPEC = SimulationSpec(hours=1000.0, aging_factor=360_000.0, joints=1, rate_hz=500.0, seed=7)
+
+
+@pytest.fixture(scope='module')
+def clean(tmp_path_factory):
+    """Simulate a one-joint bag; return it and its JointState messages."""
+    out = tmp_path_factory.mktemp('clean') / 'clean'
+    simulate_bag(out, SPEC)
+    with open_bag(out) as bag:
+        batch = bag.read_joint_states()['/joint_states']
+    return out, batch
+
+
+def rewrite(path, batch):
+    """Write ``batch`` as a bag with the simulated bag's aging factor."""
+    return write_bag_dir(path, {'/joint_states': batch}, compression='none',
+                         custom_data={AGING_KEY: repr(SPEC.aging_factor)})
+
+
+def analyze(bag, out, capsys):
+    """Run ``reducer-twin analyze --json`` in this process; return code, JSON and stderr."""
+    code = main(['analyze', str(bag), '--out', str(out), '--json'])
+    captured = capsys.readouterr()
+    assert 'Traceback' not in captured.err
+    return code, (json.loads(captured.out) if captured.out.strip() else None), captured.err
+
+
+def warnings(err):
+    """Return the WARNING lines of stderr."""
+    return [line for line in err.splitlines() if line.startswith('WARNING:')]
+
+
+@pytest.mark.parametrize('every', [1, 3], ids=['every message', 'every third message'])
+def test_a_joint_named_twice_in_a_message_is_dropped_counted_and_the_first_entry_counts(
+        clean, tmp_path, capsys, every):
+    bag, batch = clean
+    n = len(batch)
+    repeated = JointStateBatch(
+        batch.stamps_ns, batch.names + ('joint_1',),
+        np.concatenate([batch.position, np.full((n, 1), 1e6)], axis=1),
+        np.concatenate([batch.velocity, np.full((n, 1), -1e6)], axis=1),
+        np.concatenate([batch.effort, np.full((n, 1), 7e5)], axis=1))
+    twice = np.arange(n) % every == 0   # messages that name joint_1 twice
+    path = write_runs(tmp_path / 'twice', [repeated if t else batch for t in twice])
+    code, got, err = analyze(path, tmp_path / 'd', capsys)
+    ref_code, ref, _ = analyze(bag, tmp_path / 'ref', capsys)
+    assert code == ref_code == 0, err
+    (line,) = [w for w in warnings(err) if 'named a joint' in w]
+    assert f'{int(twice.sum()):,} JointState entries on /joint_states' in line, line
+    assert list(got['joints']) == ['joint_1']
+    for key in ('wear_um', 'lost_motion_arcmin', 'rul_p50_h', 'messages', 'rejected'):
+        assert got['joints']['joint_1'][key] == ref['joints']['joint_1'][key], key
+    info = yaml.safe_load((tmp_path / 'd' / 'metadata.yaml').read_text())
+    info = info['rosbag2_bagfile_information']
+    assert info['message_count'] > 0
+    assert info['starting_time']['nanoseconds_since_epoch'] < 2**63 - 1
+
+
+def write_runs(path, sources):
+    """Write message i of ``sources[i]`` (a batch per message), runs of one batch at once."""
+    n = len(sources)
+    with BagDirWriter(path, compression='none',
+                      custom_data={AGING_KEY: repr(SPEC.aging_factor)}) as writer:
+        channel = writer.add_topic('/joint_states', JOINT_STATE)
+        start = 0
+        while start < n:
+            stop = start + 1
+            while stop < n and sources[stop] is sources[start]:
+                stop += 1
+            part = sources[start].take(np.arange(start, stop))
+            writer.write_joint_states(channel, part, log_times_ns=part.stamps_ns)
+            start = stop
+    return path
+
+
+def test_stamps_that_never_advance_give_a_warning_naming_the_topic_and_the_count(
+        clean, tmp_path, capsys):
+    _, batch = clean
+    n = len(batch)
+    zero = JointStateBatch(np.zeros(n, np.int64), batch.names, batch.position, batch.velocity,
+                           batch.effort, log_time_ns=batch.stamps_ns)
+    code, got, err = analyze(rewrite(tmp_path / 'zero', zero), tmp_path / 'd0', capsys)
+    # Nothing can be observed with one stamp: the joints are declared, exit 3.
+    assert code == 3 and got is not None
+    assert all(not joint['observed'] for joint in got['joints'].values())
+    (line,) = [w for w in warnings(err) if 'header stamp' in w and 'JointState messages' in w]
+    assert f'{n - 1:,} of {n:,} JointState messages on /joint_states' in line
+    assert 'all zero' in line, line
+    frozen_stamps = batch.stamps_ns.copy()
+    frozen_stamps[n // 2:] = frozen_stamps[n // 2]
+    frozen = JointStateBatch(frozen_stamps, batch.names, batch.position, batch.velocity,
+                             batch.effort, log_time_ns=batch.stamps_ns)
+    code, got, err = analyze(rewrite(tmp_path / 'frozen', frozen), tmp_path / 'd1', capsys)
+    (line,) = [w for w in warnings(err) if 'header stamp' in w and 'JointState messages' in w]
+    assert f'{n - n // 2 - 1:,} of {n:,}' in line and 'a frozen clock' in line, line
+
+
+def test_a_clean_bag_gives_no_stamp_or_name_warning(clean, tmp_path, capsys):
+    code, _, err = analyze(clean[0], tmp_path / 'd', capsys)
+    assert code == 0 and warnings(err) == []
+
+
+def _fifo(tmp_path):
+    path = tmp_path / 'pipe.mcap'
+    os.mkfifo(path)
+    return path
+
+
+def _socket(tmp_path):
+    path = tmp_path / 'sock.mcap'
+    server = socket.socket(socket.AF_UNIX)
+    server.bind(str(path))
+    return path
+
+
+def _fifo_in_a_bag_directory(tmp_path):
+    root = tmp_path / 'bagdir'
+    root.mkdir()
+    os.mkfifo(root / 'bagdir_0.mcap')
+    return root
+
+
+@pytest.mark.parametrize('make, kind', [
+    (_fifo, 'named pipe'), (_socket, 'socket'), (lambda t: Path('/dev/zero'), 'device'),
+    (_fifo_in_a_bag_directory, 'named pipe')],
+    ids=['fifo', 'socket', 'device', 'fifo in a bag directory'])
+def test_a_named_pipe_socket_or_device_as_a_bag_is_refused_at_once(tmp_path, make, kind):
+    given = make(tmp_path)
+    done = subprocess.run([str(Path(sys.executable).parent / 'reducer-twin'), 'analyze',
+                           str(given), '--out', str(tmp_path / 'd')],
+                          capture_output=True, text=True, timeout=60)
+    errors = [line for line in done.stderr.splitlines() if line.startswith('ERROR:')]
+    assert done.returncode == 1 and 'Traceback' not in done.stderr
+    assert len(errors) == 1 and kind in errors[0], done.stderr
+    assert not (tmp_path / 'd').exists()

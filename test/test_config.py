@@ -1,0 +1,124 @@
+"""
+The bringup configuration means what it says (``reducer_twin/config.py``, ``--config``).
+
+A value of the wrong kind is refused rather than guessed (a string is not a boolean),
+numbers written as YAML 1.1 reads them as strings (``3.6e4``) are numbers, a motor side
+that cannot be told from the link side is refused, a YAML syntax error is one line with
+the file, line and column, and through ``reducer-twin analyze --config`` every problem is
+one ``ERROR:`` line that names the flag; a configured topic that the bag does not have is
+an error naming the topics it has.
+"""
+
+from pathlib import Path
+
+import pytest
+from reducer_twin.analysis.pipeline import AnalysisSettings
+from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.cli import main
+from reducer_twin.config import default_config, load_config
+from reducer_twin.core.errors import InvalidParameter
+
+
+def _file(tmp_path, text):
+    path = tmp_path / 'twin.yaml'
+    path.write_text(text)
+    return path
+
+
+BAD = [
+    ('a string for a boolean', 'twin:\n  simulate: "yes"\n',
+     "twin.simulate must be true or false, got 'yes' (a string)"),
+    ('a number for a boolean', 'twin:\n  intra_process: 1\n', 'twin.intra_process must be '
+     'true or false'),
+    ('an empty motor suffix', "twin:\n  motor_suffix: ''\n", 'twin.motor_suffix must not be '
+     'empty'),
+    ('the link topic as motor topic', 'twin:\n  link_topic: /js\n  motor_topic: /js\n',
+     'twin.motor_topic must differ from twin.link_topic'),
+    ('a word for a number', 'twin:\n  window_s: two\n',
+     "twin.window_s must be a finite number, got 'two'"),
+    ('not a finite number', 'twin:\n  aging_factor: .nan\n', 'twin.aging_factor must be a '
+     'finite number'),
+    ('a fraction of samples', 'life:\n  n_samples: 2000.5\n', 'life.n_samples must be a whole '
+     'number'),
+    ('a topic that is not a string', 'twin:\n  link_topic: 5\n', 'twin.link_topic must be a '
+     'string'),
+    ('a YAML syntax error', 'twin:\n  joints: [joint_1\n  window_s: 2.0\n',
+     'YAML syntax error at line 3, column 11'),
+]
+
+
+@pytest.mark.parametrize('text, message', [row[1:] for row in BAD],
+                         ids=[row[0] for row in BAD])
+def test_a_value_of_the_wrong_kind_is_refused_naming_the_file_and_the_key(
+        tmp_path, text, message):
+    path = _file(tmp_path, text)
+    with pytest.raises(InvalidParameter) as err:
+        load_config(path)
+    assert str(err.value).startswith(str(path)) and message in str(err.value), err.value
+    assert '\n' not in str(err.value)
+
+
+def test_numbers_that_yaml_1_1_reads_as_strings_are_numbers(tmp_path):
+    config = load_config(_file(tmp_path, 'twin:\n  aging_factor: 3.6e4\n  window_s: 2e0\n'
+                                         'life:\n  warn_s: 3.6e6\n  n_samples: 2e3\n'
+                                         'simulator:\n  wear_rate_scales: [1e0, 1.5]\n'))
+    assert config['twin']['aging_factor'] == 36_000.0
+    assert config['twin']['window_s'] == 2.0
+    assert config['life'] == {'warn_s': 3.6e6, 'n_samples': 2000}
+    assert config['simulator']['wear_rate_scales'] == [1.0, 1.5]
+    settings = AnalysisSettings.from_config(_file(tmp_path, 'twin:\n  aging_factor: 3.6e4\n'))
+    assert settings.aging_factor == 36_000.0
+
+
+def test_a_missing_file_is_one_line_naming_it(tmp_path):
+    with pytest.raises(InvalidParameter, match='none.yaml does not exist'):
+        load_config(tmp_path / 'none.yaml')
+
+
+def test_the_packaged_configuration_is_valid_as_it_is():
+    config = load_config(default_config())
+    assert config['twin']['simulate'] is False and config['twin']['motor_suffix'] == '_motor'
+
+
+@pytest.fixture(scope='module')
+def bag(tmp_path_factory):
+    """Simulate a small bag on /joint_states."""
+    out = tmp_path_factory.mktemp('cfg') / 'rec'
+    simulate_bag(out, SimulationSpec(hours=500.0, aging_factor=360_000.0, rate_hz=250.0))
+    return out
+
+
+def _analyze(argv, capsys):
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    errors = [x for x in captured.err.splitlines() if x.startswith('ERROR:')]
+    assert 'Traceback' not in captured.err
+    return code, errors
+
+
+@pytest.mark.parametrize('text, message', [
+    ('twin:\n  link_topic: /arm/joint_states\n', 'twin.link_topic /arm/joint_states set in '
+     '--config is not in the bag; found: /joint_states (sensor_msgs/msg/JointState)'),
+    ('twin:\n  motor_topic: /motor_states\n', 'twin.motor_topic /motor_states set in --config '
+     'is not in the bag; found:'),
+    ('twin:\n  simulate: "yes"\n', '--config '),
+    ('twin:\n  joints: [joint_1\n', 'YAML syntax error at line 3, column 1'),
+], ids=['link topic not in the bag', 'motor topic not in the bag', 'string boolean',
+        'syntax error'])
+def test_analyze_config_problems_are_one_error_line_naming_the_flag_or_the_topics_found(
+        bag, tmp_path, capsys, text, message):
+    code, errors = _analyze(['analyze', bag, '--out', tmp_path / 'd', '--config',
+                             _file(tmp_path, text)], capsys)
+    assert code == 1 and len(errors) == 1 and message in errors[0], errors
+    assert 'overwrite=' not in errors[0]
+    assert not (tmp_path / 'd').exists()
+
+
+def test_analyze_applies_an_aging_factor_written_as_3_6e4(bag, tmp_path, capsys):
+    code, errors = _analyze(['analyze', bag, '--out', tmp_path / 'd', '--json', '--config',
+                             _file(tmp_path, 'twin:\n  aging_factor: 3.6e4\n')], capsys)
+    assert code == 0 and errors == []
+    from reducer_twin.analysis.bag import open_bag
+    with open_bag(tmp_path / 'd') as derived:
+        assert float(derived.metadata['reducer_twin.aging_factor']) == 36_000.0
+    assert Path(tmp_path / 'd').is_dir()
