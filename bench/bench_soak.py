@@ -238,7 +238,8 @@ def main():
                   if len(tail) >= 3 else float('nan'))
     if five is not None and five is not end:
         print(f'  RSS after 5 min      {end[1] - five[1]:+.1f} MB from {five[0]:.0f} s to '
-              f'{end[0]:.0f} s (floor: <= 5 MB); trend of the last {(end[0] - tail_from) / 60:.0f} '
+              f'{end[0]:.0f} s (floor: <= 5 MB); trend of the last '
+              f'{(end[0] - tail_from) / 60:.0f} '
               f'min {tail_slope:+.3f} MB/min (floor: <= 0.02 MB/min over the last 30 min)')
     kinds = ', '.join(f'{kind} {end[8][kind] - warm[8][kind]:+.1f} MB' for kind in end[8])
     print(f'  RSS growth by kind   {kinds or "not reported by this kernel"}')

@@ -17,7 +17,8 @@ DEFAULTS = {
              'motor_suffix': '_motor', 'motor_angles': 'raw', 'effort_source': 'auto',
              'motor_effort_units': 'auto', 'aging_factor': 1.0,
              'window_s': 2.0, 'state_dir': '', 'simulate': False,
-             'intra_process': True, 'robot': '', 'interfaces': {}},
+             'intra_process': True, 'robot': '', 'store': '', 'store_period_s': 60.0,
+             'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
 }
 

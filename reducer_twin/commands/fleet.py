@@ -5,7 +5,9 @@ Lists robot, joint, hours observed, bags, last seen, wear ± σ, lost motion aga
 limit, remaining life P10/P50/P90 (past the limit: negative, how many hours past) and a
 verdict with the rule that gave it: REPLACE (P10 at or below the error threshold, or
 past the limit), PLAN (at or below the warning threshold), OK, NOT OBSERVED (with the
-reason), RETIRED (replaced), ranked by P10. ``--json`` prints ``{"reducers": [...]}``;
+reason), RETIRED (replaced), ranked by P10. Reducers a live ``wear_estimator`` writes
+(its ``store`` parameter) show ``+L`` after their bags. ``--json`` prints
+``{"reducers": [...]}``;
 ``--report DIR`` writes one self-contained HTML page with the table and every
 reducer's lost-motion and remaining-life trend across its bags.
 """
@@ -64,6 +66,7 @@ def print_table(rows, store_path):
     """Print the fleet view in 80 columns: one line per reducer, the reason beneath."""
     from reducer_twin.fleet.verdict import RULES
     print(f'fleet store {store_path}: {len(rows)} reducer(s), most urgent first')
+    live = any(r.get('live_segments') for r in rows)
     print(f'{"robot/joint":<18} {"bags":>4} {"hours":>6} {"wear um":>11} {"LM arcmin":>9} '
           f'{"RUL P10/P50 h":>13} verdict')
     for r in rows:
@@ -71,9 +74,12 @@ def print_table(rows, store_path):
         wear = '-' if r['wear_um'] is None else \
             f'{r["wear_um"]:.2f}±{_num(r["wear_std_um"], ".2f")}'
         rul = f'{_num(r["rul_p10_h"], ".0f")}/{_num(r["rul_p50_h"], ".0f")}'
-        print(f'{name[:18]:<18} {r["bags"]:>4} {r["hours_observed"]:>6.0f} {wear:>11} '
+        bags = f'{r["bags"]}+L' if r.get('live_segments') else str(r['bags'])
+        print(f'{name[:18]:<18} {bags:>4} {r["hours_observed"]:>6.0f} {wear:>11} '
               f'{_num(r["lost_motion_arcmin"], ".2f"):>9} {rul:>13} {r["verdict"]}')
         print(textwrap.fill(r['reason'], 79, initial_indent='    ', subsequent_indent='    '))
+    if live:
+        print('+L: also watched live (a wear_estimator writes this store)')
     print('rules:')
     for verdict, rule in RULES:
         print(textwrap.fill(f'{verdict}: {rule}', 79, initial_indent='  ',

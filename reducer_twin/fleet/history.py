@@ -201,7 +201,8 @@ def plan_chains(store, infos, settings, rebuild=False, scratch=None):
     Raises
     ------
     InvalidParameter
-        If a rebuild needs a stored bag that no longer exists.
+        If a rebuild needs a stored bag that no longer exists, or would drop a history
+        watched live (its windows exist only in the store).
 
     """
     by_robot = {}
@@ -212,6 +213,14 @@ def plan_chains(store, infos, settings, rebuild=False, scratch=None):
         reducers = {r.joint: r for r in store.reducers() if r.robot == robot and r.in_service}
         forget = ()
         if rebuild:
+            live = [r for r in reducers.values() if r.live_segments]
+            if live:
+                names = ', '.join(f'{robot}/{r.joint} ({r.live_segments})' for r in live)
+                raise InvalidParameter(
+                    f'--rebuild cannot analyse the history of robot {robot} again: live '
+                    f'segments of a wear_estimator are part of it ({names}), and their '
+                    'windows exist only in the store; a bag older than that history cannot '
+                    'join it')
             forget = tuple(r.row_id for r in reducers.values() if r.bags)
             bags = bags + _stored_again(store, robot, bags, settings, scratch)
         bags = sorted(bags, key=lambda b: (b.first_ns, b.fingerprint))
@@ -254,11 +263,13 @@ def _decide(robot, info, reducers, last, have, revision):
                          'was recorded')
             continue
         if last.get(joint) is not None and info.first_ns <= last[joint]:
+            remedy = ('pass --rebuild to analyse the history again with it' if r is None
+                      or not r.live_segments else 'that history was watched live (a '
+                      'wear_estimator with store), so it cannot be analysed again')
             return BagRefused(
                 f'{info.path}: starts at {iso_from_ns(info.first_ns)}, before the end of the '
                 f'stored history of {robot}/{joint} ({iso_from_ns(last[joint])}); a bag '
-                'older than the history is refused: pass --rebuild to analyse the history '
-                'again with it')
+                f'older than the history is refused: {remedy}')
         joints[joint] = revision.get(joint)
     if not joints:
         return BagSkipped(f'{info.path}: already in the fleet store for robot {robot} '

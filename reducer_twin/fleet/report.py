@@ -70,7 +70,7 @@ def verdict_table(rows, with_robot=True):
         colour = COLOURS.get(r['verdict'], '#ffffff')
         cells = ([f'<td class="t">{html.escape(r["robot"])}</td>'] if with_robot else []) + [
             f'<td class="t">{html.escape(r["joint"])}</td>'] + (
-            [f'<td>{r["bags"]}</td>',
+            [f'<td>{r["bags"]}{" + live" if r.get("live_segments") else ""}</td>',
              f'<td>{html.escape((r["last_seen"] or "–")[:16].replace("T", " "))}</td>']
             if with_robot else []) + [
             f'<td>{_fmt(r["hours_observed"], ",.0f")}</td>', f'<td>{wear}</td>',
@@ -177,7 +177,7 @@ def trend_figure(trend, title, limit_rad):
     for ax in (ax_lm, ax_life):
         for start in trend.bag_starts_h[1:]:
             ax.axvline(start, color='0.6', lw=0.6, ls=':')
-        ax.set_xlabel('operating hours (dotted: a new bag)')
+        ax.set_xlabel('operating hours (dotted: a new bag or live session)')
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.0, 1.0))
     fig.suptitle(title, fontsize=11)
@@ -220,7 +220,8 @@ def write_fleet_report(store, rows, out_dir):
     sections = []
     for row in rows:
         reducer = by_key.get((row['robot'], row['joint']))
-        if reducer is None or row['verdict'] == 'RETIRED' or not reducer.bags:
+        if reducer is None or row['verdict'] == 'RETIRED' or not (
+                reducer.bags or reducer.live_segments):
             continue
         title = f'{row["robot"]} / {row["joint"]}: {row["verdict"]}'
         image = _png(trend_figure(store.trend(reducer.row_id), title,

@@ -9,11 +9,17 @@ and every window's ``te_features``, ``wear`` and ``remaining_life`` records (flo
 arrays in the layouts of :mod:`msg_adapters.layouts`, zlib-compressed), so trends span
 bags. Bags are known by a fingerprint of their files' content, not by their path.
 
+The live twin joins the same history: a ``wear_estimator`` with a ``store`` writes its
+windows as *live segments* (:meth:`FleetStore.write_live_segment`), each recorded in the
+``bags`` table as a source of kind ``live`` (one row per segment, named by the node's
+session), so a reducer watched live and later analysed from bags has one history.
+
 Durability: SQLite in WAL mode with ``synchronous=FULL``; each bag's results for all
 its reducers are one transaction, so a ``kill -9`` at any point leaves the store as it
 was before or after that bag. Writers take an exclusive lock on ``<store>.lock`` for
 their whole run, so two ``analyze --store`` runs serialise (the second waits, then
-finds the first one's bags in the store); a reducer whose row changed between planning
+finds the first one's bags in the store); a live writer takes it for one segment at a
+time and skips a flush rather than wait long; a reducer whose row changed between planning
 and writing (its ``revision``) is refused with :class:`StoreConflict`, never
 overwritten. The schema is versioned (``PRAGMA user_version``) and older stores are
 migrated in a transaction on opening; a newer or foreign file is refused.
@@ -36,6 +42,10 @@ STORE_KIND = 'reducer_twin.fleet'
 
 LAYOUTS = {'features': TE_FEATURES, 'wear': WEAR_ESTIMATE, 'life': REMAINING_LIFE}
 """Segment columns holding window arrays, and their layouts."""
+
+_BAG_COLUMNS = ('id, fingerprint, robot, path, first_ns, last_ns, aging_factor, messages, '
+                'analysed_utc, source, session')
+"""Columns of :class:`BagRow`, in order."""
 
 BUSY_TIMEOUT_S = 60.0
 """How long a statement waits for another connection's write transaction [s]."""
@@ -100,7 +110,15 @@ CREATE TABLE events (
 # Version 2: which engine, node and process analysed each segment.
 _V2 = 'ALTER TABLE segments ADD COLUMN worker TEXT;'
 
-MIGRATIONS = (_V1, _V2)
+# Version 3: live segments. A row of ``bags`` is a source of windows: a recorded bag
+# (``source`` 'bag') or one segment of a live session (``source`` 'live', ``session`` the
+# node's session id).
+_V3 = """
+ALTER TABLE bags ADD COLUMN source TEXT NOT NULL DEFAULT 'bag';
+ALTER TABLE bags ADD COLUMN session TEXT;
+"""
+
+MIGRATIONS = (_V1, _V2, _V3)
 """Schema steps: ``MIGRATIONS[k]`` takes a store from version k to k + 1."""
 
 SCHEMA_VERSION = len(MIGRATIONS)
@@ -112,6 +130,10 @@ class StoreError(ReducerTwinError):
 
 class StoreConflict(StoreError):
     """Another process changed a reducer between this run's planning and its writing."""
+
+
+class StoreBusy(StoreError):
+    """Another process holds the store's writer lock."""
 
 
 def utc_now():
@@ -211,6 +233,10 @@ class Reducer:
         The ``--json`` summary at the end of its newest bag.
     lost_motion_limit_rad, warn_s, error_s : float or None
         Limit and thresholds its newest bag was analysed with.
+    live_segments : int
+        Live segments written for it by a ``wear_estimator`` (not counted in ``bags``).
+    live_exposure_s : float
+        Operating seconds of those live segments (part of ``exposure_s``) [s].
 
     """
 
@@ -229,6 +255,8 @@ class Reducer:
     lost_motion_limit_rad: float
     warn_s: float
     error_s: float
+    live_segments: int = 0
+    live_exposure_s: float = 0.0
 
     @property
     def key(self):
@@ -254,6 +282,8 @@ class BagRow:
     aging_factor: float
     messages: int
     analysed_utc: str
+    source: str = 'bag'
+    session: str = None
 
 
 @dataclass
@@ -355,6 +385,10 @@ class FleetStore:
             self.conn.execute('PRAGMA foreign_keys = ON')
             self.conn.execute('PRAGMA synchronous = FULL')
             self._prepare()
+        except sqlite3.OperationalError as err:
+            # The file may be fine: its disk is full, or not writable, or it is locked.
+            self.close()
+            raise StoreError(f'cannot open the fleet store {self.path}: {err}') from None
         except sqlite3.DatabaseError as err:
             self.close()
             raise StoreError(f'{self.path} is not a usable fleet store: {err}') from None
@@ -416,9 +450,9 @@ class FleetStore:
 
     # ----------------------------------------------------------------- locking
 
-    def lock_for_writing(self, wait=True, notify=None):
+    def lock_for_writing(self, wait=True, notify=None, timeout_s=None):
         """
-        Take the store's writer lock (``<store>.lock``) until :meth:`close`.
+        Take the store's writer lock (``<store>.lock``) until :meth:`unlock` or :meth:`close`.
 
         Parameters
         ----------
@@ -426,31 +460,58 @@ class FleetStore:
             Wait for another writer to finish (serialise) instead of failing.
         notify : callable, optional
             Called with one line of text when this has to wait.
+        timeout_s : float, optional
+            With ``wait``: give up after this long [s] (a live writer waits briefly,
+            then skips its flush); default wait as long as it takes.
 
         Raises
         ------
+        StoreBusy
+            If another process holds the lock and ``wait`` is False, or still holds it
+            after ``timeout_s``.
         StoreError
-            If another process holds the lock and ``wait`` is False, or the lock file
-            cannot be made.
+            If the lock file cannot be made.
 
         """
         import fcntl
+        import time
+        if self._lock_fd is not None:
+            return
         lock_path = self.path.with_name(self.path.name + '.lock')
         try:
             fd = os.open(lock_path, os.O_CREAT | os.O_RDWR, 0o644)
         except OSError as err:
             raise StoreError(f'cannot create the writer lock {lock_path}: {err}') from None
+        busy = StoreBusy(f'another process is writing the fleet store {self.path} '
+                         f'(it holds {lock_path}); try again when it has finished')
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
             if not wait:
                 os.close(fd)
-                raise StoreError(f'another process is writing the fleet store {self.path} '
-                                 f'(it holds {lock_path}); try again when it has finished')
+                raise busy from None
             if notify:
                 notify(f'waiting for another process writing {self.path} to finish')
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            if timeout_s is None:
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            else:
+                deadline = time.monotonic() + float(timeout_s)
+                while True:
+                    time.sleep(0.02)
+                    try:
+                        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                        break
+                    except OSError:
+                        if time.monotonic() >= deadline:
+                            os.close(fd)
+                            raise busy from None
         self._lock_fd = fd
+
+    def unlock(self):
+        """Release the writer lock (if held); the connection stays open."""
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
 
     def close(self):
         """Close the connection and release the writer lock."""
@@ -458,9 +519,7 @@ class FleetStore:
         if conn is not None:
             conn.close()
             self.conn = None
-        if self._lock_fd is not None:
-            os.close(self._lock_fd)
-            self._lock_fd = None
+        self.unlock()
 
     def __enter__(self):
         """Use as a context manager."""
@@ -474,19 +533,23 @@ class FleetStore:
 
     _REDUCER_SQL = """
         SELECT r.id, r.robot, r.joint, r.installed_ns, r.retired_ns, r.state, r.last_ns,
-               r.revision, COUNT(s.bag_id), COALESCE(SUM(s.windows), 0),
+               r.revision, COALESCE(SUM(b.source = 'bag'), 0), COALESCE(SUM(s.windows), 0),
                COALESCE(SUM(s.exposure_s), 0.0),
                (SELECT summary FROM segments WHERE reducer_id = r.id
                 ORDER BY last_ns DESC LIMIT 1),
-               r.lost_motion_limit_rad, r.warn_s, r.error_s
-        FROM reducers r LEFT JOIN segments s ON s.reducer_id = r.id"""
+               r.lost_motion_limit_rad, r.warn_s, r.error_s,
+               COALESCE(SUM(b.source = 'live'), 0),
+               COALESCE(SUM(CASE WHEN b.source = 'live' THEN s.exposure_s END), 0.0)
+        FROM reducers r LEFT JOIN segments s ON s.reducer_id = r.id
+             LEFT JOIN bags b ON b.id = s.bag_id"""
 
     @staticmethod
     def _reducer(row):
         state = json.loads(row[5]) if row[5] else None
         summary = json.loads(row[11]) if row[11] else None
         return Reducer(row[0], row[1], row[2], row[3], row[4], state, row[6], row[7], row[8],
-                       row[9], float(row[10]), summary, row[12], row[13], row[14])
+                       row[9], float(row[10]), summary, row[12], row[13], row[14], row[15],
+                       float(row[16]))
 
     def reducers(self):
         """Return every reducer, retired ones included, by robot, joint and installation."""
@@ -501,22 +564,23 @@ class FleetStore:
         return self._reducer(row) if row else None
 
     def bag(self, fingerprint):
-        """Return the stored bag of this fingerprint, or None."""
-        row = self.conn.execute('SELECT * FROM bags WHERE fingerprint = ?',
+        """Return the stored source of this fingerprint (a bag or a live segment), or None."""
+        row = self.conn.execute(f'SELECT {_BAG_COLUMNS} FROM bags WHERE fingerprint = ?',
                                 (fingerprint,)).fetchone()
         return BagRow(*row) if row else None
 
     def bags_of(self, robot):
-        """Return the robot's stored bags in time order."""
-        rows = self.conn.execute('SELECT * FROM bags WHERE robot = ? ORDER BY first_ns',
-                                 (robot,)).fetchall()
+        """Return the robot's stored bags in time order (recorded bags, not live segments)."""
+        rows = self.conn.execute(f'SELECT {_BAG_COLUMNS} FROM bags WHERE robot = ? AND '
+                                 "source = 'bag' ORDER BY first_ns", (robot,)).fetchall()
         return [BagRow(*r) for r in rows]
 
     def bags_of_ids(self, ids):
         """Return the stored bags of these ids."""
         ids = sorted(int(i) for i in ids)
         marks = ','.join('?' * len(ids))
-        rows = self.conn.execute(f'SELECT * FROM bags WHERE id IN ({marks})', ids).fetchall()
+        rows = self.conn.execute(f'SELECT {_BAG_COLUMNS} FROM bags WHERE id IN ({marks})',
+                                 ids).fetchall()
         return [BagRow(*r) for r in rows]
 
     def segment_bags(self, reducer_id):
@@ -537,19 +601,24 @@ class FleetStore:
         -------
         Trend
             Concatenated ``te_features``, ``wear`` and ``remaining_life`` records, the
-            levels, and the operating hours at which each bag starts.
+            levels, and the operating hours at which each bag (or live session) starts.
 
         """
         rows = self.conn.execute(
-            'SELECT features, wear, life, levels FROM segments WHERE reducer_id = ? '
-            'ORDER BY first_ns', (reducer_id,)).fetchall()
+            'SELECT s.features, s.wear, s.life, s.levels, b.source, b.session FROM segments s '
+            'JOIN bags b ON b.id = s.bag_id WHERE s.reducer_id = ? ORDER BY s.first_ns',
+            (reducer_id,)).fetchall()
         parts = {name: [np.zeros((0, len(layout.fields)))] for name, layout in LAYOUTS.items()}
         levels, starts = [], []
         exposure = WEAR_ESTIMATE.fields.index('exposure_s')
-        for features, wear, life, lv in rows:
+        session = None
+        for features, wear, life, lv, source, this_session in rows:
             for name, blob in (('features', features), ('wear', wear), ('life', life)):
                 parts[name].append(unpack_array(blob, LAYOUTS[name]))
-            if len(parts['wear'][-1]):
+            # A live session's segments are one stretch of data: only its first one starts.
+            new = source != 'live' or this_session != session
+            session = this_session if source == 'live' else None
+            if new and len(parts['wear'][-1]):
                 starts.append(float(parts['wear'][-1][0, exposure]) / 3600.0)
             levels += json.loads(lv)
         return Trend(*(np.concatenate(parts[name]) for name in LAYOUTS), levels, starts)
@@ -641,16 +710,90 @@ class FleetStore:
 
         return self._transaction(work)
 
-    def _write_segment(self, conn, robot, bag_id, seg, path):
+    def write_live_segment(self, robot, session, seq, segment, aging_factor, path):
+        """
+        Record one segment of a live session (a ``wear_estimator``'s windows) in one transaction.
+
+        The segment continues the reducer in service at ``(robot, segment.joint)``
+        (created when there is none yet) exactly as a bag's would: its windows and the
+        estimator state at their end. It is kept as a source of kind ``live`` in the
+        ``bags`` table, so ``fleet`` counts it apart from the recorded bags, a later bag
+        continues from its state and a bag overlapping it is refused.
+
+        Parameters
+        ----------
+        robot : str
+            The robot.
+        session : str
+            The node's session id (one per start of the node).
+        seq : int
+            The segment's number within the session.
+        segment : Segment
+            The windows; ``first_ns`` is the first window's start, ``last_ns`` the last
+            window's end.
+        aging_factor : float
+            Exposure seconds per stream second of its windows.
+        path : str
+            What wrote it, for the ``bags`` table and messages (``live <node>``).
+
+        Returns
+        -------
+        int
+            The reducer row's revision after the write (what the next segment expects).
+
+        Raises
+        ------
+        StoreConflict
+            If the reducer changed since the writer last saw it (another process wrote
+            or replaced it).
+        StoreError
+            If its first window does not end after the stored history.
+
+        """
+        stride = len(TE_FEATURES.fields)
+        first_end_ns = segment.last_ns
+        if len(segment.features):
+            end = TE_FEATURES.fields.index('window_end_s')
+            first_end_ns = int(round(float(
+                np.asarray(segment.features).reshape(-1, stride)[0, end]) * 1e9))
+
+        def work(conn):
+            bag_id = conn.execute(
+                'INSERT INTO bags (fingerprint, robot, path, first_ns, last_ns, aging_factor, '
+                'messages, analysed_utc, source, session) '
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, 'live', ?)",
+                (f'live:{session}:{int(seq)}', robot, str(path), int(segment.first_ns),
+                 int(segment.last_ns), float(aging_factor), int(segment.messages), utc_now(),
+                 str(session))).lastrowid
+            self._write_segment(conn, robot, bag_id, segment, path, start_ns=first_end_ns)
+            return conn.execute('SELECT revision FROM reducers WHERE robot = ? AND joint = ? '
+                                'AND retired_ns IS NULL', (robot, segment.joint)).fetchone()[0]
+
+        return self._transaction(work)
+
+    def _write_segment(self, conn, robot, bag_id, seg, path, start_ns=None):
         row = conn.execute('SELECT id, revision, last_ns FROM reducers WHERE robot = ? AND '
                            'joint = ? AND retired_ns IS NULL', (robot, seg.joint)).fetchone()
         expected = seg.expected_revision
+        live = start_ns is not None
         if (row is None) != (expected is None) or (row is not None and row[1] != expected):
+            if live:
+                raise StoreConflict(
+                    f'reducer {robot}/{seg.joint} changed in the fleet store {self.path} since '
+                    f'{path} continued from it (another process analysed a bag of it or '
+                    'replaced it); live windows are not stored: restart the node to continue '
+                    'from the store')
             raise StoreConflict(
                 f'{path}: reducer {robot}/{seg.joint} changed in the store while this bag '
                 'was analysed (another process wrote it); nothing of this bag was stored: '
                 'run the command again')
-        if row is not None and row[2] is not None and seg.first_ns <= row[2]:
+        start = seg.first_ns if start_ns is None else start_ns
+        if row is not None and row[2] is not None and start <= row[2]:
+            if live:
+                raise StoreError(
+                    f'{path}: its window ending {iso_from_ns(start)} does not end after the '
+                    f'stored history of {robot}/{seg.joint} ({iso_from_ns(row[2])}): the '
+                    'window stamps went back (a clock reset?) or overlap a stored bag')
             raise StoreError(f'{path}: starts at {iso_from_ns(seg.first_ns)}, before the end '
                              f'of the stored history of {robot}/{seg.joint} '
                              f'({iso_from_ns(row[2])}): the bags overlap in time')

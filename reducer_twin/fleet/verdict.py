@@ -9,9 +9,9 @@ analysed with (``life.error_s``, ``life.warn_s``; 200 h and 1000 h by default):
   the limit (remaining life negative: how many operating hours past it);
 * ``PLAN``: P10 at or below the warning threshold: order the reducer, plan the stop;
 * ``OK``: P10 above the warning threshold;
-* ``NOT OBSERVED``: no bag analysed since installation, or no window whose lost motion
-  the estimator could use (the joint never reversed under load, or no window at all):
-  the twin cannot tell, and says why;
+* ``NOT OBSERVED``: no bag analysed and no live window since installation, or no window
+  whose lost motion the estimator could use (the joint never reversed under load, or no
+  window at all): the twin cannot tell, and says why;
 * ``RETIRED``: replaced; kept for its history.
 
 Rows are ranked by P10, most urgent first; not observed and retired reducers follow.
@@ -32,8 +32,8 @@ RULES = (
     ('PLAN', 'remaining life P10 at or below the warning threshold (default 1000 h): order '
              'the reducer and plan the replacement'),
     ('OK', 'remaining life P10 above the warning threshold'),
-    ('NOT OBSERVED', 'no usable lost-motion observation since installation (no data, or the '
-                     'joint never reversed under load): the twin cannot tell'),
+    ('NOT OBSERVED', 'no usable lost-motion observation since installation (no bag, no live '
+                     'window, or the joint never reversed under load): the twin cannot tell'),
     ('RETIRED', 'replaced; its history is kept'),
 )
 """The rules as the fleet view and the reports state them."""
@@ -107,7 +107,9 @@ def fleet_row(reducer, params):
     -------
     dict
         :data:`FIELDS` plus ``windows``, ``installed_at``, ``retired_at``,
-        ``lost_motion_limit_arcmin``, ``rul_censored`` and ``rule``.
+        ``lost_motion_limit_arcmin``, ``rul_censored``, ``rule``, ``live_segments`` and
+        ``hours_live`` (the part of ``hours_observed`` a live ``wear_estimator`` wrote;
+        ``bags`` counts recorded bags only).
 
     """
     r = reducer
@@ -118,7 +120,8 @@ def fleet_row(reducer, params):
                windows=int(r.windows), installed_at=iso_from_ns(r.installed_ns),
                retired_at=iso_from_ns(r.retired_ns),
                lost_motion_limit_arcmin=None if limit is None else limit / ARCMIN,
-               rul_censored=False)
+               rul_censored=False, live_segments=int(r.live_segments),
+               hours_live=r.live_exposure_s / HOUR)
     state = (r.state or {}).get('estimator')
     summary = r.summary or {}
     if state is not None:
@@ -134,19 +137,20 @@ def fleet_row(reducer, params):
     if not r.in_service:
         row['verdict'] = 'RETIRED'
         row['reason'] = f'replaced at {row["retired_at"]}'
-    elif r.bags == 0 or state is None:
+    elif (r.bags == 0 and r.live_segments == 0) or state is None:
         row['verdict'] = 'NOT OBSERVED'
-        row['reason'] = f'no bag analysed {since}'
+        row['reason'] = f'no bag analysed and no live window stored {since}'
         for key in ('wear_um', 'wear_std_um'):
             row[key] = None
     elif updates == 0:
         row['verdict'] = 'NOT OBSERVED'
         # The analysis says why (no effort, too few samples per reversal, frozen stamps...).
         why = summary.get('reason') or ('the joint never reversed under load, or no window '
-                                         'at all')
+                                        'at all')
+        live = f' and {r.live_segments} live segment(s)' if r.live_segments else ''
         row['reason'] = (f'{r.windows} window(s) over {row["hours_observed"]:.0f} h in '
-                         f'{r.bags} bag(s), none with a lost motion the estimator could use: '
-                         f'{why}')
+                         f'{r.bags} bag(s){live}, none with a lost motion the estimator could '
+                         f'use: {why}')
         for key in ('wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h'):
             row[key] = None
     else:

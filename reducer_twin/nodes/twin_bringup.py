@@ -12,6 +12,8 @@ rclcpp does for composed nodes; the pairs and TE topics are then published
 only while something subscribes to them. Motor encoders that ros2_control
 exports only on ``/dynamic_joint_states`` are fed through a second
 ``joint_state_broadcaster`` as ``twin.motor_topic`` (see ``encoder_ingest``).
+With ``twin.store`` (and ``twin.robot``) the estimators write the live history into
+that fleet store and continue from it (see ``wear_estimator``).
 """
 
 from rclpy.parameter import Parameter
@@ -80,9 +82,14 @@ def build_nodes(config, sim_overrides=None):
                 Parameter('window_s', value=float(twin['window_s']))])
         if local:
             nodes['ingest'].attach(joint, nodes['te'][joint].take_pairs)
+        store = [Parameter('store', value=str(twin['store'])),
+                 Parameter('robot', value=str(twin['robot'] or '')),
+                 Parameter('store_period_s', value=float(twin['store_period_s'])),
+                 *life_params] if twin['store'] else []
         nodes['estimator'][joint] = WearEstimatorNode(
             f'wear_estimator_{joint}', params=params, parameter_overrides=[
-                Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir'])])
+                Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir']),
+                *store])
         nodes['life'][joint] = LifePublisher(f'life_publisher_{joint}', params=params,
                                              parameter_overrides=[Parameter('joint', value=joint),
                                                                   *life_params])

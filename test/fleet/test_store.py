@@ -47,6 +47,8 @@ def test_an_older_store_is_migrated_and_keeps_its_history(tmp_path):
     # Take it back to version 1, as an older reducer-twin wrote it.
     conn = sqlite3.connect(path)
     conn.execute('ALTER TABLE segments DROP COLUMN worker')
+    conn.execute('ALTER TABLE bags DROP COLUMN source')
+    conn.execute('ALTER TABLE bags DROP COLUMN session')
     conn.execute('PRAGMA user_version = 1')
     conn.commit()
     conn.close()
@@ -57,6 +59,7 @@ def test_an_older_store_is_migrated_and_keeps_its_history(tmp_path):
             'r1', 'joint_1', 1, 3)
         columns = [r[1] for r in store.conn.execute('PRAGMA table_info(segments)')]
         assert 'worker' in columns
+        assert store.bag('f' * 64).source == 'bag', 'a bag stored before live segments existed'
 
 
 @pytest.mark.parametrize('make, fragment', [
@@ -140,6 +143,49 @@ def test_replace_retires_the_reducer_and_installs_a_new_one_after_its_data(tmp_p
         assert (new.bags, new.state, new.in_service) == (0, None, True)
         [event] = store.events()
         assert event['note'] == 'worn, swapped on the line' and event['kind'] == 'replaced'
+
+
+MS = 1_000_000
+
+
+def _live(revision, first_ns, windows=3):
+    """Return a live segment: windows of 1 ms from ``first_ns``, stamps in the records."""
+    seg = _segment('joint_1', revision, first_ns, windows)
+    seg.wear, seg.life = seg.wear[1:], seg.life[1:]     # no estimate at start, as live
+    start, end = (TE_FEATURES.fields.index(k) for k in ('window_start_s', 'window_end_s'))
+    seg.features[:, start] = (first_ns + MS * np.arange(windows)) * 1e-9
+    seg.features[:, end] = (first_ns + MS * np.arange(1, windows + 1)) * 1e-9
+    seg.last_ns = first_ns + MS * windows
+    return seg
+
+
+def test_live_segments_join_a_bags_history_counted_apart_and_in_time_order(tmp_path):
+    with FleetStore(tmp_path / 'f.db', create=True) as store:
+        store.write_bag('r1', 'a' * 64, '/bags/a', T0, T0 + 3, 1.0, 100,
+                        [_segment('joint_1', None, T0)])
+        assert store.write_live_segment('r1', 's1', 0, _live(1, T0 + MS), 360000.0,
+                                        'live wear_estimator_joint_1') == 2
+        assert store.write_live_segment('r1', 's1', 1, _live(2, T0 + 4 * MS), 360000.0,
+                                        'live wear_estimator_joint_1') == 3
+        [reducer] = store.reducers()
+        assert (reducer.bags, reducer.live_segments, reducer.windows) == (1, 2, 9)
+        assert reducer.live_exposure_s == 7200.0 and reducer.exposure_s == 10800.0
+        assert reducer.last_ns == T0 + 7 * MS
+        assert [b.fingerprint for b in store.bags_of('r1')] == ['a' * 64]
+        live = store.bag('live:s1:1')
+        assert (live.source, live.session, live.path) == (
+            'live', 's1', 'live wear_estimator_joint_1')
+        trend = store.trend(reducer.row_id)
+        assert len(trend.bag_starts_h) == 2, 'the bag, then the live session'
+        # A window that does not end after the history, and a bag over the live hours.
+        with pytest.raises(StoreError, match='does not end after the stored history'):
+            store.write_live_segment('r1', 's2', 0, _live(3, T0 + 5 * MS), 1.0, 'live x')
+        with pytest.raises(StoreError, match='overlap'):
+            store.write_bag('r1', 'b' * 64, '/bags/b', T0 + 6 * MS, T0 + 9 * MS, 1.0, 100,
+                            [_segment('joint_1', 3, T0 + 6 * MS)])
+        with pytest.raises(StoreConflict, match='restart the node'):
+            store.write_live_segment('r1', 's2', 0, _live(1, T0 + 20 * MS), 1.0, 'live x')
+        assert store.reducers()[0].revision == 3 and store.bag('live:s2:0') is None
 
 
 @pytest.mark.parametrize('text, expected', [
