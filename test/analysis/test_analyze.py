@@ -5,6 +5,7 @@ from pathlib import Path
 import shutil
 import sqlite3
 
+from cli_runs import run_cli as _run
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
@@ -18,7 +19,6 @@ from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.analysis.stages import TE_MAX_GAP_S
-from reducer_twin.cli import main
 from reducer_twin.core.errors import BagError
 from reducer_twin.core.ingest import pair_columns, SpikeFilter, StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
@@ -57,15 +57,6 @@ def analysed(sim, tmp_path_factory):
     """Analyse the simulated bag in this process."""
     out = tmp_path_factory.mktemp('derived') / 'derived'
     return analyze_bag(sim[0], out)
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def _errors(err):

@@ -11,13 +11,13 @@ from pathlib import Path
 import re
 import sqlite3
 
+from cli_runs import run_cli as _run
 from msg_adapters.dynamic_joint_state import MSGTYPE as DJS
 from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 import numpy as np
 import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
-from reducer_twin.cli import main
 from reducer_twin.core.errors import BagError
 from rosbags.convert import convert
 from rosbags.highlevel import AnyReader
@@ -186,15 +186,6 @@ def test_a_sqlite3_bag_is_read_by_its_stored_definition_and_without_one_by_the_b
     _agree(result, combined[2])
     (warning,) = result.warnings
     assert 'stores no message definition of control_msgs/msg/DynamicJointState' in str(warning)
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_config_names_the_motor_interface_a_robot_exports(combined, tmp_path, capsys):

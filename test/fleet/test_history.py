@@ -9,10 +9,10 @@ import subprocess
 import sys
 import time
 
+from cli_runs import run_cli as _run
 import pytest
 from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
-from reducer_twin.cli import main
 from reducer_twin.fleet.store import FleetStore
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -30,15 +30,6 @@ def bags(tmp_path_factory):
             start_hours=start, robot='r1', **LIFE)).path)
     out['anonymous'] = str(simulate_bag(root / 'anonymous', SimulationSpec(**LIFE)).path)
     return out
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def _fleet(store, capsys):

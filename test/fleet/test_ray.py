@@ -4,20 +4,11 @@ import json
 import os
 from pathlib import Path
 
+from cli_runs import run_cli as _run
 import ray  # noqa: F401 - the 'fleet' extra the Makefile installs; missing Ray fails here
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
-from reducer_twin.cli import main
 
 LIFE = {'hours': 1500.0, 'aging_factor': 360_000.0, 'joints': 2, 'rate_hz': 250.0}
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def _listening_sockets(pids):

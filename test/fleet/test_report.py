@@ -5,6 +5,7 @@ import re
 import shutil
 import subprocess
 
+from cli_runs import run_cli as _run
 import numpy as np
 import pytest
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
@@ -12,15 +13,6 @@ from reducer_twin.cli import main
 from reducer_twin.fleet.report import COLOURS
 
 CHROMIUM = shutil.which('chromium') or '/usr/bin/chromium'
-
-
-def _run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def screenshot(page, png, profile, width=1200, height=1800):

@@ -14,6 +14,7 @@ import itertools
 import json
 import subprocess
 
+from cli_runs import run_cli
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.ros import from_multiarray, to_multiarray
@@ -141,12 +142,7 @@ def fleet(store, capsys):
 def cli(capsys, *argv):
     """Run ``reducer-twin ARGV`` in this process; return (code, out, err)."""
     capsys.readouterr()
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+    return run_cli(argv, capsys)
 
 
 def test_live_windows_become_segments_that_fleet_lists_with_the_nodes_estimate(
