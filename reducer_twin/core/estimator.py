@@ -45,8 +45,10 @@ Observation, the window's lost motion at ±3 % of rated torque::
 ``h`` the catalogue lost motion of the model (``model_tables(params)``).
 A window's lost motion describes the middle of its exposure, not its end:
 each step predicts over the first half of the window's exposure, updates,
-and predicts over the second half. ``R = ρ·max(σ_z, σ_min)²`` with ``σ_z``
-the window fit's standard error and ``ρ`` learnt from the innovations
+and predicts over the second half. ``R = ρ·max(σ_z, σ_min)² + ΔLM²/12``
+with ``ΔLM`` each component's lost-motion growth over the window (a
+time-compressed window spans much wear), ``σ_z`` the window fit's standard
+error and ``ρ`` learnt from the innovations
 (covariance matching in the manner of Mehra 1972, made robust): the
 ``ρ`` that puts the median of the differences of the last
 :data:`NOISE_MEMORY` successive innovations, normalised, at the median of
@@ -115,7 +117,7 @@ mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
 Measured (``bench/bench_accuracy.py``, README Figures): on the project's own
-simulator NEES 1.2, P10-P90 coverage 76 % with its tails 3 % / 20 %: the
+simulator NEES 1.2, P10-P90 coverage 75 % with its tails 6 % / 19 %: the
 windows read the lost motion 0.02-0.07 arcmin high there and ``c`` cannot be
 told from ``b`` within a life, so the remaining life comes out a few per cent
 short; with the lost motion read right the intervals are wide (NEES 0.1),
@@ -604,6 +606,7 @@ class WearEstimator:
         self._growth = GrowthTrend()
         self._archard = 0.0
         self._observed_at = None
+        self._window_increment = 0.0
         self._score = 0.0
         self._scored = 0
         self._noise = []
@@ -803,10 +806,33 @@ class WearEstimator:
         sigma2 = max(std, self.config.min_lost_motion_std) ** 2
         return self._update(z, sigma2)
 
+    def _smear(self):
+        """
+        Variance each component's wear growth within the window adds to its lost motion [rad²].
+
+        A window's fit mixes samples from the start to the end of its exposure:
+        with the lost motion growing by ``ΔLM`` over the window (the component's
+        rate and slope times the window's Archard increment), the spread of a
+        uniform growth, ``ΔLM²/12``. Negligible for a real-time window, a large
+        share of the noise for a time-compressed one.
+        """
+        increment = self._window_increment
+        if not increment:
+            return np.zeros(self._lw.size)
+        m = self._m
+        step = 0.05 * UM
+        u = m[:, 0] + m[:, 2]
+        slope = (self._h(u + step) - self._h(u - step)) / (2 * step)
+        wp = self.params.wear
+        g = run_in_factor(np.maximum(m[:, 0], 0.0), wp) ** wp.roughness_exponent
+        growth = slope * g * np.exp(m[:, 1]) * increment
+        return growth * growth / 12.0
+
     def _update(self, z, sigma2):
         c = self.config
         nu = c.robust_dof
-        R = self.noise_scale * sigma2
+        smear = self._smear()
+        R = self.noise_scale * sigma2 + smear
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
         _, _, zc, szz, cxz = self._moments(X, self._hx(X))
@@ -815,11 +841,12 @@ class WearEstimator:
         w = np.exp(self._lw - self._lw.max())
         w /= w.sum()
         z_mix = float(w @ zc)
-        v_mix = float(w @ (szz + (zc - z_mix) ** 2))
+        v_mix = float(w @ (szz + smear + (zc - z_mix) ** 2))
+        R = self.noise_scale * sigma2
         y = z - z_mix
         nis = y * y / (v_mix + R)
         loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
-        R_eff = R * np.maximum(1.0, (nu + d2) / (nu + 1.0))
+        R_eff = (R + smear) * np.maximum(1.0, (nu + d2) / (nu + 1.0))
         self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)))
         self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz)
         self._lw = self._lw + loglik
@@ -967,10 +994,12 @@ class WearEstimator:
         increment = self._duty_value(duty, 'archard_increment', 'm')
         self._predict(0.5 * exposure, 0.5 * increment)
         self._observed_at = self._archard + 0.5 * increment
+        self._window_increment = increment
         try:
             result = self.update(features)
         finally:
             self._observed_at = None
+            self._window_increment = 0.0
         self._predict(0.5 * exposure, 0.5 * increment)
         self._count_duty(exposure, increment)
         t_end = getattr(features, 't_end', None)
