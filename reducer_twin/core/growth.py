@@ -67,6 +67,7 @@ class GrowthTrend:
         self.szz = 0.0                # Σw·z²
         self.windows = 0
         self.exposure = 0.0           # A_now [m]
+        self._cached = None
 
     # -- data ----------------------------------------------------------------------------
 
@@ -90,14 +91,24 @@ class GrowthTrend:
         self.sxz += w * z * np.stack([np.ones_like(a), a], axis=1)
         self.szz += w * z * z
         self.windows += 1
+        self._cached = None
 
     def advance(self, exposure):
         """Set the exposure now, ``A_now`` [m] (the end of the latest window)."""
-        self.exposure = max(float(exposure), self.exposure)
+        exposure = max(float(exposure), self.exposure)
+        if exposure != self.exposure:
+            self.exposure = exposure
+            self._cached = None
 
     # -- posterior -----------------------------------------------------------------------
 
-    def _posterior(self, exposure=None):
+    def _posterior(self):
+        """Return :meth:`_compute` at ``A_now``, kept until the sums or ``A_now`` change."""
+        if self._cached is None:
+            self._cached = self._compute()
+        return self._cached
+
+    def _compute(self, exposure=None):
         """
         Posterior of ``(β, k)`` for every ``g``, with ``a`` rescaled to ``A_ref``.
 
