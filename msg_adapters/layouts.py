@@ -62,8 +62,18 @@ TE_FEATURES = Layout('te_features', (
 WEAR_ESTIMATE = Layout('wear', (
     'stamp_s', 'wear_m', 'wear_std_m', 'rate_scale', 'rate_scale_std', 'log_rate_scale',
     'var_wear_m2', 'cov_wear_log_rate_m', 'var_log_rate', 'duty_rate_m_per_s',
-    'lost_motion_rad', 'lost_motion_obs_rad', 'exposure_s', 'updates', 'rejected'))
-"""Kalman estimate of one reducer: state ``[w, ln s]``, its covariance and the duty rate."""
+    'lost_motion_rad', 'lost_motion_obs_rad', 'exposure_s', 'updates', 'rejected',
+    'baseline_m', 'var_baseline_m2', 'cov_wear_baseline_m2', 'cov_log_rate_baseline_m',
+    'lost_motion_std_rad', 'lost_motion_new_rad', 'duty_rate_rel_std', 'log_rate_drift_per_s',
+    'archard_exposure_m', 'trend_probability', 'trend_new_rad', 'trend_growth_rad',
+    'trend_exponent', 'var_trend_new_rad2', 'var_trend_growth_rad2', 'var_trend_exponent',
+    'cov_trend_new_growth_rad2', 'cov_trend_new_exponent_rad', 'cov_trend_growth_exponent_rad'))
+"""
+Estimate of one reducer: the wear model's state ``[w, ln s, b]`` (wear, rate scale, as-built
+offset) and its covariance, the estimated lost motion now and when new, the duty rate with its
+relative standard error, and the observed growth law ``z = β + k·(A/A_now)^g`` in the Archard
+exposure ``A`` with its covariance and the probability that it holds.
+"""
 
 REMAINING_LIFE = Layout('remaining_life', (
     'stamp_s', 'p10_s', 'p50_s', 'p90_s', 'mean_s', 'p10_censored', 'p50_censored',

@@ -2,16 +2,32 @@
 Remaining useful life: the predictor of the twin (progpy vocabulary).
 
 The event is the catalogue accuracy limit: lost motion at ±3 % of rated
-torque reaching ``limit`` (default 3 arcmin). With the estimator's joint
-Gaussian on ``x = [w, ln s]`` (:mod:`.estimator`) and the run-in-free Archard
-rate of the recent duty ``ȧ`` [m per operating second], the wear follows
-``S(w(t)) = S(w) + s·ȧ·t`` (run-in map of :mod:`.wear`), so the time of
-event is closed form::
+torque reaching ``limit`` (default 3 arcmin). Two predictions are mixed, with
+the estimator's probability that the observed growth law holds
+(:attr:`.estimator.WearEstimator.trend_probability`):
 
-    t = (S(w_lim) - S(w)) / (s·ȧ)        w_lim = LM⁻¹(limit)
+* the wear model: the estimator's joint Gaussian on ``x = [w, ln s, b]``
+  (wear, rate scale, as-built offset). The unit reaches the limit at the
+  wear ``w_lim = h⁻¹(limit) - b`` of its own curve, so a unit built loose
+  starts closer to it. With the run-in-free Archard rate of the recent duty
+  ``ȧ`` [m per operating second] the wear follows ``S(w(t)) = S(w) + s·ȧ·t``
+  (run-in map of :mod:`.wear`), so the time of event is closed form::
 
-It is evaluated for ``n_samples`` draws of ``(w, ln s)`` at once (about a
-millisecond for 2000 samples). Times beyond ``horizon_s`` are censored: a
+      t = (S(w_lim) - S(w)) / (s·ȧ)
+
+* the observed trend (:mod:`.growth`): ``z = β + k·(A/A_now)^g`` in the
+  Archard exposure ``A``, so the limit is met at
+  ``A_lim = A_now·((limit - β)/k)^(1/g)`` and ``t = (A_lim - A_now)/ȧ``.
+
+Both are evaluated for ``n_samples`` draws at once (a few milliseconds for
+2000 samples); the draws carry everything the estimate is unsure of, so the
+interval is wide while the observed trend has not yet told the model's curve
+from another law. Two uncertainties of the future are added: the future mean
+duty rate (log-normal, relative sd ``duty_rate_rel_std``: the estimator's
+standard error of the recent rate, plus any configured allowance) and, for
+the wear model, the slow drift of ``ln s`` that the estimator's process model
+allows (``rate_drift`` per operating second: the mean of a random walk over
+``t`` has variance ``q·t/3``). Times beyond ``horizon_s`` are censored: a
 percentile beyond the horizon is reported as the horizon with its
 ``*_censored`` flag set, never as NaN or infinity.
 
@@ -25,7 +41,9 @@ import math
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
-from .estimator import lost_motion_curve, run_in_free_wear
+from .estimator import lost_motion_curve, N_STATE, run_in_free_wear, unit_lost_motion
+from .estimator import wear_at_lost_motion
+from .growth import EXPONENTS
 from .transmission_error import model_tables
 from .units import ARCMIN, HOUR
 
@@ -87,7 +105,12 @@ class LifePrediction:
 
 
 def _state_arrays(state):
-    """Return ``(x, P)`` of an estimator or of an ``(x, P)`` pair, validated."""
+    """
+    Return ``(x, P)`` of an estimator or of an ``(x, P)`` pair, validated, as four states.
+
+    A two-state ``[w, ln s]`` (the estimator before per-unit states) is a
+    nominal unit: ``b = 0``, exactly.
+    """
     if hasattr(state, 'x') and hasattr(state, 'P'):
         x, P = state.x, state.P
     else:
@@ -99,10 +122,15 @@ def _state_arrays(state):
             ) from err
     x = np.asarray(x, dtype=float)
     P = np.asarray(P, dtype=float)
-    if x.shape != (2,) or P.shape != (2, 2):
-        raise InvalidInput(f'state x must have shape (2,) and P (2, 2), got {x.shape}, {P.shape}')
+    n = x.shape[0] if x.ndim == 1 else 0
+    if n not in (2, N_STATE) or P.shape != (n, n):
+        raise InvalidInput(f'state x must have shape (2,) or ({N_STATE},) and P the matching '
+                           f'square, got {x.shape}, {P.shape}')
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
         raise InvalidInput('state x and P must be finite')
+    if n == 2:
+        x = np.concatenate([x, np.zeros(N_STATE - 2)])
+        P = np.pad(P, ((0, N_STATE - 2), (0, N_STATE - 2)))
     return x, P
 
 
@@ -148,11 +176,12 @@ def limit_wear(params, limit=LOST_MOTION_LIMIT):
     return float(model_tables(params).wear_for_lost_motion(limit))
 
 
-def event_state(wear, params, limit=LOST_MOTION_LIMIT):
+def event_state(wear, params, limit=LOST_MOTION_LIMIT, baseline=0.0):
     """
     Health of the reducer, 1 when new, 0 at the accuracy limit (progpy).
 
-    ``es = 1 - (LM(w) - LM(0))/(limit - LM(0))``, clipped to [0, 1].
+    ``es = 1 - (LM(w) - LM(0))/(limit - LM(0))``, clipped to [0, 1], with
+    ``LM(w) = h(w + b)`` the unit's lost-motion curve.
 
     Parameters
     ----------
@@ -162,6 +191,8 @@ def event_state(wear, params, limit=LOST_MOTION_LIMIT):
         Reducer parameters.
     limit : float
         Lost-motion limit [rad].
+    baseline : float
+        The unit's as-built offset ``b`` [m] (0: nominal).
 
     Returns
     -------
@@ -170,12 +201,13 @@ def event_state(wear, params, limit=LOST_MOTION_LIMIT):
 
     """
     curve = lost_motion_curve(params)
-    lm_new = curve.lost_motion[0]
-    es = np.clip(1.0 - (curve(wear) - lm_new) / (limit - lm_new), 0.0, 1.0)
+    lm_new = float(curve(baseline))
+    lm = unit_lost_motion(wear, baseline, curve)
+    es = np.clip(1.0 - (lm - lm_new) / max(limit - lm_new, 1e-12), 0.0, 1.0)
     return float(es) if np.ndim(es) == 0 else es
 
 
-def threshold_met(wear, params, limit=LOST_MOTION_LIMIT):
+def threshold_met(wear, params, limit=LOST_MOTION_LIMIT, baseline=0.0):
     """
     Tell whether the lost motion at ``wear`` reached the limit.
 
@@ -187,6 +219,8 @@ def threshold_met(wear, params, limit=LOST_MOTION_LIMIT):
         Reducer parameters.
     limit : float
         Lost-motion limit [rad].
+    baseline : float
+        The unit's as-built offset ``b`` [m] (0: nominal).
 
     Returns
     -------
@@ -194,24 +228,66 @@ def threshold_met(wear, params, limit=LOST_MOTION_LIMIT):
         ``LM(w) >= limit``.
 
     """
-    met = lost_motion_curve(params)(wear) >= limit
+    met = unit_lost_motion(wear, baseline, lost_motion_curve(params)) >= limit
     return bool(met) if np.ndim(met) == 0 else met
 
 
+@dataclass(frozen=True)
+class GrowthTrendState:
+    """
+    The observed growth law, as the estimator reports it (:mod:`.growth`).
+
+    Attributes
+    ----------
+    probability : float
+        Probability that it, not the model's curve, holds.
+    mean : ndarray, shape (3,)
+        ``[β [rad], k [rad], g]`` of ``z = β + k·(A/A_now)^g``.
+    cov : ndarray, shape (3, 3)
+        Their covariance.
+    exposure : float
+        ``A_now``, the Archard exposure since new [m].
+
+    """
+
+    probability: float
+    mean: np.ndarray
+    cov: np.ndarray
+    exposure: float
+
+
+def _trend_times(trend, limit, duty_rate, normal):
+    """Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``."""
+    draws = np.asarray(trend.mean, dtype=float) + normal @ _covariance_root(
+        np.asarray(trend.cov, dtype=float)).T
+    beta, k = draws[:, 0], draws[:, 1]
+    g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        ratio = (limit - beta) / k
+        a_lim = trend.exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
+        t = np.where(k <= 0.0, np.inf, (a_lim - trend.exposure) / duty_rate)
+    return np.where(np.isnan(t), np.inf, np.maximum(t, 0.0))
+
+
 def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_HORIZON_S,
-                   n_samples=2000, rng=None, duty_rate_rel_std=0.0, keep_samples=False):
+                   n_samples=2000, rng=None, duty_rate_rel_std=0.0, keep_samples=False,
+                   rate_drift=0.0, trend=None):
     """
     Sample the remaining useful life under the recent duty.
 
-    Draws ``(w, ln s) ~ N(x, P)``, clips ``w`` at 0 (a wear below zero is
-    the new reducer), and evaluates ``t = (S(w_lim) - S(w))/(s·ȧ)``. The
-    future duty is the recent one, optionally with a log-normal uncertainty
-    of relative sd ``duty_rate_rel_std`` on its mean rate.
+    Draws ``x = [w, ln s, b] ~ N(x, P)``, clips ``w`` at 0 (a wear below
+    zero is the new reducer), finds each draw's ``w_lim`` on its own curve
+    and evaluates ``t = (S(w_lim) - S(w))/(s·ȧ)``; with probability
+    ``trend.probability`` a draw is taken from the observed growth law
+    instead. The future duty is the recent one, with a log-normal
+    uncertainty of relative sd ``duty_rate_rel_std`` on its mean rate;
+    ``ln s`` may drift as a random walk of ``rate_drift`` per operating second.
 
     Parameters
     ----------
     state : WearEstimator or tuple
-        The estimator, or its ``(x, P)`` with ``x = [w [m], ln s]``.
+        The estimator, or its ``(x, P)`` with ``x = [w [m], ln s, b [m]]``
+        (or ``[w, ln s]`` for a nominal unit).
     duty_rate : float
         Run-in-free Archard rate of the recent duty ȧ [m per operating
         second] (``Δa/Δe`` over a recent horizon, e.g.
@@ -232,6 +308,11 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         recent duty continues exactly).
     keep_samples : bool
         Return the capped samples in ``LifePrediction.samples``.
+    rate_drift : float
+        Random-walk intensity of ``ln s`` per operating second [1/s]
+        (``EstimatorConfig.log_rate_scale_noise_density``; 0: none).
+    trend : GrowthTrendState, optional
+        The observed growth law and its probability (None: the wear model alone).
 
     Returns
     -------
@@ -241,10 +322,10 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
     Raises
     ------
     InvalidInput
-        If the state is malformed or ``duty_rate`` negative or not finite.
+        If the state or trend is malformed or ``duty_rate`` negative or not finite.
     InvalidParameter
-        If ``limit``, ``horizon_s``, ``n_samples`` or ``duty_rate_rel_std``
-        is out of range.
+        If ``limit``, ``horizon_s``, ``n_samples``, ``duty_rate_rel_std`` or
+        ``rate_drift`` is out of range.
 
     """
     x, P = _state_arrays(state)
@@ -257,26 +338,40 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
     n_samples = int(n_samples)
     if not (math.isfinite(duty_rate_rel_std) and duty_rate_rel_std >= 0.0):
         raise InvalidParameter(out_of_range('duty_rate_rel_std', duty_rate_rel_std, '', '>= 0'))
-    w_lim = limit_wear(params, limit)
-    wear_mean = max(float(x[0]), 0.0)
-    es = event_state(wear_mean, params, limit)
-    met = threshold_met(wear_mean, params, limit)
+    if not (math.isfinite(rate_drift) and rate_drift >= 0.0):
+        raise InvalidParameter(out_of_range('rate_drift', rate_drift, '1/s', '>= 0'))
+    p_trend = _trend_probability(trend)
+    limit_wear(params, limit)  # the limit must lie inside the model's table
+    curve = lost_motion_curve(params)
+    wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
+    w_lim = float(wear_at_lost_motion(limit, baseline, curve))
+    es = event_state(wear_mean, params, limit, baseline)
+    met = threshold_met(wear_mean, params, limit, baseline)
     if wear_mean >= w_lim or met:
         zeros = np.zeros(n_samples) if keep_samples else None
         return LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
                               float(horizon_s), w_lim, n_samples, zeros)
     if not isinstance(rng, np.random.Generator):
         rng = np.random.default_rng(0 if rng is None else rng)
-    normal = rng.standard_normal((n_samples, 3))
-    draws = x + normal[:, :2] @ _covariance_root(P).T
+    normal = rng.standard_normal((n_samples, N_STATE + 5))
+    pick = rng.random(n_samples)
+    draws = x + normal[:, :N_STATE] @ _covariance_root(P).T
     wear = np.maximum(draws[:, 0], 0.0)
-    scale = np.exp(draws[:, 1] + duty_rate_rel_std * normal[:, 2])
+    lim = wear_at_lost_motion(limit, draws[:, 2], curve)
+    duty = np.exp(duty_rate_rel_std * normal[:, N_STATE])
     wp = params.wear
-    remaining = run_in_free_wear(w_lim, wp) - run_in_free_wear(wear, wp)
-    speed = scale * duty_rate
-    with np.errstate(divide='ignore', invalid='ignore'):
+    remaining = run_in_free_wear(lim, wp) - run_in_free_wear(wear, wp)
+    speed = np.exp(draws[:, 1]) * duty * duty_rate
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = np.where(remaining <= 0.0, 0.0, remaining / speed)
-    t = np.where(np.isnan(t), np.inf, t)
+        t = np.where(np.isnan(t), np.inf, t)
+        if rate_drift > 0.0:
+            # The mean of the drifting ln s over the time to the event.
+            drift = np.sqrt(rate_drift * np.minimum(t, 10.0 * horizon_s) / 3.0)
+            t = t * np.exp(-drift * normal[:, N_STATE + 1])
+        if p_trend > 0.0:
+            t_trend = _trend_times(trend, limit, duty * duty_rate, normal[:, N_STATE + 2:])
+            t = np.where(pick < p_trend, t_trend, t)
     censored = t > horizon_s
     capped = np.minimum(t, horizon_s)
     p10, p50, p90 = (float(v) for v in np.quantile(capped, [0.1, 0.5, 0.9]))
@@ -287,6 +382,26 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         mean=float(capped.mean()), fraction_censored=float(censored.mean()),
         limit_reached=False, event_state=es, threshold_met=met, horizon_s=float(horizon_s),
         wear_limit=w_lim, n_samples=n_samples, samples=capped if keep_samples else None)
+
+
+def _trend_probability(trend):
+    """Validate a :class:`GrowthTrendState` (or None) and return its probability."""
+    if trend is None:
+        return 0.0
+    try:
+        p = float(trend.probability)
+        mean = np.asarray(trend.mean, dtype=float)
+        cov = np.asarray(trend.cov, dtype=float)
+        exposure = float(trend.exposure)
+    except (AttributeError, TypeError, ValueError) as err:
+        raise InvalidInput(f'trend must be a GrowthTrendState, got {trend!r}') from err
+    if not (0.0 <= p <= 1.0 and mean.shape == (3,) and cov.shape == (3, 3)
+            and np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))
+            and math.isfinite(exposure) and exposure >= 0.0):
+        raise InvalidInput('trend needs a probability in [0, 1], a finite mean of 3, a 3x3 '
+                           f'covariance and an exposure >= 0 m, got {p!r}, {mean.tolist()}, '
+                           f'{cov.tolist()}, {exposure!r}')
+    return p
 
 
 def catalogue_life(duty, params):

@@ -18,7 +18,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, StateFileError
-from .life import catalogue_life, DEFAULT_HORIZON_S, LOST_MOTION_LIMIT, remaining_life
+from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LOST_MOTION_LIMIT
+from .life import remaining_life
 from .params import _Validated, spec
 from .units import HOUR
 
@@ -350,16 +351,43 @@ class EstimatorStage:
         """
         est = self.estimator
         x, P = est.x, est.P
-        from .transmission_error import model_tables
-        return {
+        lm, lm_std = est.lost_motion()
+        rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
             'rate_scale': est.rate_scale, 'rate_scale_std': est.rate_scale_std,
-            'log_rate_scale': float(x[1]), 'var_wear_m2': float(P[0, 0]),
-            'cov_wear_log_rate_m': float(P[0, 1]), 'var_log_rate': float(P[1, 1]),
-            'duty_rate_m_per_s': est.duty_rate,
-            'lost_motion_rad': float(model_tables(self.params).lost_motion(max(est.wear, 0.0))),
+            'duty_rate_m_per_s': est.duty_rate, 'lost_motion_rad': lm,
             'lost_motion_obs_rad': self.last_observation,
-            'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected}
+            'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected,
+            'baseline_m': float(x[2]), 'log_rate_scale': float(x[1]),
+            'lost_motion_std_rad': lm_std, 'lost_motion_new_rad': est.lost_motion_new,
+            'duty_rate_rel_std': est.duty_rate_rel_std,
+            'log_rate_drift_per_s': est.config.log_rate_scale_noise_density}
+        for (i, j), key in _COVARIANCE_KEYS.items():
+            rec[key] = float(P[i, j])
+        probability, mean, cov, exposure = est.growth_trend()
+        rec['archard_exposure_m'] = exposure
+        rec['trend_probability'] = probability
+        for i, key in enumerate(_TREND_KEYS):
+            rec[key] = float(mean[i])
+        for (i, j), key in _TREND_COVARIANCE_KEYS.items():
+            rec[key] = float(cov[i, j])
+        return rec
+
+
+_COVARIANCE_KEYS = {
+    (0, 0): 'var_wear_m2', (0, 1): 'cov_wear_log_rate_m', (1, 1): 'var_log_rate',
+    (2, 2): 'var_baseline_m2', (0, 2): 'cov_wear_baseline_m2',
+    (1, 2): 'cov_log_rate_baseline_m'}
+"""Entry of the state covariance ``[w, ln s, b]`` -> ``wear`` record field."""
+
+_TREND_KEYS = ('trend_new_rad', 'trend_growth_rad', 'trend_exponent')
+"""``wear`` record fields of the observed growth law's mean ``[β, k, g]``."""
+
+_TREND_COVARIANCE_KEYS = {
+    (0, 0): 'var_trend_new_rad2', (1, 1): 'var_trend_growth_rad2', (2, 2): 'var_trend_exponent',
+    (0, 1): 'cov_trend_new_growth_rad2', (0, 2): 'cov_trend_new_exponent_rad',
+    (1, 2): 'cov_trend_growth_exponent_rad'}
+"""Entry of the growth law's covariance -> ``wear`` record field."""
 
 
 def state_from_record(record):
@@ -369,12 +397,13 @@ def state_from_record(record):
     Parameters
     ----------
     record : mapping
-        Wear record.
+        Wear record; one without the per-unit states (``baseline_m``...)
+        gives ``[w, ln s]`` and its 2x2 covariance (a nominal unit).
 
     Returns
     -------
     tuple of ndarray
-        ``x = [w, ln s]`` and its 2x2 covariance.
+        ``x = [w, ln s, b]`` and its 3x3 covariance (or the two-state form).
 
     Raises
     ------
@@ -382,9 +411,13 @@ def state_from_record(record):
         If any value is not finite.
 
     """
-    x = np.array([record['wear_m'], record['log_rate_scale']], dtype=float)
-    c = float(record['cov_wear_log_rate_m'])
-    P = np.array([[record['var_wear_m2'], c], [c, record['var_log_rate']]], dtype=float)
+    n = 3 if 'baseline_m' in record else 2
+    names = ('wear_m', 'log_rate_scale', 'baseline_m')[:n]
+    x = np.array([record[k] for k in names], dtype=float)
+    P = np.zeros((n, n))
+    for (i, j), key in _COVARIANCE_KEYS.items():
+        if i < n and j < n:
+            P[i, j] = P[j, i] = float(record[key])
     if not (np.all(np.isfinite(x)) and np.all(np.isfinite(P))):
         raise InvalidInput(f'wear record holds non-finite state: x={x.tolist()}, '
                            f'P={P.tolist()}')
@@ -407,8 +440,9 @@ class LifeConfig(_Validated):
                             lo_open=True)
     n_samples: int = spec(2000, '', 100, 1_000_000, 'samples of the state distribution',
                           integer=True)
-    duty_rate_rel_std: float = spec(0.1, '', 0.0, 5.0,
-                                    'relative uncertainty of the future duty wear rate')
+    duty_rate_rel_std: float = spec(0.0, '', 0.0, 5.0,
+                                    'allowance for a change of the future duty wear rate, '
+                                    'beyond the standard error the estimator reports')
 
     def _check(self):
         if self.error_s > self.warn_s:
@@ -459,6 +493,43 @@ class LifeStage:
             return
         self.duty = duty
 
+    def prediction(self, wear_record, keep_samples=False):
+        """
+        Sample the remaining life of a ``wear`` record.
+
+        The future duty's uncertainty is the estimator's standard error of the
+        recent duty rate (``duty_rate_rel_std`` of the record) and this stage's
+        allowance, added in quadrature; ``ln s`` drifts as the estimator's
+        process model says (``log_rate_drift_per_s``).
+
+        Parameters
+        ----------
+        wear_record : mapping
+            Output of :meth:`EstimatorStage.record`.
+        keep_samples : bool
+            Keep the sampled times in the result.
+
+        Returns
+        -------
+        LifePrediction
+            The prediction (common random numbers: the same record gives the same answer).
+
+        """
+        x, P = state_from_record(wear_record)
+        rate = float(wear_record['duty_rate_m_per_s'])
+        measured = float(wear_record.get('duty_rate_rel_std', 0.0))
+        drift = float(wear_record.get('log_rate_drift_per_s', 0.0))
+        if not (np.isfinite(measured) and measured >= 0.0 and np.isfinite(drift)
+                and drift >= 0.0):
+            raise InvalidInput(f'wear record holds a bad duty_rate_rel_std ({measured!r}) or '
+                               f'log_rate_drift_per_s ({drift!r}): both must be finite and >= 0')
+        return remaining_life((x, P), rate, self.params, limit=self.limit,
+                              horizon_s=self.horizon_s, n_samples=self.n_samples,
+                              rng=np.random.default_rng(0),
+                              duty_rate_rel_std=float(np.hypot(measured, self.duty_rate_rel_std)),
+                              keep_samples=keep_samples, rate_drift=drift,
+                              trend=trend_from_record(wear_record))
+
     def process(self, wear_record):
         """
         Predict remaining life from a ``wear`` record.
@@ -477,12 +548,7 @@ class LifeStage:
             (``updates`` 0).
 
         """
-        x, P = state_from_record(wear_record)
-        rate = float(wear_record['duty_rate_m_per_s'])
-        rng = np.random.default_rng(0)
-        pred = remaining_life((x, P), rate, self.params, limit=self.limit,
-                              horizon_s=self.horizon_s, n_samples=self.n_samples, rng=rng,
-                              duty_rate_rel_std=self.duty_rate_rel_std)
+        pred = self.prediction(wear_record)
         cat = catalogue_life(self.duty, self.params) if self.duty is not None else float('nan')
         record = {
             'stamp_s': wear_record['stamp_s'], 'p10_s': pred.p10, 'p50_s': pred.p50,
@@ -503,8 +569,60 @@ class LifeStage:
                    + (' (censored)' if pred.p50_censored else ''))
         if pred.limit_reached:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
+        else:
+            message += growth_note(wear_record)
         if level == 'OK' and int(wear_record.get('updates', 1)) == 0:
             # A prediction from the duty alone is no assessment: never 'OK' without evidence.
             level = 'STALE'
             message = 'not observed: no lost-motion observation yet; ' + message
         return record, level, message
+
+
+def trend_from_record(record):
+    """
+    Rebuild the observed growth law from a ``wear`` record.
+
+    Parameters
+    ----------
+    record : mapping
+        Wear record.
+
+    Returns
+    -------
+    GrowthTrendState or None
+        None when the record has no growth law (a record of an older twin).
+
+    """
+    if 'trend_probability' not in record:
+        return None
+    mean = np.array([record[k] for k in _TREND_KEYS], dtype=float)
+    cov = np.zeros((3, 3))
+    for (i, j), key in _TREND_COVARIANCE_KEYS.items():
+        cov[i, j] = cov[j, i] = float(record[key])
+    return GrowthTrendState(float(record['trend_probability']), mean, cov,
+                            float(record['archard_exposure_m']))
+
+
+def growth_note(wear_record):
+    """
+    Say when the observed lost-motion trend departs from the model's curve.
+
+    Parameters
+    ----------
+    wear_record : mapping
+        A ``wear`` record.
+
+    Returns
+    -------
+    str
+        ``''`` while the model's curve is the likelier law, else a clause for
+        the life message: the prediction follows the observed trend, with the
+        exponent of its power law in the Archard exposure.
+
+    """
+    p = float(wear_record.get('trend_probability', 0.0))
+    if not p > 0.5:
+        return ''
+    g = float(wear_record['trend_exponent'])
+    return (f'; lost motion grows unlike the wear model (as exposure^{g:.2f}, '
+            f'probability {p:.2f}): the prediction follows the observed trend')

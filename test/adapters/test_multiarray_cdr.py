@@ -87,11 +87,13 @@ def test_any_batch_round_trips_through_cdr(rows, seed):
     np.testing.assert_array_equal(decode_multiarray(payload).values(TE_BATCH), values)
 
 
+WEAR_ZEROS = np.zeros(len(WEAR_ESTIMATE.fields))
+
 BAD_VALUES = [
     ('batch without rows', TE_BATCH, np.zeros(4)),
     ('batch with a wrong field count', TE_BATCH, np.zeros((3, 5))),
-    ('record with a wrong field count', WEAR_ESTIMATE, np.zeros(14)),
-    ('record given as a batch', WEAR_ESTIMATE, np.zeros((2, 15))),
+    ('record with a wrong field count', WEAR_ESTIMATE, np.zeros(len(WEAR_ESTIMATE.fields) - 1)),
+    ('record given as a batch', WEAR_ESTIMATE, np.zeros((2, len(WEAR_ESTIMATE.fields)))),
 ]
 
 
@@ -105,8 +107,8 @@ def test_values_of_the_wrong_shape_are_refused_naming_the_layout(layout, values)
 BAD_PAYLOADS = [
     ('empty', b'', 'encapsulation'),
     ('unknown encapsulation', b'\x00\x07\x00\x00\x01\x00\x00\x00', 'encapsulation'),
-    ('cut inside the label', encode_multiarray(WEAR_ESTIMATE, np.zeros(15))[:20], 'ends inside'),
-    ('cut inside the data', encode_multiarray(WEAR_ESTIMATE, np.zeros(15))[:-8], 'ends inside'),
+    ('cut inside the label', encode_multiarray(WEAR_ESTIMATE, WEAR_ZEROS)[:20], 'ends inside'),
+    ('cut inside the data', encode_multiarray(WEAR_ESTIMATE, WEAR_ZEROS)[:-8], 'ends inside'),
 ]
 
 
@@ -118,7 +120,7 @@ def test_malformed_payloads_raise_invalid_input_saying_where(payload, fragment):
 
 
 def test_a_message_of_another_layout_is_refused_by_label():
-    decoded = decode_multiarray(encode_multiarray(WEAR_ESTIMATE, np.zeros(15)))
+    decoded = decode_multiarray(encode_multiarray(WEAR_ESTIMATE, WEAR_ZEROS))
     with pytest.raises(InvalidInput, match='te_features'):
         decoded.values(TE_FEATURES)
 

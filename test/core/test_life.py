@@ -11,9 +11,9 @@ import pytest
 
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.estimator import run_in_free_wear, WearEstimator
-from reducer_twin.core.life import (catalogue_life, event_state, limit_wear, LOST_MOTION_LIMIT,
-                                    remaining_life, threshold_met)
+from reducer_twin.core.estimator import EstimatorConfig, run_in_free_wear, WearEstimator
+from reducer_twin.core.life import (catalogue_life, event_state, GrowthTrendState, limit_wear,
+                                    LOST_MOTION_LIMIT, remaining_life, threshold_met)
 from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accuracy,
                                        interval_coverage, prognostic_horizon, relative_accuracy)
 from reducer_twin.core.params import ReducerParams
@@ -318,3 +318,90 @@ def test_interval_coverage_counts_the_true_rul_inside_p10_p90():
 def test_metrics_reject_malformed_arrays(t, pred, true):
     with pytest.raises(InvalidInput):
         prognostic_horizon(t, pred, true)
+
+
+# --------------------------------------------------------------------------- per-unit states
+
+
+def test_a_unit_built_looser_reaches_the_limit_at_less_wear(params, rated_rate):
+    x, P = state(5e-6)
+    nominal = remaining_life((x, P), rated_rate, params)
+    x3 = np.array([5e-6, 0.0, 3e-6])
+    P3 = np.diag([0.2e-6 ** 2, 0.05 ** 2, 1e-20])
+    loose = remaining_life((x3, P3), rated_rate, params)
+    assert loose.wear_limit == pytest.approx(nominal.wear_limit - 3e-6, rel=1e-9)
+    # Closed form: the run-in-free wear left to the limit shrinks by the as-built offset.
+    s = [float(run_in_free_wear(w, params.wear)) for w in (5e-6, nominal.wear_limit,
+                                                           loose.wear_limit)]
+    assert loose.p50 / nominal.p50 == pytest.approx((s[2] - s[0]) / (s[1] - s[0]), rel=0.02)
+
+
+def trend_state(probability, g, growth_arcmin=1.5, new_arcmin=0.5, exposure=1e-6):
+    mean = np.array([new_arcmin * ARCMIN, growth_arcmin * ARCMIN, g])
+    cov = np.diag([(0.01 * ARCMIN) ** 2, (0.01 * ARCMIN) ** 2, 0.01 ** 2])
+    return GrowthTrendState(probability, mean, cov, exposure)
+
+
+def test_a_certain_linear_trend_gives_the_linear_time_to_the_limit(params, rated_rate):
+    # 2 arcmin now after 1 um of exposure, growing linearly: 1 arcmin to go takes 2/3 um.
+    life = remaining_life(state(5e-6), rated_rate, params, trend=trend_state(1.0, 1.0))
+    expected = (1.0e-6 * (2.5 / 1.5) - 1.0e-6) / rated_rate
+    assert life.p50 == pytest.approx(expected, rel=0.03)
+
+
+def test_the_trend_and_the_wear_model_are_mixed_by_the_trend_probability(params, rated_rate):
+    x, P = state(5e-6, wear_sd=0.05e-6, log_scale_sd=0.01)
+    model = remaining_life((x, P), rated_rate, params).p50
+    trend = remaining_life((x, P), rated_rate, params, trend=trend_state(1.0, 1.0)).p50
+    mixed = remaining_life((x, P), rated_rate, params, trend=trend_state(0.5, 1.0),
+                           keep_samples=True)
+    assert min(model, trend) < mixed.p50 < max(model, trend)
+    near_model = np.abs(mixed.samples - model) < np.abs(mixed.samples - trend)
+    assert 0.4 < near_model.mean() < 0.6
+
+
+def test_a_bad_trend_is_refused(params, rated_rate):
+    with pytest.raises(InvalidInput, match='trend'):
+        remaining_life(state(5e-6), rated_rate, params, trend=trend_state(1.5, 1.0))
+    with pytest.raises(InvalidInput, match='trend'):
+        remaining_life(state(5e-6), rated_rate, params, trend=object())
+
+
+# --------------------------------------------------------------------------- calibration
+
+
+def test_the_p10_p90_interval_covers_the_true_life_from_both_sides(params):
+    """16 units drawn from the estimator's prior, 3 predictions each: both tails 2-22 %."""
+    rng = np.random.default_rng(12)
+    config = EstimatorConfig()
+    tables = model_tables(params)
+    below = above = total = 0
+    for seed in range(16):
+        scale = math.exp(rng.normal(0.0, 0.7))
+        as_built = rng.normal(0.0, config.as_built_std)
+        bias = rng.normal(0.0, config.fit_bias_std)
+        n = 2000
+        window = 30.0 * HOUR / scale
+        torque = params.rating.rated_torque * rng.uniform(0.6, 1.2, n)
+        speed = np.full(n, wear.reference_speed(params))
+        exposure = np.full(n, window)
+        increment = wear.wear_rate(torque, speed, 0.0, params) * exposure
+        true_w = wear.integrate_wear(exposure, torque, speed, params, rate_scale=scale)
+        lm = tables.lost_motion(true_w + as_built)
+        eol = int(np.argmax(lm >= LOST_MOTION_LIMIT))
+        z = lm + bias + rng.normal(0.0, 0.05 * ARCMIN, n)
+        est = WearEstimator(params, config)
+        marks = [int(f * eol) for f in (0.3, 0.5, 0.7)]
+        for k in range(marks[-1] + 1):
+            duty = DutySummary(10.0, window, float(increment[k]), 0, 0, 0, 0, 0)
+            est.step(WindowFeatures(k * 10.0, float(z[k]), 0.05 * ARCMIN, duty))
+            if k in marks:
+                life = remaining_life(est, est.duty_rate, params,
+                                      duty_rate_rel_std=est.duty_rate_rel_std,
+                                      rate_drift=config.log_rate_scale_noise_density)
+                true_rul = (eol - k - 0.5) * window
+                below += true_rul < life.p10
+                above += true_rul > life.p90
+                total += 1
+    assert 0.02 <= below / total <= 0.22
+    assert 0.02 <= above / total <= 0.22

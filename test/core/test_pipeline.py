@@ -107,7 +107,7 @@ def test_a_record_round_trip_through_json_keeps_every_value():
 def test_state_from_record_refuses_a_non_finite_state():
     rec = EstimatorStage(PARAMS).record(0.0)
     x, P = state_from_record(rec)
-    assert x.shape == (2,) and P.shape == (2, 2)
+    assert x.shape == (3,) and P.shape == (3, 3)
     rec['var_wear_m2'] = math.nan
     with pytest.raises(InvalidInput, match='non-finite'):
         state_from_record(rec)
@@ -297,6 +297,36 @@ def test_predictions_are_repeatable_for_the_same_record(windows, worn_record):
     stage = LifeStage(PARAMS)
     stage.observe_duty(windows[-1].duty)
     assert stage.process(worn_record) == stage.process(worn_record)
+
+
+def test_a_record_of_the_twin_before_per_unit_states_is_still_assessed(worn_record):
+    # A derived bag of an older twin carries [w, ln s] only: a nominal unit, no trend.
+    old = {k: worn_record[k] for k in (
+        'stamp_s', 'wear_m', 'wear_std_m', 'rate_scale', 'rate_scale_std', 'log_rate_scale',
+        'var_wear_m2', 'cov_wear_log_rate_m', 'var_log_rate', 'duty_rate_m_per_s',
+        'lost_motion_rad', 'lost_motion_obs_rad', 'exposure_s', 'updates', 'rejected')}
+    record, level, _ = LifeStage(PARAMS).process(old)
+    assert level in ('OK', 'WARN', 'ERROR')
+    assert 0.0 < record['p10_s'] <= record['p50_s'] <= record['p90_s']
+
+
+def test_the_life_message_says_when_the_prediction_follows_the_observed_trend(worn_record):
+    stage = LifeStage(PARAMS)
+    _, _, plain = stage.process({**worn_record, 'trend_probability': 0.1})
+    assert 'observed trend' not in plain
+    _, _, noted = stage.process({**worn_record, 'trend_probability': 0.95,
+                                 'trend_exponent': 1.02})
+    assert 'grows unlike the wear model (as exposure^1.02, probability 0.95)' in noted
+    assert 'the prediction follows the observed trend' in noted
+
+
+def test_the_duty_uncertainty_of_the_record_widens_the_interval(worn_record):
+    stage = LifeStage(PARAMS)
+    narrow, _, _ = stage.process({**worn_record, 'duty_rate_rel_std': 0.0})
+    wide, _, _ = stage.process({**worn_record, 'duty_rate_rel_std': 0.3})
+    assert wide['p90_s'] - wide['p10_s'] > narrow['p90_s'] - narrow['p10_s']
+    with pytest.raises(InvalidInput, match='duty_rate_rel_std'):
+        stage.process({**worn_record, 'duty_rate_rel_std': -0.1})
 
 
 @pytest.mark.parametrize('values, name', [

@@ -29,6 +29,9 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from window_records import feature_records
 
+PRIOR_WEAR = EstimatorStage(ReducerParams()).estimator.wear
+"""Wear of the prior a stage without state starts from [m]."""
+
 pytestmark = pytest.mark.timeout(60, method='thread')
 
 PARAMS = ReducerParams()
@@ -145,7 +148,8 @@ def test_features_in_give_the_offline_estimate_and_a_late_subscriber_gets_the_la
         ros, tmp_path, records):
     est = Estimator(ros, tmp_path)
     first = est.latest(est.wear)
-    assert first['updates'] == 0 and first['wear_m'] == 0.0, 'a new reducer at start'
+    # The prior of a reducer met without state: nothing observed yet.
+    assert first['updates'] == 0 and first['wear_m'] == PRIOR_WEAR, 'the prior at start'
     est.send(records[:10])
     last = est.latest(est.wear, records[9]['window_end_s'])
     assert len(est.wear) == 11, 'one estimate at start, one per window'

@@ -180,7 +180,8 @@ def estimator(ros, tmp_path, node_program):
 def test_a_killed_estimator_continues_from_its_state_without_counting_a_window_twice(
         estimator, records):
     first = estimator.start()
-    assert first['updates'] == 0 and first['wear_m'] == 0.0, 'a new reducer at first start'
+    assert first['updates'] == 0 and first['wear_m'] == EstimatorStage(PARAMS).estimator.wear, \
+        'the prior of a reducer without state at first start'
     estimator.send(records[:6])
     estimator.wait_saved(records[5]['window_end_s'])
     estimator.kill()                                  # mid-run: windows 7.. never sent
@@ -369,10 +370,10 @@ def test_a_killed_bringup_restarts_on_its_state_and_the_wear_carries_on(
             checked += 1
     assert checked >= 1
     # The estimate carries on from the restored one: never below it by more than its own
-    # 3 sd (a reset would drop it to the new-reducer prior, 0 um).
+    # 3 sd, and its update count goes on (a reset would return to the prior, 0 updates).
     sd = math.sqrt(state['P'][0][0])
     assert all(math.isfinite(e['wear_m']) for e in estimates)
-    assert state['x'][0] > 0.0
     assert min(e['wear_m'] for e in estimates) >= state['x'][0] - 3.0 * sd
+    assert min(e['updates'] for e in estimates) >= state['counters']['updates'] > 0
     final = decode_state(path.read_bytes(), path)   # Ctrl-C wrote the last queued state
     assert final['exposure_s'] >= estimates[-1]['exposure_s']

@@ -1,0 +1,220 @@
+"""
+Lost-motion growth learnt from the window history: the observed-trend model.
+
+The wear model (:mod:`.estimator`) predicts how lost motion grows with the
+Archard exposure ``A`` (``Σ duty.archard_increment``: run-in-free Archard
+wear at rate scale 1). A reducer may not follow it: its lost motion may grow
+linearly in the exposure, or be more concave than the model's curve (wear
+modes the model leaves out, a lost-motion mechanism other than flank wear).
+This module learns the growth law from the observations instead::
+
+    z = β + k·(A/A_now)^g + v        v ~ N(0, R)
+
+``β`` the unit's new lost motion, ``k`` the growth so far (at ``A_now``,
+the exposure of the latest window), ``g`` the exponent (``g = 1``: linear in
+the exposure). The physics is the prior: ``g ~ N(0.7, 0.3²)`` (the model's
+lost motion grows close to ``A^0.65-0.7`` once run in), ``β`` from the
+as-built range (0.3-1.0 arcmin), ``k ~ N(0, (3 arcmin)²)``.
+
+Given ``g`` the model is linear in ``(β, k)``, so the posterior is exact:
+the weighted sums ``Σ w·x xᵀ``, ``Σ w·z·x``, ``Σ w·z²`` with
+``x = [1, A^g]`` are kept for every ``g`` of a grid (0.2 .. 1.6 in steps of
+0.02), which makes an update O(grid) and the state a few hundred numbers,
+whatever the length of the history. The exposure is rescaled to ``A_now``
+only when the posterior is formed (a factor ``A_now^-g`` per ``g``). Each
+window's noise ``R`` is the one the wear estimator used for it (Student-t
+weight included), so the two models see the same data.
+
+:meth:`GrowthTrend.predictive` gives the one-step-ahead predictive density
+of a window, which the estimator compares with its own (prequential log
+score, Dawid 1984) to weigh the two models.
+"""
+
+import math
+
+import numpy as np
+
+from .units import ARCMIN, UM
+
+EXPONENTS = np.round(np.arange(0.2, 1.6 + 1e-9, 0.02), 10)
+"""Grid of growth exponents ``g``."""
+
+EXPONENT_PRIOR = (0.7, 0.3)
+"""Mean and sd of the prior on ``g`` (the model's curve, once run in)."""
+
+NEW_PRIOR = (0.65 * ARCMIN, 0.25 * ARCMIN)
+"""Mean and sd of the prior on ``β``, the unit's new lost motion [rad]."""
+
+GROWTH_PRIOR_SD = 3.0 * ARCMIN
+"""Sd of the zero-mean prior on ``k``, the growth to date [rad]."""
+
+EXPOSURE_UNIT = UM
+"""Unit of the exposure inside the sums [m] (keeps ``A^g`` and its square in range)."""
+
+
+class GrowthTrend:
+    """
+    Bayesian power law of lost motion in Archard exposure (see the module).
+
+    The sums are over windows with weight ``1/R``; the state is
+    :meth:`state` / :meth:`from_state`.
+    """
+
+    def __init__(self):
+        n = EXPONENTS.size
+        self.sxx = np.zeros((n, 3))   # Σw, Σw·a, Σw·a² with a = A^g
+        self.sxz = np.zeros((n, 2))   # Σw·z, Σw·z·a
+        self.szz = 0.0                # Σw·z²
+        self.windows = 0
+        self.exposure = 0.0           # A_now [m]
+        self._cached = None
+
+    # -- data ----------------------------------------------------------------------------
+
+    def add(self, exposure, z, R):
+        """
+        Take one window into the sums.
+
+        Parameters
+        ----------
+        exposure : float
+            Archard exposure of the window's middle since the estimator started [m].
+        z : float
+            Observed lost motion [rad].
+        R : float
+            Its noise variance [rad²] (> 0).
+
+        """
+        a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
+        w = 1.0 / R
+        self.sxx += w * np.stack([np.ones_like(a), a, a * a], axis=1)
+        self.sxz += w * z * np.stack([np.ones_like(a), a], axis=1)
+        self.szz += w * z * z
+        self.windows += 1
+        self._cached = None
+
+    def advance(self, exposure):
+        """Set the exposure now, ``A_now`` [m] (the end of the latest window)."""
+        exposure = max(float(exposure), self.exposure)
+        if exposure != self.exposure:
+            self.exposure = exposure
+            self._cached = None
+
+    # -- posterior -----------------------------------------------------------------------
+
+    def _posterior(self):
+        """Return :meth:`_compute` at ``A_now``, kept until the sums or ``A_now`` change."""
+        if self._cached is None:
+            self._cached = self._compute()
+        return self._cached
+
+    def _compute(self, exposure=None):
+        """
+        Posterior of ``(β, k)`` for every ``g``, with ``a`` rescaled to ``A_ref``.
+
+        Returns
+        -------
+        tuple
+            ``(log_weights (G,), means (G, 2), covariances (G, 2, 2), A_ref)``.
+
+        """
+        a_ref = (exposure if exposure is not None else self.exposure) / EXPOSURE_UNIT
+        scale = a_ref ** -EXPONENTS if a_ref > 0.0 else np.ones_like(EXPONENTS)
+        s0, s1, s2 = self.sxx.T
+        z0, z1 = self.sxz.T
+        beta0, beta_sd = NEW_PRIOR
+        prec0 = np.array([1.0 / beta_sd ** 2, 1.0 / GROWTH_PRIOR_SD ** 2])
+        L = np.empty((EXPONENTS.size, 2, 2))
+        L[:, 0, 0] = s0 + prec0[0]
+        L[:, 0, 1] = L[:, 1, 0] = s1 * scale
+        L[:, 1, 1] = s2 * scale * scale + prec0[1]
+        r = np.stack([z0 + prec0[0] * beta0, z1 * scale], axis=1)
+        cov = np.linalg.inv(L)
+        mean = np.einsum('gij,gj->gi', cov, r)
+        quad = self.szz + prec0[0] * beta0 ** 2 - np.einsum('gi,gi->g', mean, r)
+        _, logdet = np.linalg.slogdet(L)
+        g0, g_sd = EXPONENT_PRIOR
+        lw = -0.5 * quad - 0.5 * logdet - 0.5 * ((EXPONENTS - g0) / g_sd) ** 2
+        lw -= lw.max()
+        lw -= math.log(np.exp(lw).sum())
+        return lw, mean, cov, a_ref
+
+    def predictive(self, exposure, R):
+        """
+        One-step-ahead predictive density of a window at ``exposure``.
+
+        Parameters
+        ----------
+        exposure : float
+            Archard exposure of the window's middle [m].
+        R : float
+            Noise variance of the window [rad²].
+
+        Returns
+        -------
+        tuple of ndarray
+            ``(log_weights, means, variances)`` of the Gaussian mixture over ``g``.
+
+        """
+        lw, mean, cov, a_ref = self._posterior()
+        a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
+        if a_ref > 0.0:
+            a = a * a_ref ** -EXPONENTS
+        x = np.stack([np.ones_like(a), a], axis=1)
+        m = np.einsum('gi,gi->g', x, mean)
+        v = np.einsum('gi,gij,gj->g', x, cov, x) + R
+        return lw, m, v
+
+    def summary(self):
+        """
+        Moment-matched posterior of ``(β, k, g)`` at ``A_now``.
+
+        Returns
+        -------
+        tuple of ndarray
+            Mean ``[β [rad], k [rad], g]`` and its 3x3 covariance.
+
+        """
+        lw, mean, cov, _ = self._posterior()
+        w = np.exp(lw)
+        full = np.concatenate([mean, EXPONENTS[:, None]], axis=1)
+        m = w @ full
+        d = full - m
+        P = np.einsum('g,gi,gj->ij', w, d, d)
+        P[:2, :2] += np.einsum('g,gij->ij', w, cov)
+        return m, 0.5 * (P + P.T)
+
+    # -- persistence ---------------------------------------------------------------------
+
+    def state(self):
+        """Return the sums as plain JSON-able data."""
+        return {'sxx': [[float(v) for v in row] for row in self.sxx],
+                'sxz': [[float(v) for v in row] for row in self.sxz],
+                'szz': float(self.szz), 'windows': int(self.windows),
+                'exposure': float(self.exposure)}
+
+    @classmethod
+    def from_state(cls, d):
+        """
+        Restore from :meth:`state` output.
+
+        Raises
+        ------
+        ValueError
+            If the sums do not fit the exponent grid or are not finite.
+
+        """
+        out = cls()
+        sxx = np.array(d['sxx'], dtype=float)
+        sxz = np.array(d['sxz'], dtype=float)
+        if sxx.shape != out.sxx.shape or sxz.shape != out.sxz.shape:
+            raise ValueError(f'growth sums must have shapes {out.sxx.shape} and '
+                             f'{out.sxz.shape}, got {sxx.shape} and {sxz.shape}')
+        out.sxx, out.sxz = sxx, sxz
+        out.szz = float(d['szz'])
+        out.windows = int(d['windows'])
+        out.exposure = float(d['exposure'])
+        if not (np.all(np.isfinite(sxx)) and np.all(np.isfinite(sxz))
+                and math.isfinite(out.szz) and math.isfinite(out.exposure)):
+            raise ValueError('growth sums must be finite')
+        return out

@@ -1,0 +1,78 @@
+"""Tests of the observed-trend model: a power law of lost motion in Archard exposure."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from reducer_twin.core.growth import EXPONENTS, GrowthTrend
+from reducer_twin.core.units import ARCMIN
+
+NOISE = 0.03 * ARCMIN
+
+
+def history(g, beta=0.6 * ARCMIN, k=1.8 * ARCMIN, n=60, seed=0, step=3e-9):
+    """Return a trend fed with ``z = beta + k·(A/A_n)^g`` plus noise, and the exposures."""
+    rng = np.random.default_rng(seed)
+    exposure = step * (np.arange(n) + 0.5)
+    z = beta + k * (exposure / exposure[-1]) ** g + rng.normal(0.0, NOISE, n)
+    trend = GrowthTrend()
+    for a, zk in zip(exposure, z):
+        trend.add(a, zk, NOISE ** 2)
+    trend.advance(exposure[-1])
+    return trend, exposure, z
+
+
+@pytest.mark.parametrize('g', [0.4, 0.7, 1.0, 1.3])
+def test_the_exponent_new_lost_motion_and_growth_are_recovered(g):
+    trend, _, _ = history(g)
+    mean, cov = trend.summary()
+    sd = np.sqrt(np.diag(cov))
+    assert abs(mean[2] - g) < max(3.0 * sd[2], 0.05)
+    assert mean[0] == pytest.approx(0.6 * ARCMIN, abs=max(3.0 * sd[0], 0.05 * ARCMIN))
+    assert mean[1] == pytest.approx(1.8 * ARCMIN, abs=max(3.0 * sd[1], 0.05 * ARCMIN))
+
+
+def test_without_data_the_posterior_is_the_physics_prior():
+    mean, cov = GrowthTrend().summary()
+    # N(0.7, 0.3²) cut to the grid 0.2 .. 1.6: the mean moves up a little.
+    assert mean[2] == pytest.approx(0.7, abs=0.05)
+    assert math.sqrt(cov[2, 2]) == pytest.approx(0.3, abs=0.03)
+    assert mean[0] == pytest.approx(0.65 * ARCMIN, rel=1e-6)
+
+
+def test_the_predictive_density_of_the_next_window_brackets_it():
+    trend, exposure, z = history(1.0, n=80)
+    lw, m, v = trend.predictive(exposure[-1] * 1.05, NOISE ** 2)
+    w = np.exp(lw)
+    mean = w @ m
+    sd = math.sqrt(w @ (v + (m - mean) ** 2))
+    truth = 0.6 * ARCMIN + 1.8 * ARCMIN * 1.05
+    assert abs(mean - truth) < 3.0 * sd
+    assert sd < 0.1 * ARCMIN
+
+
+def test_the_sums_survive_a_json_round_trip_and_give_the_same_posterior():
+    trend, _, _ = history(0.8)
+    restored = GrowthTrend.from_state(json.loads(json.dumps(trend.state())))
+    for a, b in zip(trend.summary(), restored.summary()):
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize('change', [
+    {'sxx': [[0.0, 0.0, 0.0]]},
+    {'sxz': [[math.nan, 0.0]] * EXPONENTS.size},
+])
+def test_malformed_sums_are_refused(change):
+    state = GrowthTrend().state()
+    state.update(change)
+    with pytest.raises(ValueError):
+        GrowthTrend.from_state(state)
+
+
+def test_the_exposure_only_moves_forward():
+    trend = GrowthTrend()
+    trend.advance(2e-9)
+    trend.advance(1e-9)
+    assert trend.exposure == 2e-9
