@@ -428,13 +428,20 @@ class _ForkedChunks:
 
 def _columns(batch, names):
     """Position, velocity and effort columns of the given names (NaN where absent)."""
+    names = list(names)
+    fields = (batch.position, batch.velocity, batch.effort)
+    if names == list(batch.names):
+        return list(fields)     # read only downstream: no copy
     index = {n: k for k, n in enumerate(batch.names)}
+    have = [j for j, name in enumerate(names) if name in index]
+    take = [index[names[j]] for j in have]
     out = []
-    for values in (batch.position, batch.velocity, batch.effort):
+    for values in fields:
+        if len(have) == len(names):
+            out.append(values[:, take])
+            continue
         cols = np.full((len(batch), len(names)), np.nan)
-        for j, name in enumerate(names):
-            if name in index:
-                cols[:, j] = values[:, index[name]]
+        cols[:, have] = values[:, take]
         out.append(cols)
     return out
 
