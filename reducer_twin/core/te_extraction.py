@@ -125,6 +125,23 @@ class TEStream:
         """Count the link samples without a TE."""
         return int(self.valid.size - np.count_nonzero(self.valid))
 
+    def part(self, sl):
+        """
+        Return the samples ``sl`` of this stream (its counts kept whole).
+
+        Parameters
+        ----------
+        sl : slice
+            Which link samples.
+
+        Returns
+        -------
+        TEStream
+            Views of this stream's arrays.
+
+        """
+        return _slice(self, sl)
+
 
 def _as_stream(t, angle, name):
     """Check one stamp/angle pair: 1-D float arrays of equal length."""
