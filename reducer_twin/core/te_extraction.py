@@ -1084,21 +1084,26 @@ class WindowAnalyzer:
         n = torque.size
         period = float(np.median(np.diff(t))) if n > 1 else 0.0
         half = int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
-        idx = np.arange(n)
-        lo = np.maximum(idx - half, starts[win])
-        hi = np.minimum(idx + half + 1, ends[win])
+        width = 2 * half + 1
+        # The average over [i - half, i + half], cut at the window's ends: whole inside,
+        # computed again (and its length) near the ends of each window.
+        edge = _window_edges(starts, ends, half)
+        lo = np.maximum(edge - half, starts[win[edge]])
+        hi = np.minimum(edge + half + 1, ends[win[edge]])
         if half > 0:
             acc = np.concatenate([[0.0], np.cumsum(torque)])
-            smooth = (acc[hi] - acc[lo]) / (hi - lo)
+            smooth = np.empty(n)
+            if n > 2 * half:
+                smooth[half:n - half] = (acc[width:] - acc[:n + 1 - width]) / width
+            smooth[edge] = (acc[hi] - acc[lo]) / (hi - lo)
         else:
             smooth = torque
-        sigma = np.zeros(starts.size)
-        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            if b - a >= 3:
-                seg = torque[a:b]
-                d2 = seg[1:-1] - 0.5 * (seg[:-2] + seg[2:])
-                sigma[k] = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(1.5)
-        ambiguous = np.abs(smooth) < self.sign_sigmas * sigma[win] / np.sqrt(hi - lo)
+        sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
+                                         starts, ends - 2) / math.sqrt(1.5)
+        level = self.sign_sigmas * sigma
+        threshold = np.repeat(level / math.sqrt(width), ends - starts)
+        threshold[edge] = level[win[edge]] / np.sqrt(hi - lo)
+        ambiguous = np.abs(smooth) < threshold
         return smooth, ambiguous
 
     def _group_stats(self, z, torque, win, starts, ends, exclude=None):
@@ -1170,20 +1175,21 @@ class WindowAnalyzer:
         """
         reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
         n_par = energy.shape[1]
-        beta = np.zeros((n_win, n_par))
-        ident = np.zeros((n_win, n_par), dtype=bool)
-        noise = np.full(n_win, np.nan)
+        normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
+        pool_n = np.empty((n_win, n_par, n_par))
+        pool_r = np.empty((n_win, n_par))
+        pool_raw = np.empty((n_win, n_par))
         for k in range(n_win):
-            normal, rhs = reduced[k, :-1, :-1], reduced[k, :-1, -1]
-            self._pool_n = self._memory * self._pool_n + normal
-            self._pool_r = self._memory * self._pool_r + rhs
-            self._pool_raw = self._memory * self._pool_raw + energy[k]
-            beta[k], ident[k] = _solve_identifiable(self._pool_n, self._pool_r, self._pool_raw)
+            self._pool_n = pool_n[k] = self._memory * self._pool_n + normal[k]
+            self._pool_r = pool_r[k] = self._memory * self._pool_r + rhs[k]
+            self._pool_raw = pool_raw[k] = self._memory * self._pool_raw + energy[k]
+        beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
+        noise = np.full(n_win, np.nan)
+        free = dof - np.count_nonzero(ident, axis=1)
+        for k in np.flatnonzero(free > 0).tolist():
             b = beta[k]
-            rss = reduced[k, -1, -1] - 2.0 * b @ rhs + b @ normal @ b
-            free = dof[k] - np.count_nonzero(ident[k])
-            if free > 0:
-                noise[k] = max(rss, 0.0) / free
+            rss = reduced[k, -1, -1] - 2.0 * b @ rhs[k] + b @ normal[k] @ b
+            noise[k] = max(rss, 0.0) / free[k]
         return beta, ident, noise
 
     def _hysteresis(self, stats, beta, noise):
@@ -1335,6 +1341,66 @@ def _whole(name, value, lo, hi):
     if not whole or not lo <= value <= hi:
         raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
     return int(value)
+
+
+def _window_edges(starts, ends, half):
+    """Indices within ``half`` samples of either end of their window, ascending."""
+    if half <= 0:
+        return np.zeros(0, dtype=np.int64)
+    offsets = np.arange(half)
+    head = np.minimum(starts[:, None] + offsets, ends[:, None] - 1)
+    tail = np.maximum(ends[:, None] - half + offsets, starts[:, None])
+    return np.unique(np.concatenate([head.ravel(), tail.ravel()]))
+
+
+def _window_medians(values, starts, ends):
+    """
+    Median of ``values[starts[k]:ends[k]]`` per window, 0 for a window with none.
+
+    Windows of equal length take one call of :func:`numpy.median` along rows (the
+    same partition and mean as one window at a time).
+    """
+    out = np.zeros(starts.size)
+    lengths = ends - starts
+    for m in np.unique(lengths[lengths > 0]).tolist():
+        rows = np.flatnonzero(lengths == m)
+        out[rows] = np.median(values[starts[rows, None] + np.arange(m)], axis=1)
+    return out
+
+
+def _solve_identifiable_many(normal, rhs, energy):
+    """
+    :func:`_solve_identifiable` for a stack of systems, shape (W, P, P), (W, P), (W, P).
+
+    The common case, every parameter identifiable, takes one stacked inverse;
+    the other systems go through :func:`_solve_identifiable` one by one. The
+    results are those of :func:`_solve_identifiable` for each system.
+    """
+    n_sys, n_par = rhs.shape
+    beta = np.zeros((n_sys, n_par))
+    ident = np.zeros((n_sys, n_par), dtype=bool)
+    todo = np.ones(n_sys, dtype=bool)
+    full = np.flatnonzero((energy > 0.0).all(axis=1))
+    if full.size:
+        scale = 1.0 / np.sqrt(energy[full])
+        a = normal[full] * (scale[:, :, None] * scale[:, None, :])
+        try:
+            inv = np.linalg.inv(a)
+        except np.linalg.LinAlgError:
+            inv = None
+        if inv is not None:
+            with np.errstate(divide='ignore', invalid='ignore'):
+                share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
+            share = np.where(np.isfinite(share), share, 0.0)
+            b = rhs[full] * scale
+            for j in np.flatnonzero(share.min(axis=1) >= _MIN_IDENTIFIABILITY).tolist():
+                k = full[j]
+                beta[k] = inv[j] @ b[j] * scale[j]
+                ident[k] = True
+                todo[k] = False
+    for k in np.flatnonzero(todo).tolist():
+        beta[k], ident[k] = _solve_identifiable(normal[k], rhs[k], energy[k])
+    return beta, ident
 
 
 def _solve_identifiable(normal, rhs, energy):
