@@ -1372,35 +1372,59 @@ def _solve_identifiable_many(normal, rhs, energy):
     """
     :func:`_solve_identifiable` for a stack of systems, shape (W, P, P), (W, P), (W, P).
 
-    The common case, every parameter identifiable, takes one stacked inverse;
-    the other systems go through :func:`_solve_identifiable` one by one. The
-    results are those of :func:`_solve_identifiable` for each system.
+    Each round inverts the systems that keep the same parameters as one stack (the
+    same LAPACK call per matrix as one at a time), so the results are those of
+    :func:`_solve_identifiable` for each system.
     """
     n_sys, n_par = rhs.shape
+    ident = energy > 0.0
+    scale = np.where(ident, 1.0 / np.sqrt(np.where(ident, energy, 1.0)), 0.0)
+    a = normal * (scale[:, :, None] * scale[:, None, :])
+    b = rhs * scale
     beta = np.zeros((n_sys, n_par))
-    ident = np.zeros((n_sys, n_par), dtype=bool)
-    todo = np.ones(n_sys, dtype=bool)
-    full = np.flatnonzero((energy > 0.0).all(axis=1))
-    if full.size:
-        scale = 1.0 / np.sqrt(energy[full])
-        a = normal[full] * (scale[:, :, None] * scale[:, None, :])
-        try:
-            inv = np.linalg.inv(a)
-        except np.linalg.LinAlgError:
-            inv = None
-        if inv is not None:
-            with np.errstate(divide='ignore', invalid='ignore'):
-                share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
-            share = np.where(np.isfinite(share), share, 0.0)
-            b = rhs[full] * scale
-            for j in np.flatnonzero(share.min(axis=1) >= _MIN_IDENTIFIABILITY).tolist():
-                k = full[j]
-                beta[k] = inv[j] @ b[j] * scale[j]
-                ident[k] = True
-                todo[k] = False
-    for k in np.flatnonzero(todo).tolist():
-        beta[k], ident[k] = _solve_identifiable(normal[k], rhs[k], energy[k])
+    bits = 1 << np.arange(n_par)
+    active = ident.any(axis=1)
+    while active.any():
+        rows = np.flatnonzero(active)
+        keys = ident[rows] @ bits
+        for key in np.unique(keys).tolist():
+            group = rows[keys == key]
+            idx = np.flatnonzero(ident[group[0]])
+            inv, share = _identifiability(a[group[:, None, None], idx[:, None], idx])
+            worst = np.argmin(share, axis=1)
+            for j, k in enumerate(group.tolist()):
+                if share[j, worst[j]] >= _MIN_IDENTIFIABILITY:
+                    beta[k, idx] = inv[j] @ b[k, idx] * scale[k, idx]
+                    active[k] = False
+                else:
+                    ident[k, idx[worst[j]]] = False
+                    active[k] = ident[k].any()
     return beta, ident
+
+
+def _identifiability(sub):
+    """
+    Inverses of a stack of scaled normal matrices and each parameter's unexplained share.
+
+    A singular matrix gets a share of 0 for every parameter (as in
+    :func:`_solve_identifiable`).
+    """
+    try:
+        inv = np.linalg.inv(sub)
+    except np.linalg.LinAlgError:
+        inv = np.zeros_like(sub)
+        share = np.zeros(sub.shape[:2])
+        for j in range(sub.shape[0]):
+            try:
+                inv[j] = np.linalg.inv(sub[j])
+            except np.linalg.LinAlgError:
+                continue
+            with np.errstate(divide='ignore'):
+                share[j] = 1.0 / np.diag(inv[j])
+        return inv, np.where(np.isfinite(share), share, 0.0)
+    with np.errstate(divide='ignore'):
+        share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
+    return inv, np.where(np.isfinite(share), share, 0.0)
 
 
 def _solve_identifiable(normal, rhs, energy):
