@@ -1344,7 +1344,7 @@ def _whole(name, value, lo, hi):
 
 
 def _window_edges(starts, ends, half):
-    """Indices within ``half`` samples of either end of their window, ascending."""
+    """Return the indices within ``half`` samples of either end of their window."""
     if half <= 0:
         return np.zeros(0, dtype=np.int64)
     offsets = np.arange(half)
