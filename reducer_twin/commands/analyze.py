@@ -59,9 +59,9 @@ def add_parser(sub):
     p.add_argument('--overwrite', action='store_true',
                    help='replace derived bags already in --out')
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
-                   help='run the estimator and life stages, and the bag reading, in '
-                        'processes of their own beside the analysing one (auto: one bag at '
-                        'a time on a machine of 2 or more cores)')
+                   help='run the estimator and life stages in a process of their own beside '
+                        'the analysing one (auto: one bag at a time on a machine of 2 or more '
+                        'cores); yes also reads the bag in a third process')
     p.set_defaults(run=run)
 
 
@@ -95,8 +95,10 @@ def _analyze_all(args, settings, outs, worker):
         for bag, out in zip(args.bags, outs):
             stage = worker if worker is not None and worker.alive else worker is not None
             try:
+                # A reading process costs more CPU (the decoded arrays go through a
+                # pipe) than it takes off this one: only on request.
                 results[bag] = analyze_bag(bag, out, settings, args.overwrite, stage,
-                                           reader_process=worker is not None)
+                                           reader_process=args.stage_process == 'yes')
             except ReducerTwinError as err:
                 results[bag] = err
         return results
