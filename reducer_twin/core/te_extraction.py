@@ -490,7 +490,7 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
         on0 = on1 = tq == tm[0]
         bridged = np.zeros(tq.size, dtype=bool)
     else:
-        i0 = np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, tm.size - 2)
+        i0 = _step_index(tm, tq)
         i1 = i0 + 1
         on0, on1 = tq == tm[i0], tq == tm[i1]
         bridged = ((tm[i1] - tm[i0] <= max_gap_s) & (tq >= tm[0] - extrapolate_s)
@@ -504,6 +504,27 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
     base = run_m if run_m is not None else np.zeros(tm.size, dtype=np.int64)
     run_at = np.where(on1 & ~on0, base[i1], base[i0])
     return motor_at, run_at, ok
+
+
+def _step_index(tm, tq):
+    """
+    ``clip(searchsorted(tm, tq, 'right') - 1, 0, M - 2)`` for increasing stamps ``tm``.
+
+    Query ``k`` of a stream shifted by less than a step (a link stream read at its
+    stamps plus the time offset) lies in step ``k`` or ``k - 1``: that is checked
+    with two comparisons per query instead of a binary search.
+    """
+    m = tm.size
+    if tq.size == m and m > 2:
+        if (tm[:-1] <= tq[:-1]).all() and (tq[:-1] < tm[1:]).all() and tq[-1] >= tm[-2]:
+            i0 = np.arange(m)
+            i0[-1] = m - 2
+            return i0
+        if tq[0] < tm[1] and (tm[:-1] <= tq[1:]).all() and (tq[1:] < tm[1:]).all():
+            i0 = np.arange(-1, m - 1)
+            i0[0] = 0
+            return i0
+    return np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, m - 2)
 
 
 def _finite(name, value, unit, allowed, test):
