@@ -506,6 +506,23 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
     return motor_at, run_at, ok
 
 
+def _first_index(test, start, stop, block, default):
+    """
+    First index in ``[start, stop)`` where ``test(a, b)`` (a mask of ``[a, b)``) holds.
+
+    Blocks of ``block`` samples, four times longer each time, are tested in turn, so a
+    hit near ``start`` does not cost a test of the whole span; ``default`` if none.
+    """
+    a = start
+    while a < stop:
+        b = min(stop, a + block)
+        hit = np.flatnonzero(test(a, b))
+        if hit.size:
+            return a + int(hit[0])
+        a, block = b, 4 * block
+    return default
+
+
 def _step_index(tm, tq):
     """
     ``clip(searchsorted(tm, tq, 'right') - 1, 0, M - 2)`` for increasing stamps ``tm``.
@@ -985,13 +1002,20 @@ class WindowAnalyzer:
             if self.window == 'duration':
                 cand.append((d, 'duration'))
             else:
-                turned = np.abs(theta[s:x] - theta[s]) >= TWO_PI
-                r = s + int(np.argmax(turned)) if turned.any() else n
+                # Searched in growing blocks from about one window: the first index is
+                # the same as over the whole span up to x.
+                block = max(d, s + self.min_window_samples) - s + 2
+                start_theta = theta[s]
+                r = _first_index(lambda a, b: np.abs(theta[a:b] - start_theta) >= TWO_PI,
+                                 s, x, block, n)
                 cand.append((r, 'revolution'))
                 if self.window == 'auto':
-                    moving = np.abs(speed[s:x]) >= self.min_speed
-                    moving &= np.sign(speed[s:x]) == np.sign(speed[s])
-                    c = s + int(np.argmin(moving)) if not moving.all() else n
+                    direction = np.sign(speed[s])
+
+                    def stopped(a, b):
+                        v = speed[a:b]
+                        return ~((np.abs(v) >= self.min_speed) & (np.sign(v) == direction))
+                    c = _first_index(stopped, s, x, block, n)
                     cand.append((d, 'duration') if c <= d else (c, 'motion'))
             # Too few samples (a low rate) for the torque bins: the window goes on.
             shortest = s + self.min_window_samples
@@ -1024,13 +1048,14 @@ class WindowAnalyzer:
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
         loaded = np.flatnonzero(torque > 0.1 * self.rated_torque)
+        win_loaded = win[loaded]
         fitted = np.zeros(loaded.size)
-        for row, coef in zip(x, beta.T):
-            fitted += row[loaded] * coef[win[loaded]]
+        for row, coef in zip(x[:, loaded], beta.T[:, win_loaded]):
+            fitted += row * coef
         resid = y[loaded] - fitted
         with np.errstate(invalid='ignore', divide='ignore'):
-            loaded_mean = (np.bincount(win[loaded], resid, n_win)
-                           / np.bincount(win[loaded], minlength=n_win))
+            loaded_mean = (np.bincount(win_loaded, resid, n_win)
+                           / np.bincount(win_loaded, minlength=n_win))
         duty = self._duty(torque, speed, dt, starts)
         te_max = np.maximum.reduceat(y, starts)
         te_min = np.minimum.reduceat(y, starts)
@@ -1078,7 +1103,7 @@ class WindowAnalyzer:
                 np.multiply(2.0 * s_h, c_h, out=s_k)
                 np.multiply(c_h - s_h, c_h + s_h, out=c_k)
             else:
-                phase = order * phi
+                phase = order * phi if order != 1 else phi
                 np.sin(phase, out=s_k)
                 np.cos(phase, out=c_k)
             done[order] = (s_k, c_k)
