@@ -193,6 +193,9 @@ def _clock_resets(t, newest=None):
         Each index starts a new stream; the newest stamp restarts there.
 
     """
+    if t.size < 2 or (np.diff(t) > 0.0).all():
+        # Increasing stamps (the common case) fall back only against ``newest``, if at all.
+        return [0] if t.size and newest is not None and t[0] <= newest - CLOCK_RESET_S else []
     out, start = [], 0
     while start < t.size:
         head = np.nan if newest is None else newest
