@@ -1174,12 +1174,22 @@ class WindowAnalyzer:
         b = np.clip(b, 0, self.torque_bins - 1)
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
         u = size - self.centres[b]
-        count = np.bincount(gid, minlength=n_groups + 1)[:-1].astype(float)
-        s0 = np.stack([np.bincount(gid, row, n_groups + 1)[:-1] for row in z], axis=1)
-        s1 = np.stack([np.bincount(gid, u * row, n_groups + 1)[:-1] for row in z], axis=1)
+        # The smoothed torque stays in one bin for tens of samples: sum over those runs of
+        # one group first (contiguous), then add the runs of each group.
+        first = np.flatnonzero(np.concatenate([[True], gid[1:] != gid[:-1]]))
+        g_run = gid[first]
+
+        def group_sums(rows):
+            runs = np.add.reduceat(rows, first, axis=-1)
+            if runs.ndim == 1:
+                return np.bincount(g_run, runs, n_groups + 1)[:-1]
+            return np.stack([np.bincount(g_run, r, n_groups + 1)[:-1] for r in runs], axis=1)
+        count = np.bincount(g_run, np.diff(np.append(first, gid.size)), n_groups + 1)[:-1]
+        s0 = group_sums(z)
+        s1 = group_sums(u * z)
         with np.errstate(invalid='ignore', divide='ignore'):
-            u_mean = np.where(count > 0, np.bincount(gid, u, n_groups + 1)[:-1] / count, 0.0)
-            s_uu = np.bincount(gid, u * u, n_groups + 1)[:-1] - count * u_mean ** 2
+            u_mean = np.where(count > 0, group_sums(u) / count, 0.0)
+            s_uu = group_sums(u * u) - count * u_mean ** 2
             sloped = (count >= 3) & (s_uu > 1e-12 * count * self.centres.max() ** 2)
             s1c = s1 - u_mean[:, None] * s0
             proj0 = np.where(count[:, None] > 0, s0 / np.sqrt(count)[:, None], 0.0)
