@@ -1005,13 +1005,11 @@ class WindowAnalyzer:
             if self.window == 'duration':
                 cand.append((d, 'duration'))
             else:
-                # Searched in growing blocks from about one window: the first index is
-                # the same as over the whole span up to x.
-                block = max(d, s + self.min_window_samples) - s + 2
-                start_theta = theta[s]
-                r = _first_index(lambda a, b: np.abs(theta[a:b] - start_theta) >= TWO_PI,
-                                 s, x, block, n)
-                cand.append((r, 'revolution'))
+                # Searched in growing blocks from about one window; the turn only up to
+                # where the window ends anyway: a revolution found later is never the end.
+                shortest = s + self.min_window_samples
+                block = max(d, shortest) - s + 2
+                turn_until = x
                 if self.window == 'auto':
                     direction = np.sign(speed[s])
 
@@ -1019,7 +1017,14 @@ class WindowAnalyzer:
                         v = speed[a:b]
                         return ~((np.abs(v) >= self.min_speed) & (np.sign(v) == direction))
                     c = _first_index(stopped, s, x, block, n)
-                    cand.append((d, 'duration') if c <= d else (c, 'motion'))
+                    last = (d, 'duration') if c <= d else (c, 'motion')
+                    turn_until = min(x, max(last[0], shortest) + 1)
+                start_theta = theta[s]
+                r = _first_index(lambda a, b: np.abs(theta[a:b] - start_theta) >= TWO_PI,
+                                 s, turn_until, block, n)
+                cand.append((r, 'revolution'))
+                if self.window == 'auto':
+                    cand.append(last)
             # Too few samples (a low rate) for the torque bins: the window goes on.
             shortest = s + self.min_window_samples
             cand = [(c if r in ('gap', 'max') else max(c, shortest), r) for c, r in cand]
