@@ -426,10 +426,10 @@ class _ForkedChunks:
             self._proc.join(timeout=5)
 
 
-def _columns(batch, names):
+def _columns(batch, names, fields=3):
     """Position, velocity and effort columns of the given names (NaN where absent)."""
     names = list(names)
-    fields = (batch.position, batch.velocity, batch.effort)
+    fields = (batch.position, batch.velocity, batch.effort)[:fields]
     if names == list(batch.names):
         return list(fields)     # read only downstream: no copy
     index = {n: k for k, n in enumerate(batch.names)}
@@ -756,13 +756,13 @@ class _Run:
             if plan.motor_topic is None:
                 if link is None or not len(link):
                     continue
-                pos = _columns(link, link_names[2 * k:2 * k + 2])[0]
+                pos = _columns(link, link_names[2 * k:2 * k + 2], fields=1)[0]
                 r = motor_travel_ratio(pos[:, 0], pos[:, 1])
             else:
                 if link is None or motor is None or not len(link) or not len(motor):
                     continue
-                r = motor_travel_ratio(_columns(link, [joint])[0][:, 0],
-                                       _columns(motor, [plan.motor_names[k]])[0][:, 0])
+                r = motor_travel_ratio(_columns(link, [joint], fields=1)[0][:, 0],
+                                       _columns(motor, [plan.motor_names[k]], fields=1)[0][:, 0])
             if not math.isfinite(r):
                 continue
             found = 'raw' if r > math.sqrt(ratio) else 'output'

@@ -808,10 +808,14 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
     """
     if source == 'link':
         return link_effort
+    if source == 'auto':
+        known = np.isfinite(link_effort)
+        if known.all():
+            return link_effort
     motor = motor_effort * motor_effort_scale if motor_effort_scale != 1.0 else motor_effort
     if source == 'motor':
         return motor
-    return np.where(np.isfinite(link_effort), link_effort, motor)
+    return np.where(known, link_effort, motor)
 
 
 def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
