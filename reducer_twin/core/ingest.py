@@ -808,7 +808,7 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
     """
     if source == 'link':
         return link_effort
-    if source == 'auto':
+    if source != 'motor':
         known = np.isfinite(link_effort)
         if known.all():
             return link_effort
