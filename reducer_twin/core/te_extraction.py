@@ -1286,8 +1286,8 @@ class WindowAnalyzer:
         size, rate = np.abs(torque), np.abs(speed)
         exponent = self.params.rating.life_exponent
         archard = wear_rate(size, rate, 0.0, self.params)
-        rows = np.stack([dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt])
-        sums = np.add.reduceat(rows, starts, axis=1).T
+        rows = (dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt)
+        sums = np.stack([np.add.reduceat(row, starts) for row in rows], axis=1)
         peak = np.maximum.reduceat(size, starts)
         out = []
         for (dur, s_t, s_w, s_cube, s_wear), top in zip(sums.tolist(), peak.tolist()):
