@@ -809,8 +809,8 @@ class _Run:
             self._windows(joint, front.flush())
             for log_ns, values in front.te_messages(None, final=True):
                 self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+        self._copy_truth()     # while the estimator worker finishes
         self._drain(self.backs.finish())
-        self._copy_truth()
         self._finish(chunks, link_clean, motor_clean)
         return self.results
 
