@@ -1055,15 +1055,14 @@ class WindowAnalyzer:
         torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
-        loaded = np.flatnonzero(torque > 0.1 * self.rated_torque)
-        win_loaded = win[loaded]
-        fitted = np.zeros(loaded.size)
-        for row, coef in zip(x[:, loaded], beta.T[:, win_loaded]):
-            fitted += row * coef
-        resid = y[loaded] - fitted
+        # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
+        # within a window), over the loaded samples.
+        loaded = torque > 0.1 * self.rated_torque
+        x_sums = np.add.reduceat(np.where(loaded, x, 0.0), starts, axis=1)
+        y_sums = np.add.reduceat(np.where(loaded, y, 0.0), starts)
         with np.errstate(invalid='ignore', divide='ignore'):
-            loaded_mean = (np.bincount(win_loaded, resid, n_win)
-                           / np.bincount(win_loaded, minlength=n_win))
+            loaded_mean = ((y_sums - np.einsum('wj,jw->w', beta, x_sums))
+                           / np.add.reduceat(loaded, starts))
         duty = self._duty(torque, speed, dt, starts)
         te_max = np.maximum.reduceat(y, starts)
         te_min = np.minimum.reduceat(y, starts)
