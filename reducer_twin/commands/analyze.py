@@ -28,7 +28,7 @@ import os
 from pathlib import Path
 import sys
 
-from reducer_twin.commands.common import print_json, reuse_freed_memory
+from reducer_twin.commands.common import print_json
 from reducer_twin.commands.simulate import check_out_dir
 from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
 
@@ -128,9 +128,10 @@ def run(args):
     check_out_dir(args.out, args.overwrite)
     if args.report:
         check_out_dir(args.report, True, '--report')
-    reuse_freed_memory()
     from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
     defer_filterpy_extras()
+    from reducer_twin.commands.common import reuse_freed_memory
+    reuse_freed_memory()
     # Forked before the rest is imported: the worker loads filterpy meanwhile.
     jobs = min(args.jobs, len(args.bags))
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) else None
