@@ -211,7 +211,6 @@ def test_windows_before_the_time_offset_is_learnt_equal_a_te_monitor_run(sim, an
     np.testing.assert_array_equal(np.array(live), offline[:len(live)])
 
 
-
 def test_a_motor_step_of_more_than_half_a_turn_is_fed_in_the_nodes_pieces_until_calibrated(
         sim, tmp_path):
     """
@@ -252,6 +251,7 @@ def test_a_motor_step_of_more_than_half_a_turn_is_fed_in_the_nodes_pieces_until_
     offline = analyze_bag(root, tmp_path / 'd').joints['joint_1'].features
     assert calibration.applied is not None and len(live) >= 5
     np.testing.assert_array_equal(np.array(live), offline[:len(live)])
+
 
 def test_the_worker_and_reader_processes_give_identical_results(sim, analysed, tmp_path):
     _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
