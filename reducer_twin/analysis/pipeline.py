@@ -509,15 +509,22 @@ class _ForkedChunks:
             self._proc.join(timeout=5)
 
 
-def _columns(batch, names):
+def _columns(batch, names, fields=3):
     """Position, velocity and effort columns of the given names (NaN where absent)."""
+    names = list(names)
+    fields = (batch.position, batch.velocity, batch.effort)[:fields]
+    if names == list(batch.names):
+        return list(fields)     # read only downstream: no copy
     index = {n: k for k, n in enumerate(batch.names)}
+    have = [j for j, name in enumerate(names) if name in index]
+    take = [index[names[j]] for j in have]
     out = []
-    for values in (batch.position, batch.velocity, batch.effort):
+    for values in fields:
+        if len(have) == len(names):
+            out.append(values[:, take])
+            continue
         cols = np.full((len(batch), len(names)), np.nan)
-        for j, name in enumerate(names):
-            if name in index:
-                cols[:, j] = values[:, index[name]]
+        cols[:, have] = values[:, take]
         out.append(cols)
     return out
 
@@ -836,13 +843,13 @@ class _Run:
             if plan.motor_topic is None:
                 if link is None or not len(link):
                     continue
-                pos = _columns(link, link_names[2 * k:2 * k + 2])[0]
+                pos = _columns(link, link_names[2 * k:2 * k + 2], fields=1)[0]
                 r = motor_travel_ratio(pos[:, 0], pos[:, 1])
             else:
                 if link is None or motor is None or not len(link) or not len(motor):
                     continue
-                r = motor_travel_ratio(_columns(link, [joint])[0][:, 0],
-                                       _columns(motor, [plan.motor_names[k]])[0][:, 0])
+                r = motor_travel_ratio(_columns(link, [joint], fields=1)[0][:, 0],
+                                       _columns(motor, [plan.motor_names[k]], fields=1)[0][:, 0])
             if not math.isfinite(r):
                 continue
             found = 'raw' if r > math.sqrt(ratio) else 'output'
@@ -890,8 +897,8 @@ class _Run:
             self._windows(joint, front.flush())
             for log_ns, values in front.te_messages(None, final=True):
                 self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+        self._copy_truth()     # while the estimator worker finishes
         self._drain(self.backs.finish())
-        self._copy_truth()
         self._finish(chunks, link_clean, motor_clean)
         return self.results
 

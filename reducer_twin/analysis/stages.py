@@ -132,31 +132,81 @@ class JointFront:
         if not keep.all():
             t_ns, motor, link, effort, velocity = (a[keep] for a in
                                                    (t_ns, motor, link, effort, velocity))
+        else:   # columns of a multi-joint message: every later pass is faster on copies
+            t_ns, motor, link, effort, velocity = (np.ascontiguousarray(a) for a in
+                                                   (t_ns, motor, link, effort, velocity))
         if t_ns.size == 0:
             return [], None
         if self.period_ns is None and t_ns.size > 16:
             self.period_ns = float(np.median(np.diff(t_ns[:4096])))
         self.samples += t_ns.size
-        windows, te_parts = [], []
-        piece = t_ns.size
-        if self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
-                self.period_ns:
-            piece = max(1, int(round(ANALYSIS_PERIOD_S * 1e9 / max(self.period_ns, 1.0))))
+        n = t_ns.size
         t_s = t_ns * 1e-9
-        start = 0
+        windows, te_parts, start = [], [], 0
+        if self._calibrating():
+            if not _cut_free(t_ns, motor, link):
+                return self._feed_pieces(t_ns, t_s, motor, link, effort, velocity)
+            # Until the offset is learnt the TE of a piece does not depend on where the
+            # pieces are cut (see _cut_free): computed once, it is fed to the window
+            # analysis in the node's pieces.
+            piece = self._piece()
+            reference = self.extractor.last_te
+            stream = self.extractor.update(t_s, motor, t_s, link)
+            while start < n and self._calibrating():
+                windows += self._analyze(stream.part(slice(start, start + piece)),
+                                         effort[start:start + piece],
+                                         velocity[start:start + piece])
+                start += piece
+            if start < n and self.calibration.applied is not None:
+                # Learnt: the offset applies from the next piece on, with the TE kept
+                # continuous with the last one before it.
+                valid = np.flatnonzero(stream.valid[:start])
+                self.extractor.last_te = float(stream.te[valid[-1]]) if valid.size \
+                    else reference
+                te_parts.append(_te_rows(t_ns[:start], stream.part(slice(0, start)),
+                                         effort[:start]))
+                t_ns, t_s, motor, link, effort, velocity = (
+                    a[start:] for a in (t_ns, t_s, motor, link, effort, velocity))
+                start = 0
+                stream = None
+        else:
+            stream = None
+        if stream is None:
+            stream = self.extractor.update(t_s, motor, t_s, link)
+        if start < t_ns.size:
+            windows += self._analyze(stream.part(slice(start, None)), effort[start:],
+                                     velocity[start:])
+        te_parts.append(_te_rows(t_ns, stream, effort))
+        rows = te_parts[0] if len(te_parts) == 1 else np.concatenate(te_parts)
+        self._keep_for_report(rows)
+        return windows, rows
+
+    def _calibrating(self):
+        """Whether the stream still goes in the node's pieces (time offset not learnt)."""
+        return self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
+            bool(self.period_ns)
+
+    def _piece(self):
+        return max(1, int(round(ANALYSIS_PERIOD_S * 1e9 / max(self.period_ns, 1.0))))
+
+    def _analyze(self, stream, effort, velocity):
+        found = self.analyzer.update(stream, effort, velocity)
+        for f in found:
+            self.calibration.observe(f)
+        self.windows += len(found)
+        return found
+
+    def _feed_pieces(self, t_ns, t_s, motor, link, effort, velocity):
+        """Feed stamps that do not increase in the node's pieces, TE piece by piece."""
+        windows, te_parts = [], []
+        piece, start = self._piece(), 0
         while start < t_ns.size:
-            if self.calibration.applied is not None or self.windows >= CALIBRATION_WINDOWS:
+            if not self._calibrating():
                 piece = t_ns.size
             sl = slice(start, start + piece)
             stream = self.extractor.update(t_s[sl], motor[sl], t_s[sl], link[sl])
-            found = self.analyzer.update(stream, effort[sl], velocity[sl])
-            for f in found:
-                self.calibration.observe(f)
-            self.windows += len(found)
-            windows += found
-            valid = stream.valid
-            te_parts.append(np.column_stack([t_ns[sl][valid], stream.output_angle[valid],
-                                             stream.te[valid], effort[sl][valid]]))
+            windows += self._analyze(stream, effort[sl], velocity[sl])
+            te_parts.append(_te_rows(t_ns[sl], stream, effort[sl]))
             start += piece
         rows = te_parts[0] if len(te_parts) == 1 else np.concatenate(te_parts)
         self._keep_for_report(rows)
@@ -204,6 +254,29 @@ class JointFront:
         self._te = [rest] if rest.shape[0] else []
         self._te_n = rest.shape[0]
         return out
+
+
+def _cut_free(t_ns, motor, link):
+    """
+    Whether TE extraction gives the same TE for these samples whole or cut in pieces.
+
+    True when the stamps increase and neither angle steps by half a turn or more
+    between samples: with no time offset, then nothing is unwrapped or dropped inside
+    a piece, and the TE is continued across piece boundaries as across gaps.
+    """
+    if t_ns.size < 2:
+        return True
+    return bool((np.diff(t_ns) > 0).all() and np.abs(np.diff(motor)).max() < np.pi
+                and np.abs(np.diff(link)).max() < np.pi)
+
+
+def _te_rows(t_ns, stream, effort):
+    """TE rows ``(t_ns, output angle, TE, torque)`` of a stream's valid samples."""
+    valid = stream.valid
+    if valid.all():
+        return np.column_stack([t_ns, stream.output_angle, stream.te, effort])
+    return np.column_stack([t_ns[valid], stream.output_angle[valid], stream.te[valid],
+                            effort[valid]])
 
 
 def te_values(block):

@@ -70,9 +70,9 @@ def add_parser(sub):
     from reducer_twin.fleet.cli import add_store_options
     add_store_options(p)
     p.add_argument('--stage-process', choices=('auto', 'yes', 'no'), default='auto',
-                   help='run the estimator and life stages, and the bag reading, in '
-                        'processes of their own beside the analysing one (auto: one bag at '
-                        'a time on a machine of 2 or more cores)')
+                   help='run the estimator and life stages in a process of their own beside '
+                        'the analysing one (auto: one bag at a time on a machine of 2 or more '
+                        'cores); yes also reads the bag in a third process')
     p.set_defaults(run=run)
 
 
@@ -106,8 +106,10 @@ def _analyze_all(args, settings, outs, worker):
         for bag, out in zip(args.bags, outs):
             stage = worker if worker is not None and worker.alive else worker is not None
             try:
+                # A reading process costs more CPU (the decoded arrays go through a
+                # pipe) than it takes off this one: only on request.
                 results[bag] = analyze_bag(bag, out, settings, args.overwrite, stage,
-                                           reader_process=worker is not None)
+                                           reader_process=args.stage_process == 'yes')
             except ReducerTwinError as err:
                 results[bag] = err
         return results
@@ -202,6 +204,8 @@ def run(args):
     outs, reports = _check_outputs(args, names)
     from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
     defer_filterpy_extras()
+    from reducer_twin.commands.common import reuse_freed_memory
+    reuse_freed_memory()
     # Forked before the rest is imported: the worker loads filterpy meanwhile.
     jobs = min(args.jobs, len(args.bags))
     fleet = args.store is not None or args.engine == 'ray'

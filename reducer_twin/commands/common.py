@@ -74,3 +74,37 @@ def console():
     """Return a rich console on stdout (plain when not a terminal)."""
     from rich.console import Console
     return Console()
+
+
+MMAP_THRESHOLD = 32 << 20
+"""Blocks at least this large [bytes] are mapped from the kernel (glibc's largest)."""
+
+TRIM_THRESHOLD = 1 << 30
+"""Free heap memory [bytes] kept by the process before it is returned to the kernel."""
+
+
+def reuse_freed_memory():
+    """
+    Let the C allocator reuse freed blocks of a few MB instead of mapping fresh ones.
+
+    A bag analysis allocates and frees arrays of a few MB per chunk and stage. By
+    default glibc maps each block above 128 kB fresh from the kernel and unmaps it on
+    free, so every chunk pays page faults and zeroing again (a quarter of the CPU time of
+    ``analyze`` on a 6-joint bag was spent in the kernel). Raising the mmap and trim
+    thresholds keeps such blocks in the heap for reuse; forked worker processes inherit
+    the setting. Nothing happens where the C library has no ``mallopt``.
+
+    Returns
+    -------
+    bool
+        True when the thresholds were set.
+
+    """
+    import ctypes
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    m_trim_threshold, m_mmap_threshold = -1, -3     # <malloc.h>
+    return bool(mallopt(m_mmap_threshold, MMAP_THRESHOLD)
+                and mallopt(m_trim_threshold, TRIM_THRESHOLD))

@@ -215,10 +215,13 @@ class StreamCleaner:
         self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
         if self.column_counts is None:
             self.column_counts = {r: np.zeros(pos.shape[1], np.int64) for r in VALUE_REASONS}
-        self.column_counts['non_finite'] += pos.shape[0] - np.count_nonzero(finite, axis=0)
-        pos = np.where(finite, pos, np.nan)
+        per_column = np.count_nonzero(finite, axis=0)
+        self.column_counts['non_finite'] += pos.shape[0] - per_column
+        all_finite = bool((per_column == pos.shape[0]).all())
+        if not all_finite:
+            pos = np.where(finite, pos, np.nan)
         t, pos, vel, eff, seg = self._order(t, pos, vel, eff)
-        pos = self._unwrap_positions(pos, t, seg)
+        pos = self._unwrap_positions(pos, t, seg, all_finite)
         self.accepted += t.size
         out = CleanStream(t, pos, vel, eff, seg)
         return _squeeze(out) if one_d else out
@@ -382,14 +385,15 @@ class StreamCleaner:
         self._last_t, self._max_t, self._segment = last, max_t, segment
         return t[keep], pos[keep], vel[keep], eff[keep], seg[keep]
 
-    def _unwrap_positions(self, pos, t, seg):
+    def _unwrap_positions(self, pos, t, seg, all_finite=False):
         """
         Unwrap jumps of about 2·pi between close neighbours (within and across calls).
 
         Only neighbours of one segment and at most :data:`WRAP_PERIODS` nominal
         periods apart are compared: across a longer hole a fast motor may move
         about a whole turn, and the turn count is restored downstream by
-        keeping the TE continuous.
+        keeping the TE continuous. ``all_finite`` says that ``pos`` holds no NaN
+        (nothing to forward-fill).
         """
         n, k = pos.shape
         if self._unwrap is None:
@@ -398,18 +402,24 @@ class StreamCleaner:
         if n == 0:
             return pos
         prev_t, prev_seg = self._wrap_prev if self._wrap_prev else (t[0], seg[0])
+        self._wrap_prev = (int(t[-1]), int(seg[-1]))
+        if all_finite:
+            filled = pos
+        else:
+            # Forward-fill each column so a dropped value does not hide a wrap.
+            rows = np.where(np.isfinite(pos), np.arange(n)[:, None], -1)
+            rows = np.maximum.accumulate(rows, axis=0)
+            filled = np.where(rows >= 0, pos[np.maximum(rows, 0), np.arange(k)], self._raw_last)
+        prev = np.where(np.isfinite(self._raw_last), self._raw_last, filled[0])
+        d = np.diff(filled, axis=0, prepend=prev[None, :])
+        # The common case: no neighbours a half turn apart, so nothing wrapped (NaN never is).
+        if not (np.abs(d) > math.pi).any():
+            self._raw_last = np.where(np.isfinite(filled[-1]), filled[-1], self._raw_last)
+            return pos + self._unwrap
         dt = np.diff(t, prepend=prev_t)
         span = (WRAP_PERIODS * self.period_ns if self.period_ns
                 else self.config.max_gap_s * 1e9)
         close = ((dt <= span) & (seg == np.concatenate([[prev_seg], seg[:-1]])))[:, None]
-        self._wrap_prev = (int(t[-1]), int(seg[-1]))
-        finite = np.isfinite(pos)
-        # Forward-fill each column so a dropped value does not hide a wrap.
-        rows = np.where(finite, np.arange(n)[:, None], -1)
-        rows = np.maximum.accumulate(rows, axis=0)
-        filled = np.where(rows >= 0, pos[np.maximum(rows, 0), np.arange(k)], self._raw_last)
-        prev = np.where(np.isfinite(self._raw_last), self._raw_last, filled[0])
-        d = np.diff(filled, axis=0, prepend=prev[None, :])
         d = np.where(np.isfinite(d), d, 0.0)
         turns = np.round(d / (2.0 * math.pi))
         # A real move of pi in one sample is impossible at any robot speed; a jump of
@@ -798,10 +808,14 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
     """
     if source == 'link':
         return link_effort
+    if source != 'motor':
+        known = np.isfinite(link_effort)
+        if known.all():
+            return link_effort
     motor = motor_effort * motor_effort_scale if motor_effort_scale != 1.0 else motor_effort
     if source == 'motor':
         return motor
-    return np.where(np.isfinite(link_effort), link_effort, motor)
+    return np.where(known, link_effort, motor)
 
 
 def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',

@@ -125,6 +125,23 @@ class TEStream:
         """Count the link samples without a TE."""
         return int(self.valid.size - np.count_nonzero(self.valid))
 
+    def part(self, sl):
+        """
+        Return the samples ``sl`` of this stream (its counts kept whole).
+
+        Parameters
+        ----------
+        sl : slice
+            Which link samples.
+
+        Returns
+        -------
+        TEStream
+            Views of this stream's arrays.
+
+        """
+        return _slice(self, sl)
+
 
 def _as_stream(t, angle, name):
     """Check one stamp/angle pair: 1-D float arrays of equal length."""
@@ -176,6 +193,9 @@ def _clock_resets(t, newest=None):
         Each index starts a new stream; the newest stamp restarts there.
 
     """
+    if t.size < 2 or (np.diff(t) > 0.0).all():
+        # Increasing stamps (the common case) fall back only against ``newest``, if at all.
+        return [0] if t.size and newest is not None and t[0] <= newest - CLOCK_RESET_S else []
     out, start = [], 0
     while start < t.size:
         head = np.nan if newest is None else newest
@@ -473,7 +493,7 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
         on0 = on1 = tq == tm[0]
         bridged = np.zeros(tq.size, dtype=bool)
     else:
-        i0 = np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, tm.size - 2)
+        i0 = _step_index(tm, tq)
         i1 = i0 + 1
         on0, on1 = tq == tm[i0], tq == tm[i1]
         bridged = ((tm[i1] - tm[i0] <= max_gap_s) & (tq >= tm[0] - extrapolate_s)
@@ -487,6 +507,44 @@ def _interpolate(tm, am, run_m, tq, max_gap_s, extrapolate_s=0.0):
     base = run_m if run_m is not None else np.zeros(tm.size, dtype=np.int64)
     run_at = np.where(on1 & ~on0, base[i1], base[i0])
     return motor_at, run_at, ok
+
+
+def _first_index(test, start, stop, block, default):
+    """
+    First index in ``[start, stop)`` where ``test(a, b)`` (a mask of ``[a, b)``) holds.
+
+    Blocks of ``block`` samples, four times longer each time, are tested in turn, so a
+    hit near ``start`` does not cost a test of the whole span; ``default`` if none.
+    """
+    a = start
+    while a < stop:
+        b = min(stop, a + block)
+        hit = np.flatnonzero(test(a, b))
+        if hit.size:
+            return a + int(hit[0])
+        a, block = b, 4 * block
+    return default
+
+
+def _step_index(tm, tq):
+    """
+    ``clip(searchsorted(tm, tq, 'right') - 1, 0, M - 2)`` for increasing stamps ``tm``.
+
+    Query ``k`` of a stream shifted by less than a step (a link stream read at its
+    stamps plus the time offset) lies in step ``k`` or ``k - 1``: that is checked
+    with two comparisons per query instead of a binary search.
+    """
+    m = tm.size
+    if tq.size == m and m > 2:
+        if (tm[:-1] <= tq[:-1]).all() and (tq[:-1] < tm[1:]).all() and tq[-1] >= tm[-2]:
+            i0 = np.arange(m)
+            i0[-1] = m - 2
+            return i0
+        if tq[0] < tm[1] and (tm[:-1] <= tq[1:]).all() and (tq[1:] < tm[1:]).all():
+            i0 = np.arange(-1, m - 1)
+            i0[0] = 0
+            return i0
+    return np.clip(np.searchsorted(tm, tq, side='right') - 1, 0, m - 2)
 
 
 def _finite(name, value, unit, allowed, test):
@@ -965,14 +1023,26 @@ class WindowAnalyzer:
             if self.window == 'duration':
                 cand.append((d, 'duration'))
             else:
-                turned = np.abs(theta[s:x] - theta[s]) >= TWO_PI
-                r = s + int(np.argmax(turned)) if turned.any() else n
+                # Searched in growing blocks from about one window; the turn only up to
+                # where the window ends anyway: a revolution found later is never the end.
+                shortest = s + self.min_window_samples
+                block = max(d, shortest) - s + 2
+                turn_until = x
+                if self.window == 'auto':
+                    direction = np.sign(speed[s])
+
+                    def stopped(a, b):
+                        v = speed[a:b]
+                        return ~((np.abs(v) >= self.min_speed) & (np.sign(v) == direction))
+                    c = _first_index(stopped, s, x, block, n)
+                    last = (d, 'duration') if c <= d else (c, 'motion')
+                    turn_until = min(x, max(last[0], shortest) + 1)
+                start_theta = theta[s]
+                r = _first_index(lambda a, b: np.abs(theta[a:b] - start_theta) >= TWO_PI,
+                                 s, turn_until, block, n)
                 cand.append((r, 'revolution'))
                 if self.window == 'auto':
-                    moving = np.abs(speed[s:x]) >= self.min_speed
-                    moving &= np.sign(speed[s:x]) == np.sign(speed[s])
-                    c = s + int(np.argmin(moving)) if not moving.all() else n
-                    cand.append((d, 'duration') if c <= d else (c, 'motion'))
+                    cand.append(last)
             # Too few samples (a low rate) for the torque bins: the window goes on.
             shortest = s + self.min_window_samples
             cand = [(c if r in ('gap', 'max') else max(c, shortest), r) for c, r in cand]
@@ -1005,14 +1075,14 @@ class WindowAnalyzer:
         torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
-        loaded = np.flatnonzero(torque > 0.1 * self.rated_torque)
-        fitted = np.zeros(loaded.size)
-        for row, coef in zip(x, beta.T):
-            fitted += row[loaded] * coef[win[loaded]]
-        resid = y[loaded] - fitted
+        # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
+        # within a window), over the loaded samples.
+        loaded = torque > 0.1 * self.rated_torque
+        x_sums = np.add.reduceat(np.where(loaded, x, 0.0), starts, axis=1)
+        y_sums = np.add.reduceat(np.where(loaded, y, 0.0), starts)
         with np.errstate(invalid='ignore', divide='ignore'):
-            loaded_mean = (np.bincount(win[loaded], resid, n_win)
-                           / np.bincount(win[loaded], minlength=n_win))
+            loaded_mean = ((y_sums - np.einsum('wj,jw->w', beta, x_sums))
+                           / np.add.reduceat(loaded, starts))
         duty = self._duty(torque, speed, dt, starts)
         te_max = np.maximum.reduceat(y, starts)
         te_min = np.minimum.reduceat(y, starts)
@@ -1060,7 +1130,7 @@ class WindowAnalyzer:
                 np.multiply(2.0 * s_h, c_h, out=s_k)
                 np.multiply(c_h - s_h, c_h + s_h, out=c_k)
             else:
-                phase = order * phi
+                phase = order * phi if order != 1 else phi
                 np.sin(phase, out=s_k)
                 np.cos(phase, out=c_k)
             done[order] = (s_k, c_k)
@@ -1174,21 +1244,26 @@ class WindowAnalyzer:
         n = torque.size
         period = float(np.median(np.diff(t))) if n > 1 else 0.0
         half = int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
-        idx = np.arange(n)
-        lo = np.maximum(idx - half, starts[win])
-        hi = np.minimum(idx + half + 1, ends[win])
+        width = 2 * half + 1
+        # The average over [i - half, i + half], cut at the window's ends: whole inside,
+        # computed again (and its length) near the ends of each window.
+        edge = _window_edges(starts, ends, half)
+        lo = np.maximum(edge - half, starts[win[edge]])
+        hi = np.minimum(edge + half + 1, ends[win[edge]])
         if half > 0:
             acc = np.concatenate([[0.0], np.cumsum(torque)])
-            smooth = (acc[hi] - acc[lo]) / (hi - lo)
+            smooth = np.empty(n)
+            if n > 2 * half:
+                smooth[half:n - half] = (acc[width:] - acc[:n + 1 - width]) / width
+            smooth[edge] = (acc[hi] - acc[lo]) / (hi - lo)
         else:
             smooth = torque
-        sigma = np.zeros(starts.size)
-        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            if b - a >= 3:
-                seg = torque[a:b]
-                d2 = seg[1:-1] - 0.5 * (seg[:-2] + seg[2:])
-                sigma[k] = 1.4826 * float(np.median(np.abs(d2))) / math.sqrt(1.5)
-        ambiguous = np.abs(smooth) < self.sign_sigmas * sigma[win] / np.sqrt(hi - lo)
+        sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
+                                         starts, ends - 2) / math.sqrt(1.5)
+        level = self.sign_sigmas * sigma
+        threshold = np.repeat(level / math.sqrt(width), ends - starts)
+        threshold[edge] = level[win[edge]] / np.sqrt(hi - lo)
+        ambiguous = np.abs(smooth) < threshold
         return smooth, ambiguous
 
     def _group_stats(self, z, torque, win, starts, ends, exclude=None):
@@ -1210,12 +1285,22 @@ class WindowAnalyzer:
         b = np.clip(b, 0, self.torque_bins - 1)
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
         u = size - self.centres[b]
-        count = np.bincount(gid, minlength=n_groups + 1)[:-1].astype(float)
-        s0 = np.stack([np.bincount(gid, row, n_groups + 1)[:-1] for row in z], axis=1)
-        s1 = np.stack([np.bincount(gid, u * row, n_groups + 1)[:-1] for row in z], axis=1)
+        # The smoothed torque stays in one bin for tens of samples: sum over those runs of
+        # one group first (contiguous), then add the runs of each group.
+        first = np.flatnonzero(np.concatenate([[True], gid[1:] != gid[:-1]]))
+        g_run = gid[first]
+
+        def group_sums(rows):
+            runs = np.add.reduceat(rows, first, axis=-1)
+            if runs.ndim == 1:
+                return np.bincount(g_run, runs, n_groups + 1)[:-1]
+            return np.stack([np.bincount(g_run, r, n_groups + 1)[:-1] for r in runs], axis=1)
+        count = np.bincount(g_run, np.diff(np.append(first, gid.size)), n_groups + 1)[:-1]
+        s0 = group_sums(z)
+        s1 = group_sums(u * z)
         with np.errstate(invalid='ignore', divide='ignore'):
-            u_mean = np.where(count > 0, np.bincount(gid, u, n_groups + 1)[:-1] / count, 0.0)
-            s_uu = np.bincount(gid, u * u, n_groups + 1)[:-1] - count * u_mean ** 2
+            u_mean = np.where(count > 0, group_sums(u) / count, 0.0)
+            s_uu = group_sums(u * u) - count * u_mean ** 2
             sloped = (count >= 3) & (s_uu > 1e-12 * count * self.centres.max() ** 2)
             s1c = s1 - u_mean[:, None] * s0
             proj0 = np.where(count[:, None] > 0, s0 / np.sqrt(count)[:, None], 0.0)
@@ -1260,20 +1345,21 @@ class WindowAnalyzer:
         """
         reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
         n_par = energy.shape[1]
-        beta = np.zeros((n_win, n_par))
-        ident = np.zeros((n_win, n_par), dtype=bool)
-        noise = np.full(n_win, np.nan)
+        normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
+        pool_n = np.empty((n_win, n_par, n_par))
+        pool_r = np.empty((n_win, n_par))
+        pool_raw = np.empty((n_win, n_par))
         for k in range(n_win):
-            normal, rhs = reduced[k, :-1, :-1], reduced[k, :-1, -1]
-            self._pool_n = self._memory * self._pool_n + normal
-            self._pool_r = self._memory * self._pool_r + rhs
-            self._pool_raw = self._memory * self._pool_raw + energy[k]
-            beta[k], ident[k] = _solve_identifiable(self._pool_n, self._pool_r, self._pool_raw)
+            self._pool_n = pool_n[k] = self._memory * self._pool_n + normal[k]
+            self._pool_r = pool_r[k] = self._memory * self._pool_r + rhs[k]
+            self._pool_raw = pool_raw[k] = self._memory * self._pool_raw + energy[k]
+        beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
+        noise = np.full(n_win, np.nan)
+        free = dof - np.count_nonzero(ident, axis=1)
+        for k in np.flatnonzero(free > 0).tolist():
             b = beta[k]
-            rss = reduced[k, -1, -1] - 2.0 * b @ rhs + b @ normal @ b
-            free = dof[k] - np.count_nonzero(ident[k])
-            if free > 0:
-                noise[k] = max(rss, 0.0) / free
+            rss = reduced[k, -1, -1] - 2.0 * b @ rhs[k] + b @ normal[k] @ b
+            noise[k] = max(rss, 0.0) / free[k]
         return beta, ident, noise
 
     def _hysteresis(self, stats, beta, noise):
@@ -1306,8 +1392,8 @@ class WindowAnalyzer:
         size, rate = np.abs(torque), np.abs(speed)
         exponent = self.params.rating.life_exponent
         archard = wear_rate(size, rate, 0.0, self.params)
-        rows = np.stack([dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt])
-        sums = np.add.reduceat(rows, starts, axis=1).T
+        rows = (dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt)
+        sums = np.stack([np.add.reduceat(row, starts) for row in rows], axis=1)
         peak = np.maximum.reduceat(size, starts)
         out = []
         for (dur, s_t, s_w, s_cube, s_wear), top in zip(sums.tolist(), peak.tolist()):
@@ -1439,6 +1525,90 @@ def _whole(name, value, lo, hi):
     if not whole or not lo <= value <= hi:
         raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
     return int(value)
+
+
+def _window_edges(starts, ends, half):
+    """Return the indices within ``half`` samples of either end of their window."""
+    if half <= 0:
+        return np.zeros(0, dtype=np.int64)
+    offsets = np.arange(half)
+    head = np.minimum(starts[:, None] + offsets, ends[:, None] - 1)
+    tail = np.maximum(ends[:, None] - half + offsets, starts[:, None])
+    return np.unique(np.concatenate([head.ravel(), tail.ravel()]))
+
+
+def _window_medians(values, starts, ends):
+    """
+    Median of ``values[starts[k]:ends[k]]`` per window, 0 for a window with none.
+
+    Windows of equal length take one call of :func:`numpy.median` along rows (the
+    same partition and mean as one window at a time).
+    """
+    out = np.zeros(starts.size)
+    lengths = ends - starts
+    for m in np.unique(lengths[lengths > 0]).tolist():
+        rows = np.flatnonzero(lengths == m)
+        out[rows] = np.median(values[starts[rows, None] + np.arange(m)], axis=1)
+    return out
+
+
+def _solve_identifiable_many(normal, rhs, energy):
+    """
+    :func:`_solve_identifiable` for a stack of systems, shape (W, P, P), (W, P), (W, P).
+
+    Each round inverts the systems that keep the same parameters as one stack (the
+    same LAPACK call per matrix as one at a time), so the results are those of
+    :func:`_solve_identifiable` for each system.
+    """
+    n_sys, n_par = rhs.shape
+    ident = energy > 0.0
+    scale = np.where(ident, 1.0 / np.sqrt(np.where(ident, energy, 1.0)), 0.0)
+    a = normal * (scale[:, :, None] * scale[:, None, :])
+    b = rhs * scale
+    beta = np.zeros((n_sys, n_par))
+    bits = 1 << np.arange(n_par)
+    active = ident.any(axis=1)
+    while active.any():
+        rows = np.flatnonzero(active)
+        keys = ident[rows] @ bits
+        for key in np.unique(keys).tolist():
+            group = rows[keys == key]
+            idx = np.flatnonzero(ident[group[0]])
+            inv, share = _identifiability(a[group[:, None, None], idx[:, None], idx])
+            worst = np.argmin(share, axis=1)
+            for j, k in enumerate(group.tolist()):
+                if share[j, worst[j]] >= _MIN_IDENTIFIABILITY:
+                    beta[k, idx] = inv[j] @ b[k, idx] * scale[k, idx]
+                    active[k] = False
+                else:
+                    ident[k, idx[worst[j]]] = False
+                    active[k] = ident[k].any()
+    return beta, ident
+
+
+def _identifiability(sub):
+    """
+    Inverses of a stack of scaled normal matrices and each parameter's unexplained share.
+
+    A singular matrix gets a share of 0 for every parameter (as in
+    :func:`_solve_identifiable`).
+    """
+    try:
+        inv = np.linalg.inv(sub)
+    except np.linalg.LinAlgError:
+        inv = np.zeros_like(sub)
+        share = np.zeros(sub.shape[:2])
+        for j in range(sub.shape[0]):
+            try:
+                inv[j] = np.linalg.inv(sub[j])
+            except np.linalg.LinAlgError:
+                continue
+            with np.errstate(divide='ignore'):
+                share[j] = 1.0 / np.diag(inv[j])
+        return inv, np.where(np.isfinite(share), share, 0.0)
+    with np.errstate(divide='ignore'):
+        share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
+    return inv, np.where(np.isfinite(share), share, 0.0)
 
 
 def _solve_identifiable(normal, rhs, energy):

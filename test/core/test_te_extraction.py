@@ -109,6 +109,27 @@ def test_motor_angle_is_interpolated_at_link_stamps_that_differ_from_its_own():
     np.testing.assert_allclose(stream.output_angle, speed * t_link + te_true, atol=1e-12)
 
 
+@settings(max_examples=200, deadline=None)
+@given(steps=st.lists(st.floats(0.5e-3, 1.5e-3), min_size=3, max_size=40),
+       offset=st.sampled_from([0.0, 5e-5, -5e-5, 4e-4, -4e-4, 1e-3, -1e-3, 2e-3]))
+def test_a_link_stream_read_at_its_stamps_plus_an_offset_interpolates_as_a_binary_search(
+        steps, offset):
+    # Shared stamps read at the time offset take a shortcut past the binary search for the
+    # motor step of each query: the TE must be the one computed with separate stamps.
+    t = 10.0 + np.cumsum(steps)
+    motor = RATIO * np.sin(3.0 * t)
+    link = np.sin(3.0 * t) + 1e-4 * np.cos(7.0 * t)
+    shared = compute_te(t, motor, t, link, RATIO, max_gap_s=0.01, link_time_offset_s=offset)
+    # The same query stamps with a copy of the motor stamps shifted by nothing take the
+    # general path (the arrays differ in length by one sample that is never queried).
+    t_m = np.append(t, t[-1] + 1.0)
+    general = compute_te(t_m, np.append(motor, motor[-1]), t, link, RATIO, max_gap_s=0.01,
+                         link_time_offset_s=offset)
+    in_span = t + offset <= t[-1]
+    np.testing.assert_array_equal(shared.valid[in_span], general.valid[in_span])
+    np.testing.assert_allclose(shared.te[in_span], general.te[in_span], rtol=0, atol=1e-15)
+
+
 def test_link_samples_inside_a_motor_gap_are_dropped_not_interpolated():
     t = np.arange(0.0, 0.1, 1e-3)
     motor_keep = (t < 0.030) | (t > 0.050)            # a 21 ms hole in the motor stream
