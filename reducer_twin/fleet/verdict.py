@@ -71,8 +71,9 @@ def overdue_life(state, params, limit_rad, n_samples=2000):
     """
     from reducer_twin.core.estimator import run_in_free_wear
     from reducer_twin.core.life import limit_wear
-    x = np.asarray(state['x'], dtype=float)
-    P = np.asarray(state['P'], dtype=float)
+    # The marginal of (w, ln s): the state may carry more (the unit's as-built offset).
+    x = np.asarray(state['x'], dtype=float)[:2]
+    P = np.asarray(state['P'], dtype=float)[:2, :2]
     exposure = float(state['duty_exposure'])
     rate = float(state['duty_increment']) / exposure if exposure > 0.0 else 0.0
     if rate <= 0.0:
