@@ -476,7 +476,8 @@ def test_lost_motion_survives_effort_noise_of_a_few_percent_of_rated_torque(load
     # the raw effort's sign lost 77 % of an unloaded joint's lost motion at 2 %.
     lm, truth, _ = _noisy_run(load, noise * PARAMS.rating.rated_torque, 1000.0)
     assert lm.size >= 5
-    assert np.median(lm) == pytest.approx(truth, rel=0.05)
+    # Issue floors: 5 % at 1 % noise, 10 % at 2 %; at 5 % noise (no floor) within 10 %.
+    assert np.median(lm) == pytest.approx(truth, rel=0.05 if noise < 0.05 else 0.10)
 
 
 def test_a_100_hz_stream_of_a_loaded_joint_gives_its_lost_motion():
