@@ -2,7 +2,6 @@
 
 from dataclasses import dataclass
 import math
-import time
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -128,14 +127,11 @@ def test_a_reducer_past_the_limit_has_zero_life_and_meets_the_threshold(params, 
     assert life.event_state == 0.0
 
 
-def test_one_thousand_samples_take_well_under_a_second(params, rated_rate):
+def test_one_thousand_samples_are_drawn_and_kept_when_asked(params, rated_rate):
+    # How long it takes is measured by bench/bench_life.py, never asserted here.
     x, P = state(5e-6, wear_sd=1e-6, log_scale_sd=0.3)
-    remaining_life((x, P), rated_rate, params, n_samples=1000)  # warm the caches
-    start = time.perf_counter()
     life = remaining_life((x, P), rated_rate, params, n_samples=1000, keep_samples=True)
-    elapsed = time.perf_counter() - start
     assert life.samples.shape == (1000,) and life.n_samples == 1000
-    assert elapsed < 0.2  # about 1 ms on the dev machine; generous for a loaded CI core
 
 
 def test_the_default_rng_gives_the_same_answer_twice(params, rated_rate):
