@@ -1,5 +1,6 @@
 # Two commands for users: `make demo` and `make test`. Both build .venv first (once).
-# Needs only python3 (3.11) with venv and pip, make and a C compiler on the machine.
+# Needs only python3 (3.11) with venv and pip, make and a C compiler on the machine; as root it
+# also installs Debian's chromium when missing (the report tests render pages in it).
 
 PYTHON ?= python3
 VENV := .venv
@@ -37,6 +38,10 @@ $(STAMP): setup.py setup.cfg requirements-ros.txt
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install -r requirements-ros.txt
 	$(PY) -m pip install -e '.[test,fleet]'
+	@# Debian's headless Chromium renders the reports in the tests (test/fleet/test_report.py).
+	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) \
+	  || echo 'chromium is missing: install the Debian package chromium for the report tests'; }
 	touch $@
 
 # Removes colcon output left in the checkout; the venv stays (rm -rf .venv for that).
