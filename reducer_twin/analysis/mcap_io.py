@@ -486,7 +486,59 @@ class _Topic:
     end: int = None
 
 
-class McapBagWriter:
+class TopicBook:
+    """
+    What a bag writer tells about its file: ``custom_data``, per-topic and per-file summaries.
+
+    Shared by :class:`McapBagWriter` and the library-framed writer of
+    :mod:`reducer_twin.analysis.mcap_writer`; both keep ``_topics`` (objects with ``name``,
+    ``msgtype``, ``qos``, ``type_hash``, ``count``, ``start``, ``end``) and ``path``.
+    """
+
+    def set_custom_data(self, mapping):
+        """
+        Set rosbag2 ``custom_data`` (str to str) to store when the file is closed.
+
+        Parameters
+        ----------
+        mapping : dict
+            Keys and values, converted to str.
+
+        """
+        self.custom_data = {str(k): str(v) for k, v in mapping.items()}
+
+    def topic_summaries(self):
+        """
+        Return what was written per topic.
+
+        Returns
+        -------
+        list of dict
+            ``name``, ``type``, ``qos``, ``type_hash``, ``count``, ``start``, ``end``.
+
+        """
+        return [{'name': t.name, 'type': t.msgtype, 'qos': t.qos, 'type_hash': t.type_hash,
+                 'count': t.count, 'start': t.start, 'end': t.end}
+                for t in self._topics.values()]
+
+    def file_summary(self):
+        """
+        Return the per-file entry of the bag metadata.
+
+        Returns
+        -------
+        dict
+            ``path`` (file name), ``start``, ``end`` (ns or None) and ``count``.
+
+        """
+        starts = [t.start for t in self._topics.values() if t.start is not None]
+        ends = [t.end for t in self._topics.values() if t.end is not None]
+        return {'path': self.path.name, 'start': min(starts) if starts else None,
+                'end': max(ends) if ends else None,
+                'count': sum(t.count for t in self._topics.values())}
+
+
+class McapBagWriter(TopicBook):
     """
     Write one rosbag2 MCAP file.
 
@@ -759,48 +811,6 @@ class McapBagWriter:
             checked.append((offset, dtype, values))
         if logs.shape[0]:
             self._write_uniform(topic, logs, pubs, template, length, checked)
-
-    def set_custom_data(self, mapping):
-        """
-        Set rosbag2 ``custom_data`` (str to str) to store when the file is closed.
-
-        Parameters
-        ----------
-        mapping : dict
-            Keys and values, converted to str.
-
-        """
-        self.custom_data = {str(k): str(v) for k, v in mapping.items()}
-
-    def topic_summaries(self):
-        """
-        Return what was written per topic.
-
-        Returns
-        -------
-        list of dict
-            ``name``, ``type``, ``qos``, ``type_hash``, ``count``, ``start``, ``end``.
-
-        """
-        return [{'name': t.name, 'type': t.msgtype, 'qos': t.qos, 'type_hash': t.type_hash,
-                 'count': t.count, 'start': t.start, 'end': t.end}
-                for t in self._topics.values()]
-
-    def file_summary(self):
-        """
-        Return the per-file entry of the bag metadata.
-
-        Returns
-        -------
-        dict
-            ``path`` (file name), ``start``, ``end`` (ns or None) and ``count``.
-
-        """
-        starts = [t.start for t in self._topics.values() if t.start is not None]
-        ends = [t.end for t in self._topics.values() if t.end is not None]
-        return {'path': self.path.name, 'start': min(starts) if starts else None,
-                'end': max(ends) if ends else None,
-                'count': sum(t.count for t in self._topics.values())}
 
     def close(self):
         """

@@ -25,14 +25,14 @@ from msg_adapters.jointstate_cdr import fill_columns
 import numpy as np
 from reducer_twin.analysis.mcap_io import (
     _Topic, bag_metadata, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, message_times,
-    parse_qos_profiles, PROFILE)
+    parse_qos_profiles, PROFILE, TopicBook)
 from reducer_twin.core.errors import BagError, InvalidInput
 
 _COMPRESSION = {'none': CompressionType.NONE, '': CompressionType.NONE,
                 'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}
 
 
-class LibraryMcapWriter:
+class LibraryMcapWriter(TopicBook):
     """
     Write one rosbag2 MCAP file with ``mcap.writer.Writer``.
 
@@ -238,40 +238,6 @@ class LibraryMcapWriter:
         fill_columns(rows, columns)
         self.write_batch(channel_id, log_times_ns, rows.reshape(-1),
                          np.arange(n + 1, dtype=np.int64) * length, publish_times_ns)
-
-    def set_custom_data(self, mapping):
-        """Set rosbag2 ``custom_data`` (str to str) to store when the file is closed."""
-        self.custom_data = {str(k): str(v) for k, v in mapping.items()}
-
-    def topic_summaries(self):
-        """
-        Return what was written per topic.
-
-        Returns
-        -------
-        list of dict
-            ``name``, ``type``, ``qos``, ``type_hash``, ``count``, ``start``, ``end``.
-
-        """
-        return [{'name': t.name, 'type': t.msgtype, 'qos': t.qos, 'type_hash': t.type_hash,
-                 'count': t.count, 'start': t.start, 'end': t.end}
-                for t in self._topics.values()]
-
-    def file_summary(self):
-        """
-        Return the per-file entry of the bag metadata.
-
-        Returns
-        -------
-        dict
-            ``path`` (file name), ``start``, ``end`` (ns or None) and ``count``.
-
-        """
-        starts = [t.start for t in self._topics.values() if t.start is not None]
-        ends = [t.end for t in self._topics.values() if t.end is not None]
-        return {'path': self.path.name, 'start': min(starts) if starts else None,
-                'end': max(ends) if ends else None,
-                'count': sum(t.count for t in self._topics.values())}
 
     def close(self):
         """
