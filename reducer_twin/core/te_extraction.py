@@ -1165,23 +1165,15 @@ class WindowAnalyzer:
 
         """
         n = torque.size
-        period = float(np.median(np.diff(t))) if n > 1 else 0.0
-        half = max(1, int(round(0.5 * self.torque_smoothing_s / period))) if period > 0 else 1
+        half = max(1, self._smoothing_half(t))
         idx = np.arange(n)
-        lo = np.maximum(idx - half, starts[win])
-        hi = np.minimum(idx + half + 1, ends[win])
-
-        def mean(values):
-            acc = np.concatenate([[0.0], np.cumsum(values)])
-            return (acc[hi] - acc[lo]) / (hi - lo)
-
-        speed_s, effort_s = mean(speed), mean(torque)
+        speed_s, count = _window_mean(speed, half, win, starts, ends)
+        effort_s, _ = _window_mean(torque, half, win, starts, ends)
         accel = np.zeros(n)
-        inner = (hi - lo) == 2 * half + 1       # not at a window's edge
+        # Whole averages only: their neighbours, for the acceleration, are in the window too.
+        inner = count == 2 * half + 1
         step = np.maximum(t[np.minimum(idx + 1, n - 1)] - t[np.maximum(idx - 1, 0)], 1e-12)
         accel[1:-1] = (speed_s[2:] - speed_s[:-2]) / step[1:-1]
-        inner[[0, -1]] = False
-        inner &= (idx - 1 >= starts[win]) & (idx + 1 < ends[win])
         coulomb_shape = np.tanh(speed / _FRICTION_SPEED)
         x = np.stack([np.ones(n), np.cos(theta), np.sin(theta), np.cos(2.0 * theta),
                       np.sin(2.0 * theta), accel, coulomb_shape, speed])
@@ -1244,30 +1236,16 @@ class WindowAnalyzer:
             Smoothed torque [N·m] and the ambiguous mask, both like ``torque``.
 
         """
-        n = torque.size
-        period = float(np.median(np.diff(t))) if n > 1 else 0.0
-        half = int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
-        width = 2 * half + 1
-        # The average over [i - half, i + half], cut at the window's ends: whole inside,
-        # computed again (and its length) near the ends of each window.
-        edge = _window_edges(starts, ends, half)
-        lo = np.maximum(edge - half, starts[win[edge]])
-        hi = np.minimum(edge + half + 1, ends[win[edge]])
-        if half > 0:
-            acc = np.concatenate([[0.0], np.cumsum(torque)])
-            smooth = np.empty(n)
-            if n > 2 * half:
-                smooth[half:n - half] = (acc[width:] - acc[:n + 1 - width]) / width
-            smooth[edge] = (acc[hi] - acc[lo]) / (hi - lo)
-        else:
-            smooth = torque
+        smooth, count = _window_mean(torque, self._smoothing_half(t), win, starts, ends)
         sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
                                          starts, ends - 2) / math.sqrt(1.5)
-        level = self.sign_sigmas * sigma
-        threshold = np.repeat(level / math.sqrt(width), ends - starts)
-        threshold[edge] = level[win[edge]] / np.sqrt(hi - lo)
-        ambiguous = np.abs(smooth) < threshold
+        ambiguous = np.abs(smooth) < self.sign_sigmas * sigma[win] / np.sqrt(count)
         return smooth, ambiguous
+
+    def _smoothing_half(self, t):
+        """Half-width in samples of the ``torque_smoothing_s`` average at the stamps' rate."""
+        period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        return int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
 
     def _group_stats(self, z, torque, win, starts, ends, exclude=None):
         """
@@ -1528,6 +1506,35 @@ def _whole(name, value, lo, hi):
     if not whole or not lo <= value <= hi:
         raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
     return int(value)
+
+
+def _window_mean(values, half, win, starts, ends):
+    """
+    Centred mean of ``values[i - half .. i + half]`` cut at the ends of each window.
+
+    Returns
+    -------
+    tuple of ndarray
+        The means and the number of samples each one averages (``2·half + 1`` inside a
+        window, fewer within ``half`` of its ends); ``values`` itself when ``half`` is 0.
+
+    """
+    n = values.size
+    width = 2 * half + 1
+    count = np.full(n, width, dtype=np.int64)
+    if half <= 0:
+        return values, count
+    # Whole inside, computed again (with its length) near the ends of each window.
+    edge = _window_edges(starts, ends, half)
+    lo = np.maximum(edge - half, starts[win[edge]])
+    hi = np.minimum(edge + half + 1, ends[win[edge]])
+    acc = np.concatenate([[0.0], np.cumsum(values)])
+    mean = np.empty(n)
+    if n > 2 * half:
+        mean[half:n - half] = (acc[width:] - acc[:n + 1 - width]) / width
+    mean[edge] = (acc[hi] - acc[lo]) / (hi - lo)
+    count[edge] = hi - lo
+    return mean, count
 
 
 def _window_edges(starts, ends, half):
