@@ -60,7 +60,8 @@ from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, pair_columns, StreamCleaner
+from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
+from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, LifeConfig
@@ -209,7 +210,6 @@ class AnalysisSettings:
 
 
 MOTOR_ANGLES = ('auto', 'raw', 'output')
-MOTOR_EFFORT_UNITS = ('auto', 'motor', 'joint')
 
 
 def _number(path, name, value, lo, hi):
@@ -717,14 +717,6 @@ def _motor_scale(settings, angles=None):
     return 1.0
 
 
-def _motor_effort_scale(settings, angles):
-    """Factor from the motor entry's effort to output torque (the ratio for a motor torque)."""
-    units = settings.motor_effort_units
-    if units == 'auto':
-        units = 'motor' if angles == 'raw' else 'joint'
-    return total_ratio(settings.params.geometry) if units == 'motor' else 1.0
-
-
 MIN_DETECT_TRAVEL_RAD = 0.05
 """Link travel [rad] a chunk must show before its motor angles are classified."""
 
@@ -867,7 +859,8 @@ class _Run:
         self.angles[joint] = angles
         front.motor_scale = _motor_scale(self.settings, angles)
         front.pairer.motor_scale = front.motor_scale
-        front.effort_scale = _motor_effort_scale(self.settings, angles)
+        front.effort_scale = motor_effort_scale(self.settings.motor_effort_units, angles,
+                                                total_ratio(self.settings.params.geometry))
         front.pairer.motor_effort_scale = front.effort_scale
 
     def run(self):

@@ -16,7 +16,7 @@ from types import SimpleNamespace
 from msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 import numpy as np
-from reducer_twin.core.ingest import Pairer, SpikeFilter
+from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import features_from_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
@@ -103,9 +103,8 @@ class JointFront:
         self.params = params
         self.ratio = total_ratio(params.geometry)
         self.motor_scale = motor_scale
-        self.effort_scale = self.ratio if settings.motor_angles != 'output' else 1.0
-        if settings.motor_effort_units != 'auto':
-            self.effort_scale = self.ratio if settings.motor_effort_units == 'motor' else 1.0
+        self.effort_scale = motor_effort_scale(settings.motor_effort_units,
+                                               settings.motor_angles, self.ratio)
         self.effort_topic = 'the joint states'
         self.spikes = SpikeFilter(self.ratio, settings.ingest)
         # Offline a partner can come chunks later: hold link samples for PAIR_HOLD_S.

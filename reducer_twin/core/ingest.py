@@ -785,6 +785,34 @@ class Pairer:
 EFFORT_SOURCES = ('auto', 'link', 'motor')
 """Where the joint torque is read: the link entry, the motor entry, or the link where known."""
 
+MOTOR_EFFORT_UNITS = ('auto', 'motor', 'joint')
+"""What the motor entry's effort is: motor torque, output torque, or as its angles say."""
+
+
+def motor_effort_scale(units, motor_angles, ratio):
+    """
+    Factor that turns the motor entry's effort into output torque.
+
+    Parameters
+    ----------
+    units : str
+        One of :data:`MOTOR_EFFORT_UNITS`; ``'auto'``: a motor torque unless the
+        motor angles are reported divided by the ratio (then joint units).
+    motor_angles : str
+        ``'raw'``, ``'output'`` or ``'auto'`` (taken as raw).
+    ratio : float
+        Reduction ratio.
+
+    Returns
+    -------
+    float
+        ``ratio`` for a motor torque, 1 for joint units.
+
+    """
+    if units == 'auto':
+        units = 'joint' if motor_angles == 'output' else 'motor'
+    return ratio if units == 'motor' else 1.0
+
 
 def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1.0):
     """

@@ -44,7 +44,8 @@ import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import choose_effort, EFFORT_SOURCES, IngestConfig, Pairer
-from reducer_twin.core.ingest import SpikeFilter, SpikeFilterBank
+from reducer_twin.core.ingest import motor_effort_scale, MOTOR_EFFORT_UNITS, SpikeFilter
+from reducer_twin.core.ingest import SpikeFilterBank
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
@@ -101,11 +102,8 @@ class EncoderIngest(Node):
         self.joints = p['joints']
         ratio = total_ratio(Geometry()) if p['gear_ratio'] <= 0 else p['gear_ratio']
         scale = ratio if p['motor_angles'] == 'output' else 1.0
-        units = p['motor_effort_units']
-        if units == 'auto':
-            units = 'joint' if p['motor_angles'] == 'output' else 'motor'
         self.effort_source = p['effort_source']
-        self.effort_scale = ratio if units == 'motor' else 1.0
+        self.effort_scale = motor_effort_scale(p['motor_effort_units'], p['motor_angles'], ratio)
         self.batch_ns = int(p['batch_period_s'] * 1e9)
         self.split = bool(p['motor_topic'])
         cfg = self.ingest_params.value
@@ -171,7 +169,7 @@ class EncoderIngest(Node):
             raise InvalidParameter(
                 f"motor_angles must be 'raw' or 'output', got {out['motor_angles']!r}")
         for name, allowed in (('effort_source', EFFORT_SOURCES),
-                              ('motor_effort_units', ('auto', 'motor', 'joint'))):
+                              ('motor_effort_units', MOTOR_EFFORT_UNITS)):
             if out[name] not in allowed:
                 raise InvalidParameter(f'{name} must be one of '
                                        f'{", ".join(repr(a) for a in allowed)}, got {out[name]!r}')
