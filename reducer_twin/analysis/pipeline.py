@@ -995,6 +995,14 @@ class _Run:
     def _finish(self, chunks, link_clean, motor_clean):
         plan = self.plan
         self.messages_read = sum(chunks.messages.values())
+        if self.settings.motor_angles == 'auto':
+            unknown = [j for j in plan.joints if j not in self.angles]
+            if unknown:     # never a silent guess: say what was assumed and how to say it
+                self.bag.warnings.append(ReadWarning(
+                    str(self.bag.path), None, f'motor angles of {", ".join(unknown)} could not '
+                    f'be told raw from output (the link moved less than '
+                    f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
+                    'twin.motor_angles in --config'))
         for topic, count in chunks.malformed.items():
             if count:   # as Bag.read_joint_states reports them
                 self.bag.warnings.append(ReadWarning(

@@ -180,3 +180,14 @@ def test_effort_source_and_units_come_from_the_config(tmp_path):
     config.write_text('twin:\n  effort_source: elbow\n')
     with pytest.raises(Exception, match="twin.effort_source must be one of 'auto', 'link'"):
         AnalysisSettings.from_config(config)
+
+
+def test_motor_angles_that_cannot_be_classified_are_said_to_be_taken_as_raw(
+        original, tmp_path, capsys):
+    js = original[0]
+    still = js.position.copy()
+    still[:] = still[0]         # a robot that never moved: nothing tells raw from output
+    bag = _rewrite(js, tmp_path, 'still', position=still)
+    _, _, err = _cli_json(bag, tmp_path, capsys)
+    assert any(line.startswith('WARNING:') and 'could not be told raw from output' in line
+               and 'twin.motor_angles' in line for line in err.splitlines())
