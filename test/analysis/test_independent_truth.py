@@ -7,7 +7,8 @@ the lost motion of every joint, including the base rotation without gravity, is 
 within 10 % of the truth. The recordings: three joints, link and motor on two topics, the
 rate drawn among 100-1000 Hz, 150 s of stream of units at a drawn point of their lives
 (aging factor 1: the lost motion is fixed over the recording). The full distribution over
-random truths is printed by ``bench/bench_lost_motion.py``.
+random truths is printed by ``bench/bench_lost_motion.py`` (19 of 24 runs at 2 % noise): these
+three seeds are fixed regression cases, not evidence for the issue's 95 % floor.
 """
 
 import json
@@ -31,7 +32,7 @@ def test_lost_motion_is_within_10_percent_of_truth_at_2_percent_effort_noise(tmp
     done = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
                            str(tmp_path / 'bag'), '--out', str(tmp_path / 'out'), '--json'],
                           capture_output=True, text=True)
-    assert 'Traceback' not in done.stderr
+    assert done.returncode == 0 and 'Traceback' not in done.stderr, done.stderr[-500:]
     reported = json.loads(done.stdout)['joints']
     errors = {}
     for name, t in truth['joints'].items():

@@ -151,25 +151,44 @@ def _consistent(store_path):
         return sum(r.bags for r in store.reducers())
 
 
+def _stored_bags(path):
+    """Bags a store holds now, as another reader sees it (-1 while there is no store)."""
+    if not path.exists():
+        return -1
+    try:
+        conn = sqlite3.connect(f'file:{path}?mode=ro', uri=True, timeout=0.05)
+        try:
+            return conn.execute('SELECT count(*) FROM bags').fetchone()[0]
+        finally:
+            conn.close()
+    except sqlite3.Error:
+        return -1
+
+
 def test_kill_9_at_any_moment_leaves_a_consistent_store_that_a_rerun_completes(
         bags, tmp_path, capsys):
     reference = tmp_path / 'clean.db'
     assert _analyze([bags['s1'], bags['s2'], bags['s3']], reference, tmp_path / 'c',
                     capsys)[0] == 0
+    full = _consistent(reference)
     seen = set()
-    for k, delay in enumerate((0.8, 1.6, 2.4, 3.2)):
+    # Killed as soon as the store holds 0, 1 and 2 of the 3 bags: before, between and
+    # after the transactions (polled, not timed, so a fast machine cannot outrun it).
+    for k, stored in enumerate((0, 1, 2)):
         store = tmp_path / f'k{k}.db'
         proc = _cli(['analyze', bags['s1'], bags['s2'], bags['s3'], '--store', store, '--out',
                      tmp_path / f'k{k}'])
-        time.sleep(delay)
+        while proc.poll() is None and _stored_bags(store) < stored:
+            time.sleep(0.002)
         os.killpg(proc.pid, signal.SIGKILL)
         proc.communicate()
+        assert proc.returncode == -signal.SIGKILL, 'the run ended before it was killed'
         seen.add(_consistent(store) if store.exists() else 0)
         code, _, err = _analyze([bags['s1'], bags['s2'], bags['s3']], store,
                                 tmp_path / f'r{k}', capsys)
         assert code == 0, err
         assert _fleet(store, capsys) == _fleet(reference, capsys)
-    assert seen, 'no kill happened'
+    assert min(seen) < full, f'no kill landed before the last bag was stored: {seen}'
 
 
 def test_two_writers_at_once_serialise_and_count_every_bag_once(bags, tmp_path, capsys):
