@@ -1084,11 +1084,6 @@ class WearEstimator:
         return self.trend_probability, mean, cov, self._growth.exposure
 
     @property
-    def fit_bias(self):
-        """Estimated bias of the window fit's lost motion, ``c`` [rad]."""
-        return float(self._x[3])
-
-    @property
     def components(self):
         """Return the number of Gaussian components now."""
         return int(self._lw.size)

@@ -876,8 +876,8 @@ def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
     motor = stream.position[:, motor_col]
     ok = np.isfinite(link) & np.isfinite(motor)
     unpaired = int(np.count_nonzero(np.isfinite(link) ^ np.isfinite(motor)))
-    torque = stream.effort[:, link_col] if effort == 'link' else choose_effort(
-        stream.effort[:, link_col], stream.effort[:, motor_col], effort, motor_effort_scale)
+    torque = choose_effort(stream.effort[:, link_col], stream.effort[:, motor_col], effort,
+                           motor_effort_scale)
     if ok.all():
         return (stream.t_ns, motor * motor_scale, link, torque,
                 stream.velocity[:, link_col]), unpaired

@@ -571,7 +571,7 @@ class LifeStage:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
         else:
             message += growth_note(wear_record)
-        if level == 'OK' and int(wear_record.get('updates', 1)) == 0:
+        if level == 'OK' and int(wear_record.get('updates', 0)) == 0:
             # A prediction from the duty alone is no assessment: never 'OK' without evidence.
             level = 'STALE'
             message = 'not observed: no lost-motion observation yet; ' + message
