@@ -1636,24 +1636,5 @@ def _solve_identifiable(normal, rhs, energy):
         Coefficients (0 where not identifiable) and the identifiable mask.
 
     """
-    n_par = rhs.size
-    ident = energy > 0.0
-    scale = np.where(ident, 1.0 / np.sqrt(np.where(ident, energy, 1.0)), 0.0)
-    a = normal * np.outer(scale, scale)
-    b = rhs * scale
-    beta = np.zeros(n_par)
-    while ident.any():
-        idx = np.flatnonzero(ident)
-        sub = a[np.ix_(idx, idx)]
-        try:
-            inv = np.linalg.inv(sub)
-            share = 1.0 / np.diag(inv)
-        except np.linalg.LinAlgError:
-            share = np.zeros(idx.size)
-        share = np.where(np.isfinite(share), share, 0.0)
-        worst = int(np.argmin(share))
-        if share[worst] >= _MIN_IDENTIFIABILITY:
-            beta[idx] = inv @ b[idx] * scale[idx]
-            break
-        ident[idx[worst]] = False
-    return beta, ident
+    beta, ident = _solve_identifiable_many(normal[None], rhs[None], energy[None])
+    return beta[0], ident[0]
