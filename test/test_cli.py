@@ -5,8 +5,8 @@ from pathlib import Path
 import subprocess
 import sys
 
+from cli_runs import run_cli as _run
 import pytest
-from reducer_twin.cli import main
 
 T0 = 784.0   # rated torque [N*m], paper Table 3
 
@@ -21,18 +21,8 @@ def _run_script(*args):
                           timeout=120)
 
 
-def _run_in_process(argv, capsys):
-    """Run ``main(argv)``; usage errors exit through SystemExit. Return (code, out, err)."""
-    try:
-        code = main(argv)
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 def _model_json(capsys, *extra):
-    code, out, err = _run_in_process(['model', '--json', *extra], capsys)
+    code, out, err = _run(['model', '--json', *extra], capsys)
     assert code == 0, err
     return json.loads(out)
 
@@ -92,10 +82,10 @@ def test_model_reads_a_params_file_and_set_overrides(capsys, repo_root):
 
 
 def test_model_and_paper_print_tables_without_json(capsys):
-    code, out, err = _run_in_process(['model', '--wear-um', '3', '--torque-nm', '50'], capsys)
+    code, out, err = _run(['model', '--wear-um', '3', '--torque-nm', '50'], capsys)
     assert code == 0, err
     assert 'lost_motion_arcmin' in out
-    code, out, err = _run_in_process(['paper'], capsys)
+    code, out, err = _run(['paper'], capsys)
     assert code == 0, err
     assert 'Table 2' in out and 'Table 4' in out and 'Table 5' in out
 
@@ -135,7 +125,7 @@ VALUE_ERRORS = [
 @pytest.mark.parametrize('argv, fragment', [row[1:] for row in USAGE_ERRORS],
                          ids=[row[0] for row in USAGE_ERRORS])
 def test_usage_errors_exit_2_with_one_error_line(capsys, argv, fragment):
-    code, out, err = _run_in_process(argv, capsys)
+    code, out, err = _run(argv, capsys)
     assert code == 2
     lines = _error_lines(err)
     assert len(lines) == 1 and fragment in lines[0], err
@@ -145,7 +135,7 @@ def test_usage_errors_exit_2_with_one_error_line(capsys, argv, fragment):
 @pytest.mark.parametrize('argv, fragments', [row[1:] for row in VALUE_ERRORS],
                          ids=[row[0] for row in VALUE_ERRORS])
 def test_invalid_values_exit_1_naming_the_quantity(capsys, argv, fragments):
-    code, out, err = _run_in_process(argv, capsys)
+    code, out, err = _run(argv, capsys)
     assert code == 1
     lines = _error_lines(err)
     assert len(lines) == 1, err
@@ -167,6 +157,6 @@ def test_the_installed_script_returns_exit_1_on_an_invalid_value_without_a_trace
 def test_a_params_file_with_a_non_mapping_reducer_key_is_an_invalid_value(capsys, tmp_path):
     path = tmp_path / 'bad.yaml'
     path.write_text('reducer: [1, 2]\n', encoding='utf-8')
-    code, _, err = _run_in_process(['model', '--wear-um', '5', '--torque-nm', '1',
-                                    '--params', str(path)], capsys)
+    code, _, err = _run(['model', '--wear-um', '5', '--torque-nm', '1',
+                         '--params', str(path)], capsys)
     assert code == 1 and _error_lines(err)

@@ -9,13 +9,13 @@ store must hold is what the bag analysis computes from the same windows
 (:class:`~reducer_twin.analysis.stages.JointBack`), and what the node estimates.
 """
 
-import errno
 import itertools
 import json
 import subprocess
 
 from cli_runs import run_cli
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from full_disk import fill, small_tmpfs
 from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
@@ -315,26 +315,9 @@ def test_a_second_writer_holding_the_store_never_holds_the_stream(
 
 @pytest.fixture
 def small_disk(tmp_path):
-    """Mount a 1 MiB tmpfs: a disk that really fills up (needs the right to mount)."""
-    where = tmp_path / 'disk'
-    where.mkdir()
-    mounted = subprocess.run(['mount', '-t', 'tmpfs', '-o', 'size=1m', 'tmpfs', str(where)],
-                             capture_output=True, text=True)
-    assert mounted.returncode == 0, f'cannot mount a small tmpfs: {mounted.stderr}'
-    yield where
-    subprocess.run(['umount', '-l', str(where)], check=True)
-
-
-def fill(directory):
-    """Write a file until the file system is full; return it."""
-    filler = directory / 'filler'
-    with open(filler, 'wb', buffering=0) as out:
-        try:
-            while True:
-                out.write(b'\0' * 4096)
-        except OSError as err:
-            assert err.errno == errno.ENOSPC
-    return filler
+    """Mount a 1 MiB tmpfs: a disk that really fills up."""
+    with small_tmpfs(tmp_path / 'disk', 1 << 20) as where:
+        yield where
 
 
 def test_a_full_disk_keeps_the_stored_state_says_error_and_recovers(
