@@ -3,11 +3,16 @@
 MAX_ROBOT_NAME = 64
 
 
+def valid_robot_name(text):
+    """Tell whether ``text`` is a robot name: 1 .. 64 printable characters, no spaces."""
+    return isinstance(text, str) and 0 < len(text) <= MAX_ROBOT_NAME and not any(
+        c.isspace() or not c.isprintable() for c in text)
+
+
 def robot_name(text):
     """Check a robot name given on the command line (argparse type)."""
     import argparse
-    if not text or len(text) > MAX_ROBOT_NAME or \
-            any(c.isspace() or not c.isprintable() for c in text):
+    if not valid_robot_name(text):
         raise argparse.ArgumentTypeError(
             f'expected a robot name of 1 .. {MAX_ROBOT_NAME} printable characters without '
             f'spaces, got {text!r}')

@@ -37,6 +37,7 @@ import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.pipeline import features_from_record, LifeStage
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
 from reducer_twin.fleet.store import StoreConflict, StoreError
 
@@ -45,8 +46,6 @@ LOCK_WAIT_S = 0.5
 
 MAX_PENDING_WINDOWS = 50_000
 """Windows kept in memory while the store cannot be written (a day of 2-s windows)."""
-
-MAX_ROBOT_NAME = 64
 
 _END = TE_FEATURES.fields.index('window_end_s')
 _START = TE_FEATURES.fields.index('window_start_s')
@@ -67,8 +66,7 @@ def check_robot(robot):
         If it is empty, too long or holds spaces or unprintable characters.
 
     """
-    if not isinstance(robot, str) or not robot or len(robot) > MAX_ROBOT_NAME or \
-            any(c.isspace() or not c.isprintable() for c in robot):
+    if not valid_robot_name(robot):
         raise InvalidParameter(out_of_range(
             'robot', robot, '', f'a name of 1 .. {MAX_ROBOT_NAME} printable characters '
             'without spaces when store is set (the robot of the reducer in the fleet store; '
