@@ -183,6 +183,9 @@ TREND_LIMIT = 1.5
 SCORE_AFTER = 8
 """Usable windows both models have seen before their predictions are scored."""
 
+DUTY_UNKNOWN_REL_STD = 0.1
+"""Relative sd of the duty rate before three batches show it (the twin's former allowance)."""
+
 DUTY_BATCH_WINDOWS = 10
 """Windows per batch of the duty rate's standard error (batch means)."""
 
@@ -1181,14 +1184,16 @@ class WearEstimator:
         ``r_b`` the rate of a batch (weighted by its exposure, exponentially
         forgotten like the duty rate) and ``n_eff`` the effective number of
         batches, ``sqrt(var(r_b)/n_eff)/r̄``: a few per cent for a periodic
-        duty, more for a duty that changes. 0 before three batches.
+        duty, more for a duty that changes. Before three batches the spread is not
+        known and :data:`DUTY_UNKNOWN_REL_STD` stands for it (never 0: a duty seen for a
+        few windows is no duty known exactly).
         """
         w, wr, wr2, w2 = self._duty['sums']
         if w <= 0.0 or wr <= 0.0 or w2 <= 0.0:
-            return 0.0
+            return DUTY_UNKNOWN_REL_STD
         n_eff = w * w / w2
         if n_eff < 2.5:
-            return 0.0
+            return DUTY_UNKNOWN_REL_STD
         mean = wr / w
         var = max(wr2 / w - mean * mean, 0.0)
         return math.sqrt(var / n_eff) / mean
