@@ -175,6 +175,10 @@ def test_live_windows_become_segments_that_fleet_lists_with_the_nodes_estimate(
     np.testing.assert_array_equal(trend.wear, wear)
     np.testing.assert_array_equal(trend.life, life)
     ends = [r['window_end_s'] for r in records[:9]]
+    # The store is written; the last estimates may still be on their way over DDS.
+    ros.spin_until(lambda: sum(from_multiarray(m, WEAR_ESTIMATE)['stamp_s'] in ends
+                               for m in est.wear) >= len(ends),
+                   what='every window estimate published')
     published = [from_multiarray(m, WEAR_ESTIMATE) for m in est.wear]
     published = [record_values(WEAR_ESTIMATE, p) for p in published if p['stamp_s'] in ends]
     np.testing.assert_array_equal(published, wear)
