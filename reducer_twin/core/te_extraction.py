@@ -692,7 +692,12 @@ class WindowAnalyzer:
     normal equations (after eliminating the per-bin torque lines) are pooled
     over recent windows with an exponential memory of ``memory_windows``
     windows, so that windows that cover part of a revolution still separate
-    them from the torque dependence.
+    them from the torque dependence. They are fitted only on samples whose
+    load surely exceeds the catalogue's lost-motion test torque (noise band
+    and viscous friction counted against it): below it the play is still
+    being taken up, the flank's level follows the load, and an unloaded
+    joint's load follows its position in the move, which the harmonics
+    would then absorb at the cost of the hysteresis.
 
     Parameters
     ----------
@@ -801,6 +806,7 @@ class WindowAnalyzer:
         self.params = params
         self.tables = model_tables(params)
         self.rated_torque = params.rating.rated_torque
+        self.takeup_torque = params.rating.lost_motion_torque_fraction * self.rated_torque
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
         self.centres = np.sqrt(self.edges[1:] * self.edges[:-1])
         n_par = 2 * len(self.orders) + 1
@@ -1067,14 +1073,30 @@ class WindowAnalyzer:
         n_win = starts.size
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
+        drag = None
         if self.friction:
-            torque = self._friction(torque, t, buf['theta'], speed, win, starts, ends)
-        torque, ambiguous = self._smooth_torque(torque, t, win, starts, ends)
+            torque, drag = self._friction(torque, t, buf['theta'], speed, win, starts, ends)
+        torque, band = self._smooth_torque(torque, t, win, starts, ends)
+        if drag is not None:
+            # Viscous friction of the motor side and drag of the link both follow the
+            # speed; the effort cannot tell them apart: the torque lies between the two
+            # readings (all of it subtracted, or none).
+            low = np.minimum(np.abs(torque), np.abs(torque + drag))
+            low = np.where(torque * (torque + drag) > 0.0, low, 0.0) - band
+        else:
+            low = np.abs(torque) - band
+        # Where the load may be inside the band, the noise or the friction picks the flank.
+        ambiguous = low <= 0.0
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
         x = z[:-1]
         stats = self._group_stats(z, torque, win, starts, ends, ambiguous)
-        beta, ident, noise = self._fit_harmonics(stats, n_win)
+        # The harmonics and the time offset come from samples whose load surely takes the
+        # play up (beyond the lost-motion test torque): below it the flank's level still
+        # follows the load, which an unloaded joint's position in the move mirrors.
+        taken_up = low > self.takeup_torque
+        fit_stats = self._group_stats(z, torque, win, starts, ends, ~taken_up)
+        beta, ident, noise = self._fit_harmonics(fit_stats, n_win)
         torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
@@ -1155,16 +1177,21 @@ class WindowAnalyzer:
         ``Fv·omega`` friction; ``Fc`` and ``Fv`` (each at least 0, 0 while not
         identifiable: a joint that never reversed) are subtracted when they
         amount to :data:`_FRICTION_FLOOR` of rated torque or more. Velocity-
-        proportional drag downstream of the mesh is taken out with ``Fv``: it
-        is small next to the load where the flank is decided.
+        proportional drag downstream of the mesh (cables, seals of the link)
+        is taken out with ``Fv`` too, although the reducer carries it: the
+        effort cannot tell the two apart, so the caller treats a sample whose
+        torque changes sign with ``Fv·omega`` put back as ambiguous.
 
         Returns
         -------
-        ndarray
-            Torque at the reducer output [N·m].
+        tuple of ndarray
+            Torque at the reducer output [N·m], and the velocity-proportional
+            part taken out of it [N·m] (which may be drag of the link that the
+            reducer does carry).
 
         """
         n = torque.size
+        drag = np.zeros(n)
         half = max(1, self._smoothing_half(t))
         idx = np.arange(n)
         speed_s, count = _window_mean(speed, half, win, starts, ends)
@@ -1198,7 +1225,8 @@ class WindowAnalyzer:
             typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
             if typical >= _FRICTION_FLOOR * self.rated_torque:
                 out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
-        return out
+                drag[a:b] = fv * speed[a:b]
+        return out, drag
 
     def _significant_friction(self, beta, ident):
         """Coulomb and viscous friction of the pooled fit, 0 unless 3 standard errors above 0."""
@@ -1222,25 +1250,26 @@ class WindowAnalyzer:
 
     def _smooth_torque(self, torque, t, win, starts, ends):
         """
-        Centred moving average of the effort inside each window, and its ambiguous samples.
+        Centred moving average of the effort inside each window, and its noise band.
 
         The noise of the raw effort is estimated per window from second
         differences (robustly, by their median absolute value), so the
         smoothed torque's noise is ``sigma/sqrt(m)`` for an average of ``m``
         samples. Samples whose smoothed torque is within ``sign_sigmas`` of
-        that noise from zero are ambiguous: their flank is unknown.
+        that noise from zero (or from the torque with the viscous friction
+        left in) are ambiguous: their flank is unknown.
 
         Returns
         -------
         tuple of ndarray
-            Smoothed torque [N·m] and the ambiguous mask, both like ``torque``.
+            Smoothed torque [N·m] and ``sign_sigmas`` times its noise [N·m],
+            both like ``torque``.
 
         """
         smooth, count = _window_mean(torque, self._smoothing_half(t), win, starts, ends)
         sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
                                          starts, ends - 2) / math.sqrt(1.5)
-        ambiguous = np.abs(smooth) < self.sign_sigmas * sigma[win] / np.sqrt(count)
-        return smooth, ambiguous
+        return smooth, self.sign_sigmas * sigma[win] / np.sqrt(count)
 
     def _smoothing_half(self, t):
         """Half-width in samples of the ``torque_smoothing_s`` average at the stamps' rate."""

@@ -7,7 +7,7 @@ the lost motion of every joint, including the base rotation without gravity, is 
 within 10 % of the truth. The recordings: three joints, link and motor on two topics, the
 rate drawn among 100-1000 Hz, 150 s of stream of units at a drawn point of their lives
 (aging factor 1: the lost motion is fixed over the recording). The full distribution over
-random truths is printed by ``bench/bench_lost_motion.py`` (19 of 24 runs at 2 % noise): these
+random truths is printed by ``bench/bench_lost_motion.py``: these
 three seeds are fixed regression cases, not evidence for the issue's 95 % floor.
 """
 
@@ -16,7 +16,10 @@ import subprocess
 import sys
 
 from bench_scripts import load
+import numpy as np
 import pytest
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
 
 gen = load('independent_generator')
 
@@ -43,3 +46,22 @@ def test_lost_motion_is_within_10_percent_of_truth_at_2_percent_effort_noise(tmp
            if e[2] is None or abs(e[2] - e[1]) > 0.10 * e[1]}
     assert not off, (f"{truth['rate_hz']:g} Hz; joint: (kind, true, reported arcmin) beyond "
                      f'10 %: {off}')
+
+
+@pytest.mark.parametrize('seed', (1005, 1016))
+def test_link_drag_the_reducer_carries_does_not_bias_an_unloaded_joints_lost_motion(seed):
+    # The base rotation's torque is inertia plus drag of the link (cables, seals), which
+    # the reducer carries. Given that exact torque as effort (no noise, no motor friction),
+    # the friction identification still finds a viscous term (the drag) and takes it out:
+    # where that flips the torque's sign the flank is unknown, and the harmonics are fitted
+    # beyond the lost-motion test torque, so the lost motion stays within 3 % (seed 1016
+    # read 6 % low when the subtracted drag decided flanks and bent the 1x harmonic).
+    stream = gen.generate(gen.Spec(seed=seed, kinds=('base',), hours=150.0 / 3600.0,
+                                   start_fraction=0.3, effort_noise_pct=2.0))
+    te = compute_te(stream.motor_stamp_ns * 1e-9, stream.motor[:, 0],
+                    stream.link_stamp_ns * 1e-9, stream.link[:, 0], gen.RATIO)
+    analyzer = WindowAnalyzer(ReducerParams())
+    windows = analyzer.update(te, stream.torque[:, 0], stream.velocity[:, 0]) + analyzer.flush()
+    assert stream.joints[0].drag_nm_s > 0.0 and analyzer.viscous_friction > 0.0
+    observed = np.nanmedian([w.lost_motion for w in windows])
+    assert observed == pytest.approx(stream.lost_motion[-1, 0], rel=0.03)
