@@ -1073,10 +1073,13 @@ class WindowAnalyzer:
         n_win = starts.size
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
-        drag = None
+        drag = model = None
         if self.friction:
-            torque, drag = self._friction(torque, t, buf['theta'], speed, win, starts, ends)
+            torque, drag, model = self._friction(torque, t, buf['theta'], speed, win, starts,
+                                                 ends)
         torque, band = self._smooth_torque(torque, t, win, starts, ends)
+        if model is not None:
+            torque, band = self._toward_model(torque, band, model, starts, ends)
         if drag is not None:
             # Viscous friction of the motor side and drag of the link both follow the
             # speed; the effort cannot tell them apart: the torque lies between the two
@@ -1192,15 +1195,19 @@ class WindowAnalyzer:
         """
         n = torque.size
         drag = np.zeros(n)
+        model = np.full(n, np.nan)
         half = max(1, self._smoothing_half(t))
         idx = np.arange(n)
         speed_s, count = _window_mean(speed, half, win, starts, ends)
         effort_s, _ = _window_mean(torque, half, win, starts, ends)
-        accel = np.zeros(n)
-        # Whole averages only: their neighbours, for the acceleration, are in the window too.
-        inner = count == 2 * half + 1
-        step = np.maximum(t[np.minimum(idx + 1, n - 1)] - t[np.maximum(idx - 1, 0)], 1e-12)
-        accel[1:-1] = (speed_s[2:] - speed_s[:-2]) / step[1:-1]
+        # The acceleration from the smoothed speed over the averaging length (a two-sample
+        # difference would add the speed's noise, amplified, to the load model), where the
+        # averages at both ends are whole and in the same window.
+        whole = count == 2 * half + 1
+        lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half, n - 1)
+        inner = whole[lo] & whole[hi] & (win[lo] == win[hi])
+        accel = np.where(inner, (speed_s[hi] - speed_s[lo])
+                         / np.maximum(t[hi] - t[lo], 1e-12), 0.0)
         coulomb_shape = np.tanh(speed / _FRICTION_SPEED)
         x = np.stack([np.ones(n), np.cos(theta), np.sin(theta), np.cos(2.0 * theta),
                       np.sin(2.0 * theta), accel, coulomb_shape, speed])
@@ -1222,11 +1229,51 @@ class WindowAnalyzer:
             beta, ident = _solve_identifiable(self._fric_n, self._fric_r, self._fric_e)
             fc, fv = self._significant_friction(beta, ident)
             self.coulomb_friction, self.viscous_friction = fc, fv
+            # The effort as the fit explains it, where its acceleration is whole (the
+            # window's edges keep NaN); less the friction taken out, as the torque is.
+            model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
             typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
             if typical >= _FRICTION_FLOOR * self.rated_torque:
                 out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
                 drag[a:b] = fv * speed[a:b]
-        return out, drag
+                model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
+        return out, drag, model
+
+    def _toward_model(self, torque, band, model, starts, ends):
+        """
+        Combine the smoothed torque with the rigid-body load model, weighted by their errors.
+
+        The load model (:meth:`_friction`'s fit, pooled over many windows) has
+        almost no noise but misses what a single joint's rigid-body terms
+        cannot explain (other joints' motion, payloads); the smoothed torque
+        has the effort's noise ``sigma`` (``band/sign_sigmas``). Per window,
+        the model's own error ``s_m^2`` is the mean square of their
+        difference less ``sigma^2``; the torque becomes
+        ``model + g*(T_s - model)`` with ``g = s_m^2/(s_m^2 + sigma^2)`` and
+        its noise ``sqrt(g)*sigma``: near the model where it explains the
+        effort, the smoothed torque where it does not.
+
+        Returns
+        -------
+        tuple of ndarray
+            Torque [N·m] and its ``sign_sigmas`` band [N·m], like ``torque``.
+
+        """
+        sigma2 = (band / self.sign_sigmas) ** 2 if self.sign_sigmas > 0 else band * 0.0
+        diff = torque - model
+        ok = np.isfinite(diff)
+        n_ok = np.add.reduceat(ok, starts)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            miss = (np.add.reduceat(np.where(ok, diff ** 2 - sigma2, 0.0), starts)
+                    / np.maximum(n_ok, 1))
+        miss = np.maximum(miss, 1e-6 * self.rated_torque ** 2)
+        miss = np.where(n_ok > 0, miss, np.inf)
+        win = np.repeat(np.arange(starts.size), ends - starts)
+        with np.errstate(invalid='ignore'):
+            gain = np.where(ok, miss[win] / (miss[win] + sigma2), 1.0)
+        gain = np.where(np.isfinite(gain), gain, 1.0)
+        out = np.where(ok, model + gain * np.where(ok, diff, 0.0), torque)
+        return out, band * np.sqrt(gain)
 
     def _significant_friction(self, beta, ident):
         """Coulomb and viscous friction of the pooled fit, 0 unless 3 standard errors above 0."""
