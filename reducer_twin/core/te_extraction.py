@@ -688,12 +688,15 @@ class WindowAnalyzer:
     direction, otherwise after ``window_s`` (a window that turned
     continuously past ``window_s`` ends when continuous motion stops).
 
-    Manufacturing orders and the time offset are hardware constants: their
-    normal equations (after eliminating the per-bin torque lines) are pooled
-    over recent windows with an exponential memory of ``memory_windows``
-    windows, so that windows that cover part of a revolution still separate
-    them from the torque dependence. They are fitted only on samples whose
-    load surely exceeds the catalogue's lost-motion test torque (noise band
+    Manufacturing orders and the time offset are hardware constants: they
+    are fitted to recent windows pooled with an exponential memory of
+    ``memory_windows`` windows, each ``(|T| bin, torque sign)`` flank line
+    shared by the pool (with a drift over its windows), so that the joint
+    meeting the same load at different positions in different moves tells
+    the harmonics from the hysteresis, and windows that cover part of a
+    revolution still separate them from the torque dependence. They are
+    fitted only on samples whose load surely exceeds the catalogue's
+    lost-motion test torque (noise band
     and viscous friction counted against it): below it the play is still
     being taken up, the flank's level follows the load, and an unloaded
     joint's load follows its position in the move, which the harmonics
@@ -811,9 +814,14 @@ class WindowAnalyzer:
         self.centres = np.sqrt(self.edges[1:] * self.edges[:-1])
         n_par = 2 * len(self.orders) + 1
         self._memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
-        self._pool_n = np.zeros((n_par, n_par))
-        self._pool_r = np.zeros(n_par)
-        self._pool_raw = np.zeros(n_par)
+        n_groups = 2 * self.torque_bins
+        self._te_ref = None
+        self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
+                      'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
+                      'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
+                      'sut': np.zeros(n_groups), 's0': np.zeros((n_groups, n_par + 1)),
+                      's1': np.zeros((n_groups, n_par + 1)),
+                      'stz': np.zeros((n_groups, n_par + 1))}
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._last_t = None
         self._last_theta = None
@@ -1090,6 +1098,11 @@ class WindowAnalyzer:
             low = np.abs(torque) - band
         # Where the load may be inside the band, the noise or the friction picks the flank.
         ambiguous = low <= 0.0
+        if drag is not None:
+            # Nor is the level known where the drag decides whether the load is beyond the
+            # lost-motion test torque (the play taken up) or below it.
+            high = np.maximum(np.abs(torque), np.abs(torque + drag))
+            ambiguous |= (high - np.abs(drag) < self.takeup_torque) & (high > self.takeup_torque)
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
         x = z[:-1]
@@ -1099,7 +1112,8 @@ class WindowAnalyzer:
         # follows the load, which an unloaded joint's position in the move mirrors.
         taken_up = low > self.takeup_torque
         fit_stats = self._group_stats(z, torque, win, starts, ends, ~taken_up)
-        beta, ident, noise = self._fit_harmonics(fit_stats, n_win)
+        exposure = np.add.reduceat(dt, starts) * self.aging_factor
+        beta, ident, noise = self._fit_harmonics(fit_stats, n_win, te_mean, exposure)
         torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
@@ -1382,6 +1396,7 @@ class WindowAnalyzer:
         group_params = (count > 0).astype(float) + sloped
         inside = (ends - starts) - np.diff(out_bounds)
         return {
+            'moments': moments,
             'reduced': moments - correction,
             'energy': np.einsum('wii->wi', moments)[:, :-1],
             'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
@@ -1389,9 +1404,16 @@ class WindowAnalyzer:
             's0': s0, 's1c': s1c,
         }
 
-    def _fit_harmonics(self, stats, n_win):
+    def _fit_harmonics(self, stats, n_win, te_mean, exposure):
         """
         Pooled least squares of the harmonics and time offset.
+
+        The normal equations are those of the pool (:meth:`_level_correction`:
+        flank lines shared by its windows), referred to one TE level through
+        the windows' means ``te_mean`` [rad]; ``exposure`` [s] of operation per
+        window shortens the pool where the lost motion moves (time-compressed
+        recordings). The residual variance is each window's own, under its
+        own flank lines.
 
         Returns
         -------
@@ -1403,13 +1425,48 @@ class WindowAnalyzer:
         reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
         n_par = energy.shape[1]
         normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
+        shape = (n_win, 2 * self.torque_bins)
+        count = stats['count'].reshape(shape)
+        u_mean = stats['u_mean'].reshape(shape)
+        s0 = stats['s0'].reshape(shape + (-1,))
+        raw = {'moments': stats['moments'], 'count': count, 'su': count * u_mean,
+               'suu': stats['s_uu'].reshape(shape) + count * u_mean ** 2, 's0': s0,
+               's1': stats['s1c'].reshape(shape + (-1,)) + u_mean[..., None] * s0}
         pool_n = np.empty((n_win, n_par, n_par))
         pool_r = np.empty((n_win, n_par))
         pool_raw = np.empty((n_win, n_par))
+        pool = self._pool
         for k in range(n_win):
-            self._pool_n = pool_n[k] = self._memory * self._pool_n + normal[k]
-            self._pool_r = pool_r[k] = self._memory * self._pool_r + rhs[k]
-            self._pool_raw = pool_raw[k] = self._memory * self._pool_raw + energy[k]
+            # The windows' TE is centred on each one's mean: refer it to one level for the
+            # pool (a jump of the TE's constant, where a turn count was lost, starts afresh).
+            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP:
+                self._te_ref = te_mean[k]
+                for value in pool.values():
+                    value[...] = 0.0
+            d = te_mean[k] - self._te_ref
+            add = {key: value[k].copy() for key, value in raw.items()}
+            total = add['s0'].sum(axis=0)
+            add['moments'][-1, :] += d * total
+            add['moments'][:, -1] += d * total
+            add['moments'][-1, -1] += d * d * add['count'].sum()
+            add['s0'][:, -1] += d * add['count']
+            add['s1'][:, -1] += d * add['su']
+            # The flank levels are shared while the lost motion holds still: over
+            # memory_windows windows, or _POOL_EXPOSURE_S of operation if that is shorter
+            # (a time-compressed recording wears visibly from one window to the next).
+            memory = min(self._memory, math.exp(-exposure[k] / _POOL_EXPOSURE_S))
+            for key, value in pool.items():
+                value *= memory
+            # The pooled windows' index tau counts back from this one (0): one step older.
+            pool['stt'] += pool['count'] - 2.0 * pool['st']
+            pool['st'] -= pool['count']
+            pool['sut'] -= pool['su']
+            pool['stz'] -= pool['s0']
+            for key, value in add.items():
+                pool[key] += value
+            red = pool['moments'] - self._level_correction(pool)
+            pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
+            pool_raw[k] = np.diagonal(pool['moments'])[:-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
@@ -1418,6 +1475,47 @@ class WindowAnalyzer:
             rss = reduced[k, -1, -1] - 2.0 * b @ rhs[k] + b @ normal[k] @ b
             noise[k] = max(rss, 0.0) / free[k]
         return beta, ident, noise
+
+    def _level_correction(self, pool):
+        """
+        Projection of the pooled flank lines out of the pooled moments, ``(P+1, P+1)``.
+
+        The pool's groups are ``(|T| bin, torque sign)`` over all its windows:
+        each a level with a slope in ``u`` and a drift over the windows (the
+        lost motion grows, quickly in a time-compressed recording), shared by
+        the windows, so that the harmonics are told from the hysteresis by the
+        positions at which the joint meets the same load in different moves,
+        not only within one window.
+        """
+        n = pool['count']
+        has = n > 0
+        with np.errstate(invalid='ignore', divide='ignore'):
+            inv_n = np.where(has, 1.0 / np.where(has, n, 1.0), 0.0)
+            u_m, t_m = pool['su'] * inv_n, pool['st'] * inv_n
+            c_uu = pool['suu'] - n * u_m ** 2
+            c_tt = pool['stt'] - n * t_m ** 2
+            c_ut = pool['sut'] - n * u_m * t_m
+            b_u = pool['s1'] - u_m[:, None] * pool['s0']
+            b_t = pool['stz'] - t_m[:, None] * pool['s0']
+        use_u = has & (n >= 3) & (c_uu > 1e-12 * n * self.centres.max() ** 2)
+        use_t = has & (n >= 3) & (c_tt > 1e-6 * n)
+        c_uu, c_tt, c_ut = (np.where(use_u, c_uu, 1.0), np.where(use_t, c_tt, 1.0),
+                            np.where(use_u & use_t, c_ut, 0.0))
+        b_u = np.where(use_u[:, None], b_u, 0.0)
+        b_t = np.where(use_t[:, None], b_t, 0.0)
+        det = c_uu * c_tt - c_ut ** 2
+        ok = det > 1e-9 * c_uu * c_tt
+        # Inverse of the centred (u, tau) Gram matrix; a nearly collinear pair keeps u only.
+        i_uu = np.where(ok, c_tt / np.where(ok, det, 1.0), 1.0 / c_uu)
+        i_tt = np.where(ok, c_uu / np.where(ok, det, 1.0), 0.0)
+        i_ut = np.where(ok, -c_ut / np.where(ok, det, 1.0), 0.0)
+        i_uu, i_tt, i_ut = (np.where(use_u, i_uu, 0.0), np.where(use_t, i_tt, 0.0),
+                            np.where(use_u & use_t, i_ut, 0.0))
+        i_tt = np.where(use_t & ~use_u, 1.0 / c_tt, i_tt)
+        s0 = pool['s0']
+        return ((s0 * inv_n[:, None]).T @ s0
+                + (b_u * i_uu[:, None]).T @ b_u + (b_t * i_tt[:, None]).T @ b_t
+                + (b_u * i_ut[:, None]).T @ b_t + (b_t * i_ut[:, None]).T @ b_u)
 
     def _hysteresis(self, stats, beta, noise):
         """Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins)."""
@@ -1555,6 +1653,12 @@ class WindowAnalyzer:
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
+
+_POOL_EXPOSURE_S = 100.0 * 3600.0
+"""Operation [s] over which the pooled flank levels fade (the lost motion moves little)."""
+
+_POOL_JUMP = 0.01
+"""Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
 
 _FRICTION_TERMS = 8
 """Regressors of the friction identification (load: 6, Coulomb, viscous)."""
