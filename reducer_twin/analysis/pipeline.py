@@ -53,9 +53,6 @@ from msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
 from msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
 import numpy as np
-from reducer_twin.analysis.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
-from reducer_twin.analysis.mcap_io import DEFAULT_QOS, ReadWarning
-from reducer_twin.analysis.outputs import refuse_inside_inputs
 from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
@@ -66,6 +63,10 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, LifeConfig
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.io.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
+from reducer_twin.io.mcap_reader import ReadWarning
+from reducer_twin.io.outputs import refuse_inside_inputs
+from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
 
 CHUNK_MESSAGES = 1 << 17
 """JointState messages cleaned, paired and analysed per step."""

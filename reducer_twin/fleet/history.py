@@ -144,7 +144,7 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
         If the bag cannot be read or has no encoder pairs.
 
     """
-    from reducer_twin.analysis.bag import open_bag
+    from reducer_twin.io.bag import open_bag
     from reducer_twin.analysis.pipeline import plan_joints
     from reducer_twin.analysis.simulate import ROBOT_KEY
     with open_bag(path) as bag:

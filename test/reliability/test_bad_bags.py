@@ -31,9 +31,9 @@ from msg_adapters.ros import make_joint_state
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-from reducer_twin.analysis.bag import BagDirWriter, open_bag
 from reducer_twin.analysis.simulate import AGING_KEY
 from reducer_twin.cli import main
+from reducer_twin.io.bag import BagDirWriter, open_bag
 
 
 pytestmark = pytest.mark.timeout(120, method='thread')

@@ -24,11 +24,12 @@ from msg_adapters.multiarray_cdr import decode_layout_batch, decode_multiarray
 from msg_adapters.multiarray_cdr import encode_multiarray
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag, write_bag_dir
-from reducer_twin.analysis.mcap_io import custom_data_strings, McapBagReader
 from reducer_twin.core.errors import ReducerTwinError, StateFileError
 from reducer_twin.core.estimator import decode_state, encode_state, WearEstimator
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.io.bag import open_bag, write_bag_dir
+from reducer_twin.io.mcap_reader import McapBagReader
+from reducer_twin.io.rosbag2_metadata import custom_data_strings
 import yaml
 
 pytestmark = pytest.mark.timeout(120, method='thread')

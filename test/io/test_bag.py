@@ -9,9 +9,10 @@ from mcap_ros2.decoder import DecoderFactory
 from msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
-from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
 from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
+from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.io.mcap_array_writer import McapBagWriter
+from reducer_twin.io.rosbag2_metadata import bag_metadata, dump_yaml
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
