@@ -19,13 +19,14 @@ import pytest
 
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
-from reducer_twin.core.estimator import (backup_path, encode_state, EstimatorConfig,
-                                         load_with_fallback, lost_motion_curve,
-                                         params_fingerprint, run_in_free_wear,
-                                         wear_from_run_in_free, WearEstimator)
+from reducer_twin.core.estimator import (
+    EstimatorConfig, lost_motion_curve, params_fingerprint, run_in_free_wear,
+    wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
+from reducer_twin.io.state_file import (
+    backup_path, encode_state, load_estimator, load_with_fallback, save_estimator)
 
 NOISE = 0.05 * ARCMIN
 WINDOW = 10.0 * HOUR
@@ -415,12 +416,12 @@ def test_a_state_dict_survives_a_json_round_trip_bit_for_bit(params):
 def test_save_and_load_restore_exactly_and_keep_the_previous_copy(params, tmp_path):
     est, features = stepped_estimator(params)
     path = tmp_path / 'wear_state.json'
-    est.save(path)
+    save_estimator(est, path)
     first = est.state_dict()
     est.step(features[60])
-    est.save(path)
-    assert WearEstimator.load(path, params).state_dict() == est.state_dict()
-    assert WearEstimator.load(backup_path(path), params).state_dict() == first
+    save_estimator(est, path)
+    assert load_estimator(path, params).state_dict() == est.state_dict()
+    assert load_estimator(backup_path(path), params).state_dict() == first
     assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.tmp')] == []
 
 
@@ -470,41 +471,41 @@ def reencode_with(data, **changes):
 def test_a_bad_state_file_raises_state_file_error(params, tmp_path, mangle, message):
     est, _ = stepped_estimator(params, n=5)
     path = tmp_path / 'state.json'
-    est.save(path)
+    save_estimator(est, path)
     path.write_bytes(mangle(path.read_bytes()))
     with pytest.raises(StateFileError, match=message):
-        WearEstimator.load(path, params)
+        load_estimator(path, params)
 
 
 def test_a_state_of_another_reducer_is_detected_as_foreign(params, tmp_path):
     other = params.with_overrides({'geometry.equidistant_modification': 0.04e-3})
     assert params_fingerprint(other) != params_fingerprint(params)
     est, _ = stepped_estimator(params, n=5)
-    est.save(tmp_path / 'state.json')
+    save_estimator(est, tmp_path / 'state.json')
     with pytest.raises(StateFileError, match='other reducer parameters'):
-        WearEstimator.load(tmp_path / 'state.json', other)
+        load_estimator(tmp_path / 'state.json', other)
 
 
 def test_a_missing_file_raises_state_file_error(params, tmp_path):
     with pytest.raises(StateFileError, match='cannot read'):
-        WearEstimator.load(tmp_path / 'absent.json', params)
+        load_estimator(tmp_path / 'absent.json', params)
 
 
 def test_a_corrupt_primary_falls_back_to_the_backup_and_says_so(params, tmp_path):
     est, features = stepped_estimator(params)
     path = tmp_path / 'state.json'
-    est.save(path)
+    save_estimator(est, path)
     good = est.state_dict()
     est.step(features[60])
-    est.save(path)
+    save_estimator(est, path)
     path.write_bytes(path.read_bytes()[:100])
     loaded = load_with_fallback(path, params)
     assert loaded.used_backup and loaded.path == backup_path(path)
     assert 'not valid JSON' in loaded.primary_error
     assert loaded.estimator.state_dict() == good
     # Saving over the corrupt primary must not overwrite the good backup with it.
-    loaded.estimator.save(path)
-    assert WearEstimator.load(backup_path(path), params).state_dict() == good
+    save_estimator(loaded.estimator, path)
+    assert load_estimator(backup_path(path), params).state_dict() == good
 
 
 def test_fallback_without_a_usable_file_raises_naming_both(params, tmp_path):
@@ -516,7 +517,7 @@ def test_fallback_without_a_usable_file_raises_naming_both(params, tmp_path):
 
 def test_an_intact_primary_is_used_without_fallback(params, tmp_path):
     est, _ = stepped_estimator(params, n=5)
-    est.save(tmp_path / 'state.json')
+    save_estimator(est, tmp_path / 'state.json')
     loaded = load_with_fallback(tmp_path / 'state.json', params)
     assert not loaded.used_backup and loaded.primary_error is None
 
@@ -530,7 +531,7 @@ def test_a_state_of_the_two_state_estimator_is_converted_on_load(params, tmp_pat
         del old[key]
     path = tmp_path / 'old.json'
     path.write_bytes(encode_state(old))
-    loaded = WearEstimator.load(path, params)
+    loaded = load_estimator(path, params)
     assert loaded.wear == pytest.approx(3e-6) and loaded.x[1] == pytest.approx(0.2)
     assert loaded.components == 1 and loaded.baseline == 0.0
     loaded.step(features[60])

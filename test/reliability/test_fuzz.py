@@ -25,11 +25,12 @@ from msg_adapters.multiarray_cdr import encode_multiarray
 import numpy as np
 import pytest
 from reducer_twin.core.errors import ReducerTwinError, StateFileError
-from reducer_twin.core.estimator import decode_state, encode_state, WearEstimator
+from reducer_twin.core.estimator import WearEstimator
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.io.bag import open_bag, write_bag_dir
 from reducer_twin.io.mcap_reader import McapBagReader
 from reducer_twin.io.rosbag2_metadata import custom_data_strings
+from reducer_twin.io.state_file import decode_state, encode_state
 import yaml
 
 pytestmark = pytest.mark.timeout(120, method='thread')
