@@ -1,8 +1,9 @@
 """
-MCAP framing shared by the project's array writer and its reader.
+MCAP record opcodes and framing shared by the project's array writer and its reader.
 
-Record opcodes and encoders, chunk compression, and decompression bounded by the size a
-chunk declares (a damaged size field cannot exhaust memory).
+Reading parses records with the ``mcap`` library; what is here is the record layout the
+numpy hot path needs (opcodes, the message record header) and the chunk compression of
+the array writer.
 """
 
 import struct
@@ -68,32 +69,3 @@ def _compress(compression, data, level):
     if compression == 'lz4':
         return _lz4.compress(data)
     return bytes(data)
-
-
-def _decompress(compression, data, size):
-    """Decompress chunk records, never producing more than the declared ``size`` bytes."""
-    if compression == '':
-        return bytes(data)
-    if compression == 'zstd':
-        if _zstd is None:  # pragma: no cover
-            raise ValueError('no zstd module is installed')
-        make = _zstd.ZstdDecompressor
-    elif compression == 'lz4':
-        if _lz4 is None:  # pragma: no cover
-            raise ValueError('no lz4 module is installed')
-        make = _lz4.LZ4FrameDecompressor
-    else:
-        raise ValueError(f'unsupported chunk compression {compression!r}; expected zstd, lz4 '
-                         'or none')
-    parts, total = [], 0
-    while data:  # one frame after the other; a damaged size field cannot exhaust memory
-        decompressor = make()
-        part = decompressor.decompress(data, max_length=size + 1 - total)
-        parts.append(part)
-        total += len(part)
-        if total > size:
-            raise ValueError(f'the records are longer than the declared {size} bytes')
-        if not decompressor.eof:
-            raise ValueError('the compressed data end inside a frame')
-        data = decompressor.unused_data
-    return parts[0] if len(parts) == 1 else b''.join(parts)

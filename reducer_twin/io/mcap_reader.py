@@ -1,9 +1,13 @@
 """
 Fast MCAP reading of rosbag2 (Jazzy) files.
 
-The reader hands out each decompressed chunk as one buffer plus offset and length
-arrays, gathered with numpy from runs of equal-length records or from the Message Index
-records.
+The format is read with the ``mcap`` library: the footer, the summary (schemas,
+channels, statistics, chunk and metadata indexes), Header, Schema, Channel, Metadata
+and Chunk records, chunk decompression and the chunk CRC. What stays the project's
+own is the measured hot path: each decompressed chunk is handed out as one buffer
+plus offset and length arrays, gathered with numpy from runs of equal-length
+message records or from the Message Index records, ready for the vectorised
+JointState decoder.
 
 A file without a usable summary (a recording cut short) is scanned record by record;
 what is readable is returned and the reader's ``warnings`` say where reading stopped.
@@ -20,14 +24,21 @@ import re
 import struct
 import zlib
 
+from mcap.data_stream import ReadDataStream
+from mcap.exceptions import EndOfFile, McapError
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Footer, Header, Metadata, Schema
+from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 import numpy as np
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.mcap_format import (
-    _decompress, MAGIC, MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_CHUNK_INDEX, OP_DATA_END,
-    OP_FOOTER, OP_HEADER, OP_MESSAGE, OP_MESSAGE_INDEX, OP_METADATA, OP_METADATA_INDEX, OP_SCHEMA,
-    OP_STATISTICS, RECORD_NAMES)
+    MAGIC, MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE,
+    OP_MESSAGE_INDEX, OP_METADATA, OP_SCHEMA, RECORD_NAMES)
 from reducer_twin.io.rosbag2_metadata import custom_data_strings
 import yaml
+
+_CODECS = ('', 'zstd', 'lz4')
+"""Chunk compressions the mcap library decompresses ('' is none)."""
 
 
 @dataclass(frozen=True)
@@ -53,27 +64,6 @@ class ReadWarning:
     def __str__(self):
         """Return ``'<file>: <message>'``."""
         return f'{Path(self.path).name}: {self.message}'
-
-
-@dataclass(frozen=True)
-class SchemaInfo:
-    """An MCAP Schema record: ``id``, ``name`` (ROS type), ``encoding`` and ``data``."""
-
-    id: int  # noqa: A003 - the MCAP field name
-    name: str
-    encoding: str
-    data: bytes
-
-
-@dataclass(frozen=True)
-class ChannelInfo:
-    """An MCAP Channel record: ids, ``topic``, ``message_encoding`` and ``metadata``."""
-
-    id: int  # noqa: A003 - the MCAP field name
-    schema_id: int
-    topic: str
-    message_encoding: str
-    metadata: dict
 
 
 @dataclass(frozen=True)
@@ -171,11 +161,12 @@ class _ChunkRef:
     offset: int  # of the chunk record in the file
     length: int  # of the whole record
     compression: str = ''
-    compressed_size: int = 0
-    uncompressed_size: int = 0
-    crc: int = 0
-    data_offset: int = 0  # of the compressed records in the file
     index_offsets: dict = field(default_factory=dict)  # channel -> message index record
+
+    @property
+    def data_offset(self):
+        """Return the file offset of the chunk's (compressed) records."""
+        return self.offset + 9 + 28 + len(self.compression.encode('utf-8')) + 8
 
 
 class _Corrupt(Exception):
@@ -186,57 +177,47 @@ def _u64(buf, pos):
     return struct.unpack_from('<Q', buf, pos)[0]
 
 
-class _Cursor:
-    """Bounds-checked reading of MCAP primitive fields from a record body."""
+class _View:
+    """A read-only stream over a buffer that hands out slices without copying them."""
 
-    def __init__(self, buf, start, end, what):
-        self.buf, self.pos, self.end, self.what = buf, start, end, what
+    def __init__(self, body):
+        self._body = memoryview(body)
+        self._pos = 0
 
-    def take(self, fmt):
-        size = struct.calcsize(fmt)
-        if self.pos + size > self.end:
-            raise _Corrupt(f'{self.what} ends at byte {self.end} but needs {size} more '
-                           f'bytes at byte {self.pos}')
-        values = struct.unpack_from(fmt, self.buf, self.pos)
-        self.pos += size
-        return values if len(values) > 1 else values[0]
+    def read(self, length):
+        out = self._body[self._pos:self._pos + length]
+        self._pos += len(out)
+        return out
 
-    def raw(self, size_fmt='<I'):
-        size = self.take(size_fmt)
-        if self.pos + size > self.end:
-            raise _Corrupt(f'{self.what}: a field of {size} bytes at byte {self.pos} runs past '
-                           f'the record end at byte {self.end}')
-        data = bytes(self.buf[self.pos:self.pos + size])
-        self.pos += size
+
+class _RecordBody(ReadDataStream):
+    """The mcap library's field reader over one record body; a field past its end is an error."""
+
+    def __init__(self, body):
+        super().__init__(_View(body))
+
+    def read(self, length):
+        data = super().read(length)
+        if len(data) != length:
+            raise EndOfFile()
         return data
 
-    def string(self):
-        try:
-            return self.raw().decode('utf-8')
-        except UnicodeDecodeError as err:
-            raise _Corrupt(f'{self.what}: a string is not UTF-8 ({err.reason})') from None
 
-    def kv_map(self):
-        size = self.take('<I')
-        stop = self.pos + size
-        if stop > self.end:
-            raise _Corrupt(f'{self.what}: a map of {size} bytes runs past the record end')
-        out = {}
-        while self.pos < stop:
-            key = self.string()
-            out[key] = self.string()
-        return out
+def _parse(record_type, body, what):
+    """
+    Parse a record body with the mcap library's record type.
 
-    def int_map(self, key_fmt):
-        size = self.take('<I')
-        stop = self.pos + size
-        if stop > self.end:
-            raise _Corrupt(f'{self.what}: a map of {size} bytes runs past the record end')
-        out = {}
-        while self.pos < stop:
-            key, value = self.take('<' + key_fmt + 'Q')
-            out[key] = value
-        return out
+    Raises _Corrupt, naming ``what``, when a field runs past the body or a
+    string is not UTF-8.
+    """
+    try:
+        return record_type.read(_RecordBody(body))
+    except EndOfFile:
+        raise _Corrupt(f'{what} ends inside a field ({len(body)} bytes)') from None
+    except UnicodeDecodeError as err:
+        raise _Corrupt(f'{what}: a string is not UTF-8 ({err.reason})') from None
+    except (struct.error, ValueError, McapError) as err:
+        raise _Corrupt(f'{what} is malformed ({err})') from None
 
 
 def _gather_messages(arr, starts, end):
@@ -328,7 +309,7 @@ class McapBagReader:
     header : tuple of str
         ``(profile, library)``.
     schemas, channels : dict
-        By id.
+        ``mcap.records.Schema`` and ``mcap.records.Channel`` records by id.
     warnings : list of ReadWarning
         Problems met; reading goes on after them.
     has_summary : bool
@@ -540,119 +521,112 @@ class McapBagReader:
             opcode, length = struct.unpack_from('<BQ', self._mm, 8)
             if opcode != OP_HEADER or 17 + length > self.size:
                 raise _Corrupt('no header record')
-            cursor = _Cursor(self._mm, 17, 17 + length, 'the header record')
-            self.header = (cursor.string(), cursor.string())
+            header = _parse(Header, self._mm[17:17 + length], 'the header record')
+            self.header = (header.profile, header.library)
         except (struct.error, _Corrupt):
             self._warn(8, f'no valid header record at byte 8 of {self.size}')
 
     def _read_summary(self):
         mm, size = self._mm, self.size
-        footer = size - 8 - 29
-        if size < 8 + 29 + 8 or mm[size - 8:] != MAGIC or mm[footer] != OP_FOOTER \
-                or _u64(mm, footer + 1) != 20:
+        at = size - 8 - 29
+        if size < 8 + 29 + 8 or mm[size - 8:] != MAGIC or mm[at] != OP_FOOTER \
+                or _u64(mm, at + 1) != 20:
             raise _Corrupt(f'no footer at the end of the file ({size} bytes; a recording '
                            'that was cut short?)')
-        summary_start, offsets_start, crc = struct.unpack_from('<QQI', mm, footer + 9)
-        if summary_start == 0:
+        footer = _parse(Footer, mm[at + 9:at + 29], 'the footer')
+        start = footer.summary_start
+        if start == 0:
             raise _Corrupt('')  # a valid file without summary: scan quietly
-        if not 8 <= summary_start <= footer or (offsets_start and not
-                                                summary_start <= offsets_start <= footer):
-            raise _Corrupt(f'the footer points to a summary at byte {summary_start}, outside '
-                           f'the file')
-        if self.validate_crc and crc and zlib.crc32(mm[summary_start:footer + 25]) != crc:
-            raise _Corrupt(f'the summary CRC does not match (summary at byte {summary_start})')
-        stop = offsets_start or footer
-        chunks = []
-        metadata_at = []
-        arr = None
-        for opcode, starts, length in _walk(mm, summary_start, stop, arr):
-            pos = int(starts[0])
-            cursor = _Cursor(mm, pos + 9, pos + 9 + length,
-                             f'the {RECORD_NAMES.get(opcode, "unknown")} record at byte {pos}')
-            if opcode == OP_SCHEMA:
-                self._add_schema(cursor)
-            elif opcode == OP_CHANNEL:
-                self._add_channel(cursor)
-            elif opcode == OP_STATISTICS:
-                stats = cursor.take('<QHIIIIQQ')
-                self.statistics = stats
-                self._counts = cursor.int_map('H')
-            elif opcode == OP_CHUNK_INDEX:
-                chunks.append(self._chunk_from_index(cursor, summary_start))
-            elif opcode == OP_METADATA_INDEX:
-                offset, rec_len = cursor.take('<QQ')
-                metadata_at.append((offset, rec_len))
-        if self.statistics is None:
+        if not 8 <= start <= at or (footer.summary_offset_start and not
+                                    start <= footer.summary_offset_start <= at):
+            raise _Corrupt(f'the footer points to a summary at byte {start}, outside the file')
+        if self.validate_crc and footer.summary_crc and \
+                zlib.crc32(mm[start:at + 25]) != footer.summary_crc:
+            raise _Corrupt(f'the summary CRC does not match (summary at byte {start})')
+        try:
+            self._file.seek(0)
+            summary = SeekingReader(self._file).get_summary()
+        except Exception as err:  # noqa: B902 - any damage means: scan the records instead
+            raise _Corrupt(f'the summary at byte {start} cannot be read ({err})') from None
+        if summary is None or summary.statistics is None:
             raise _Corrupt('')  # valid, but message counts need a scan: scan quietly
-        self._chunks = sorted(chunks, key=lambda c: c.offset)
-        for offset, rec_len in metadata_at:
-            self._read_metadata_record(offset, rec_len)
-        if self.statistics[0] and not self._chunks:
-            self._loose = self._scan_loose(summary_start)
+        self.schemas = dict(summary.schemas)
+        self.channels = dict(summary.channels)
+        self.statistics = summary.statistics
+        self._counts = dict(summary.statistics.channel_message_counts)
+        self._chunks = sorted((self._chunk_from_index(index, start)
+                               for index in summary.chunk_indexes), key=lambda c: c.offset)
+        for index in summary.metadata_indexes:
+            self._read_metadata_record(index.offset, index.length)
+        if self.statistics.message_count and not self._chunks:
+            self._loose = self._scan_loose(start)
 
-    def _chunk_from_index(self, cursor, limit):
-        start, end, offset, length = cursor.take('<QQQQ')
-        index_offsets = cursor.int_map('H')
+    def _chunk_from_index(self, index, limit):
+        offset, length = index.chunk_start_offset, index.chunk_length
         if offset + length > limit or length < 9:
             raise _Corrupt(f'a chunk index points to bytes {offset} .. {offset + length}, '
                            'past the data section')
-        return self._chunk_at(offset, index_offsets)
+        opcode, body = struct.unpack_from('<BQ', self._mm, offset)
+        if opcode != OP_CHUNK or 9 + body != length:
+            raise _Corrupt(f'no chunk record of {length} bytes at byte {offset}')
+        return _ChunkRef(offset, length, index.compression, dict(index.message_index_offsets))
 
-    def _chunk_at(self, offset, index_offsets=None):
-        mm = self._mm
-        opcode, length = struct.unpack_from('<BQ', mm, offset)
+    def _chunk_at(self, offset):
+        opcode, length = struct.unpack_from('<BQ', self._mm, offset)
         if opcode != OP_CHUNK or offset + 9 + length > self.size:
             raise _Corrupt(f'no chunk record at byte {offset}')
-        cursor = _Cursor(mm, offset + 9, offset + 9 + length, f'the chunk at byte {offset}')
-        _, _, uncompressed, crc = cursor.take('<QQQI')
-        compression = cursor.string()
-        compressed = cursor.take('<Q')
-        if cursor.pos + compressed > cursor.end:
-            raise _Corrupt(f'the chunk at byte {offset} holds {compressed} bytes of records, '
-                           'more than its record length')
-        return _ChunkRef(offset, 9 + length, compression, compressed, uncompressed, crc,
-                         cursor.pos, dict(index_offsets or {}))
+        return _ChunkRef(offset, 9 + length)
 
     def _read_metadata_record(self, offset, length):
         try:
             opcode, body = struct.unpack_from('<BQ', self._mm, offset)
             if opcode != OP_METADATA or offset + 9 + body > self.size:
                 raise _Corrupt(f'no metadata record at byte {offset}')
-            cursor = _Cursor(self._mm, offset + 9, offset + 9 + body,
-                             f'the metadata record at byte {offset}')
-            self.metadata.append((cursor.string(), cursor.kv_map()))
+            record = _parse(Metadata, self._mm[offset + 9:offset + 9 + body],
+                            f'the metadata record at byte {offset}')
+            self.metadata.append((record.name, record.metadata))
         except (struct.error, _Corrupt) as err:
             self._warn(offset, f'metadata record skipped: {err}')
 
-    def _add_schema(self, cursor):
-        schema_id = cursor.take('<H')
-        name = cursor.string()
-        encoding = cursor.string()
-        self.schemas[schema_id] = SchemaInfo(schema_id, name, encoding, cursor.raw())
+    def _add_schema(self, body, what):
+        record = _parse(Schema, body, what)
+        self.schemas[record.id] = Schema(id=record.id, name=record.name,
+                                         encoding=record.encoding, data=bytes(record.data))
 
-    def _add_channel(self, cursor):
-        channel_id, schema_id = cursor.take('<HH')
-        topic = cursor.string()
-        encoding = cursor.string()
-        self.channels[channel_id] = ChannelInfo(channel_id, schema_id, topic, encoding,
-                                                cursor.kv_map())
+    def _add_channel(self, body, what):
+        record = _parse(Channel, body, what)
+        self.channels[record.id] = record
 
     def _load_chunk(self, chunk):
-        """Decompress and check a chunk; return (uint8 array, None) or (None, problem)."""
+        """Read, decompress and check a chunk; return (uint8 array, None) or (None, problem)."""
+        what = f'chunk at byte {chunk.offset}'
         try:
             # pread, not the map: a copy into reused heap memory costs far less than a
             # page fault per 4 KiB of the file.
-            raw = self._pread(chunk.data_offset, chunk.compressed_size)
-            data = _decompress(chunk.compression, raw, chunk.uncompressed_size)
+            record = _parse(Chunk, self._pread(chunk.offset + 9, chunk.length - 9), what)
+        except _Corrupt as err:
+            return None, f'{err}; its messages are skipped'
+        chunk.compression = record.compression
+        if record.compression not in _CODECS:
+            return None, (f'{what} has the unsupported compression {record.compression!r} '
+                          '(expected zstd, lz4 or none); its messages are skipped')
+        try:
+            if record.compression:
+                records, size = get_chunk_data_stream(record, validate_crc=self.validate_crc)
+                data = records.read(size)
+            else:   # used in place; its CRC is checked as the library checks it
+                data = record.data
+                if self.validate_crc and record.uncompressed_crc and \
+                        zlib.crc32(data) != record.uncompressed_crc:
+                    raise CRCValidationError(record.uncompressed_crc, zlib.crc32(data), record)
+        except CRCValidationError:
+            return None, f'{what} fails its CRC check (corrupted file); its messages are skipped'
         except Exception as err:  # noqa: B902 - every codec raises its own error type
-            return None, (f'chunk at byte {chunk.offset} cannot be decompressed '
-                          f'({chunk.compression}: {err}); its messages are skipped')
-        if len(data) != chunk.uncompressed_size:
-            return None, (f'chunk at byte {chunk.offset} decompressed to {len(data)} bytes, '
-                          f'expected {chunk.uncompressed_size}; its messages are skipped')
-        if self.validate_crc and chunk.crc and zlib.crc32(data) != chunk.crc:
-            return None, (f'chunk at byte {chunk.offset} fails its CRC check (corrupted '
-                          'file); its messages are skipped')
+            return None, (f'{what} cannot be decompressed ({record.compression}: {err}); its '
+                          'messages are skipped')
+        if len(data) != record.uncompressed_size:
+            return None, (f'{what} decompressed to {len(data)} bytes, expected '
+                          f'{record.uncompressed_size}; its messages are skipped')
         return np.frombuffer(data, np.uint8), None
 
     def _chunk_data(self, chunk, loaded=None):
@@ -716,9 +690,9 @@ class McapBagReader:
                 runs.append(starts)
             elif collect and opcode in (OP_SCHEMA, OP_CHANNEL):
                 pos = int(starts[0])
-                cursor = _Cursor(data, pos + 9, pos + 9 + length,
-                                 f'a {RECORD_NAMES[opcode]} record inside a chunk')
-                (self._add_schema if opcode == OP_SCHEMA else self._add_channel)(cursor)
+                (self._add_schema if opcode == OP_SCHEMA else self._add_channel)(
+                    data[pos + 9:pos + 9 + length].tobytes(),
+                    f'a {RECORD_NAMES[opcode]} record inside a chunk')
         return np.concatenate(runs) if runs else np.zeros(0, np.int64)
 
     def _loose_batch(self, starts):
@@ -777,21 +751,22 @@ class McapBagReader:
                 if opcode == OP_MESSAGE:
                     self._add_loose(starts)
                     continue
-                cursor = _Cursor(mm, pos + 9, pos + 9 + length,
-                                 f'the {RECORD_NAMES.get(opcode, "unknown")} record at byte '
-                                 f'{pos}')
+                what = f'the {RECORD_NAMES.get(opcode, "unknown")} record at byte {pos}'
                 try:
                     if opcode == OP_SCHEMA:
-                        self._add_schema(cursor)
+                        self._add_schema(mm[pos + 9:pos + 9 + length], what)
                     elif opcode == OP_CHANNEL:
-                        self._add_channel(cursor)
+                        self._add_channel(mm[pos + 9:pos + 9 + length], what)
                     elif opcode == OP_CHUNK:
                         self._scan_chunk(pos)
                     elif opcode == OP_MESSAGE_INDEX and self._chunks:
-                        channel_id = cursor.take('<H')
+                        if length < 2:
+                            raise _Corrupt(f'{what} has no channel id')
+                        (channel_id,) = struct.unpack_from('<H', mm, pos + 9)
                         self._chunks[-1].index_offsets[channel_id] = pos
                     elif opcode == OP_METADATA:
-                        self.metadata.append((cursor.string(), cursor.kv_map()))
+                        record = _parse(Metadata, mm[pos + 9:pos + 9 + length], what)
+                        self.metadata.append((record.name, record.metadata))
                     elif opcode in (OP_DATA_END, OP_FOOTER):
                         return
                 except _Corrupt as err:
