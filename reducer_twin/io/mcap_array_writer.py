@@ -28,15 +28,16 @@ from pathlib import Path
 import struct
 import zlib
 
+from mcap.records import (
+    Channel, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema, Statistics,
+    SummaryOffset)
 from msg_adapters import ros_schemas
 import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
 from reducer_twin.io.mcap_format import (
-    _compress, _COMPRESSIONS, _int_map, _kv_map, _lz4, _record, _string, _zstd, DEFAULT_CHUNK_SIZE,
-    LIBRARY,
-    MAGIC, MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_CHUNK_INDEX, OP_DATA_END, OP_FOOTER,
-    OP_HEADER, OP_MESSAGE, OP_MESSAGE_INDEX, OP_METADATA, OP_METADATA_INDEX, OP_SCHEMA,
-    OP_STATISTICS, OP_SUMMARY_OFFSET, PROFILE)
+    _compress, _COMPRESSIONS, _lz4, _string, _zstd, DEFAULT_CHUNK_SIZE, LIBRARY, MAGIC,
+    MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_CHUNK_INDEX, OP_MESSAGE, OP_MESSAGE_INDEX,
+    OP_METADATA_INDEX, OP_SCHEMA, OP_STATISTICS, PROFILE, record_bytes)
 from reducer_twin.io.rosbag2_metadata import (
     bag_metadata, DEFAULT_QOS, dump_yaml, parse_qos_profiles)
 
@@ -206,9 +207,9 @@ class McapBagWriter(TopicBook):
         self._closed = False
         self._pos = 0
         self._crc = 0
-        self._schemas = {}  # msgtype -> (id, record body)
+        self._schemas = {}  # msgtype -> mcap.records.Schema
         self._topics = {}  # name -> _Topic
-        self._channels = []  # (id, record body)
+        self._channels = []  # mcap.records.Channel
         # Chunks are built in a ring of reused buffers (no page faults, no copies) while
         # earlier chunks are compressed on the thread pool.
         self._ring = [np.empty(self.chunk_size + 65536, np.uint8)
@@ -224,7 +225,7 @@ class McapBagWriter(TopicBook):
         self._pool = ThreadPoolExecutor(threads) if threads > 1 else None
         self._pending = []
         self._write(MAGIC)
-        self._write(_record(OP_HEADER, _string(PROFILE) + _string(LIBRARY)))
+        self._write(record_bytes(Header(profile=PROFILE, library=LIBRARY)))
         self._write_rosbag2_metadata()
 
     # ----------------------------------------------------------------- public API
@@ -268,18 +269,18 @@ class McapBagWriter(TopicBook):
         profiles = parse_qos_profiles(qos)
         if msgtype not in self._schemas:
             schema_id = len(self._schemas) + 1
-            body = (struct.pack('<H', schema_id) + _string(msgtype) + _string('ros2msg')
-                    + struct.pack('<I', len(schema_text.encode('utf-8')))
-                    + schema_text.encode('utf-8'))
-            self._schemas[msgtype] = (schema_id, body)
-            self._append_bytes(_record(OP_SCHEMA, body))
-        schema_id = self._schemas[msgtype][0]
+            schema = Schema(id=schema_id, name=msgtype, encoding='ros2msg',
+                            data=schema_text.encode('utf-8'))
+            self._schemas[msgtype] = schema
+            self._append_bytes(record_bytes(schema))
+        schema_id = self._schemas[msgtype].id
         channel_id = len(self._topics) + 1
         qos_text = dump_yaml([p.as_dict() for p in profiles]) if profiles else ''
-        body = (struct.pack('<HH', channel_id, schema_id) + _string(name) + _string('cdr')
-                + _kv_map({'offered_qos_profiles': qos_text, 'topic_type_hash': type_hash}))
-        self._channels.append((channel_id, body))
-        self._append_bytes(_record(OP_CHANNEL, body))
+        channel = Channel(id=channel_id, schema_id=schema_id, topic=name, message_encoding='cdr',
+                          metadata={'offered_qos_profiles': qos_text,
+                                    'topic_type_hash': type_hash})
+        self._channels.append(channel)
+        self._append_bytes(record_bytes(channel))
         self._topics[name] = _Topic(channel_id, name, msgtype, profiles, type_hash)
         return channel_id
 
@@ -431,8 +432,9 @@ class McapBagWriter(TopicBook):
                 self._finish_chunk()
             self._drain()
             self._write_rosbag2_metadata()
-            self._file.write(_record(OP_DATA_END, struct.pack('<I', self._crc)))
-            self._pos += 9 + 4
+            data_end = record_bytes(DataEnd(data_section_crc=self._crc))
+            self._file.write(data_end)
+            self._pos += len(data_end)
             self._write_summary()
         finally:
             self._closed = True
@@ -484,8 +486,8 @@ class McapBagWriter(TopicBook):
 
     def _write_rosbag2_metadata(self):
         info = bag_metadata(self.topic_summaries(), [self.file_summary()], self.custom_data)
-        body = _string('rosbag2') + _kv_map({'serialized_metadata': dump_yaml(info)})
-        record = _record(OP_METADATA, body)
+        record = record_bytes(Metadata(name='rosbag2',
+                                       metadata={'serialized_metadata': dump_yaml(info)}))
         self._metadata_indexes.append((self._pos, len(record), 'rosbag2'))
         self._write(record)
 
@@ -628,45 +630,48 @@ class McapBagWriter(TopicBook):
             pairs = np.concatenate(index[channel_id]).astype('<u8')
             body = struct.pack('<HI', channel_id, pairs.nbytes) + pairs.tobytes()
             index_offsets[channel_id] = self._pos
-            self._write(_record(OP_MESSAGE_INDEX, body))
-        self._chunk_indexes.append(
-            struct.pack('<QQQQ', start, end, chunk_start, chunk_length)
-            + _int_map(index_offsets, 'H')
-            + struct.pack('<Q', self._pos - index_start) + _string(self.compression)
-            + struct.pack('<QQ', len(compressed), len(data)))
+            self._write(struct.pack('<BQ', OP_MESSAGE_INDEX, len(body)) + body)
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=start, message_end_time=end, chunk_start_offset=chunk_start,
+            chunk_length=chunk_length, message_index_offsets=index_offsets,
+            message_index_length=self._pos - index_start, compression=self.compression,
+            compressed_size=len(compressed), uncompressed_size=len(data)))
 
     def _write_summary(self):
         summary_start = self._pos
         groups = []
         out = bytearray()
 
-        def group(opcode, bodies):
-            if not bodies:
+        def group(opcode, records):
+            if not records:
                 return
             start = summary_start + len(out)
-            for body in bodies:
-                out.extend(_record(opcode, body))
+            out.extend(record_bytes(*records))
             groups.append((opcode, start, summary_start + len(out) - start))
 
         counts = {t.channel_id: t.count for t in self._topics.values() if t.count}
         starts = [t.start for t in self._topics.values() if t.start is not None]
         ends = [t.end for t in self._topics.values() if t.end is not None]
-        statistics = (struct.pack('<QHIIII', sum(counts.values()), len(self._schemas),
-                                  len(self._channels), 0, len(self._metadata_indexes),
-                                  len(self._chunk_indexes))
-                      + struct.pack('<QQ', min(starts) if starts else 0,
-                                    max(ends) if ends else 0)
-                      + _int_map(counts, 'H'))
-        group(OP_SCHEMA, [body for _, body in sorted(self._schemas.values())])
-        group(OP_CHANNEL, [body for _, body in self._channels])
+        statistics = Statistics(
+            message_count=sum(counts.values()), schema_count=len(self._schemas),
+            channel_count=len(self._channels), attachment_count=0,
+            metadata_count=len(self._metadata_indexes), chunk_count=len(self._chunk_indexes),
+            message_start_time=min(starts) if starts else 0,
+            message_end_time=max(ends) if ends else 0, channel_message_counts=counts)
+        group(OP_SCHEMA, sorted(self._schemas.values(), key=lambda schema: schema.id))
+        group(OP_CHANNEL, self._channels)
         group(OP_STATISTICS, [statistics])
         group(OP_CHUNK_INDEX, self._chunk_indexes)
-        group(OP_METADATA_INDEX, [struct.pack('<QQ', off, length) + _string(name)
-                                  for off, length, name in self._metadata_indexes])
+        group(OP_METADATA_INDEX, [MetadataIndex(offset=offset, length=length, name=name)
+                                  for offset, length, name in self._metadata_indexes])
         offsets_start = summary_start + len(out)
-        for opcode, start, length in groups:
-            out.extend(_record(OP_SUMMARY_OFFSET, struct.pack('<BQQ', opcode, start, length)))
-        footer_head = struct.pack('<BQQQ', OP_FOOTER, 20, summary_start, offsets_start)
-        crc = zlib.crc32(footer_head, zlib.crc32(bytes(out)))
-        self._file.write(bytes(out) + footer_head + struct.pack('<I', crc) + MAGIC)
-        self._pos += len(out) + len(footer_head) + 4 + len(MAGIC)
+        out.extend(record_bytes(*(SummaryOffset(group_opcode=opcode, group_start=start,
+                                                group_length=length)
+                                  for opcode, start, length in groups)))
+        # The summary CRC covers the summary and the footer up to the CRC field itself.
+        footer = record_bytes(Footer(summary_start=summary_start,
+                                     summary_offset_start=offsets_start, summary_crc=0))
+        crc = zlib.crc32(footer[:-4], zlib.crc32(out))
+        tail = bytes(out) + footer[:-4] + struct.pack('<I', crc) + MAGIC
+        self._file.write(tail)
+        self._pos += len(tail)

@@ -1,12 +1,14 @@
 """
 MCAP record opcodes and framing shared by the project's array writer and its reader.
 
-Reading parses records with the ``mcap`` library; what is here is the record layout the
-numpy hot path needs (opcodes, the message record header) and the chunk compression of
-the array writer.
+Records are framed and parsed by the ``mcap`` library (:func:`record_bytes` writes
+them); what is here besides is the layout the numpy hot path needs (opcodes, the message
+record header, the chunk record header) and the chunk compression of the array writer.
 """
 
 import struct
+
+from mcap.data_stream import RecordBuilder
 
 try:  # Python >= 3.14
     from compression import zstd as _zstd  # pragma: no cover
@@ -23,10 +25,7 @@ except ImportError:  # pragma: no cover - lz4 is optional
 MAGIC = b'\x89MCAP0\r\n'
 PROFILE = 'ros2'
 LIBRARY = 'reducer_twin mcap_array_writer 0.1'
-ROS_DISTRO = 'jazzy'
-METADATA_VERSION = 9
 DEFAULT_CHUNK_SIZE = 768 * 1024  # libmcap's default chunk size, kept by rosbag2
-MAX_TIME = 2**63 - 1  # rosbag2's starting_time before the first message
 
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 1, 2, 3, 4, 5, 6
 OP_MESSAGE_INDEX, OP_CHUNK_INDEX, OP_ATTACHMENT, OP_ATTACHMENT_INDEX = 7, 8, 9, 10
@@ -44,23 +43,30 @@ _COMPRESSIONS = {'zstd': 'zstd', 'lz4': 'lz4', 'none': '', '': ''}
 # --------------------------------------------------------------------------- records
 
 
+def record_bytes(*records):
+    """
+    Serialise records with the mcap library's record writer.
+
+    Parameters
+    ----------
+    *records : mcap.records.McapRecord
+        Header, Schema, Channel, Metadata, Statistics, index records...
+
+    Returns
+    -------
+    bytes
+        The records, framed (opcode, length, body) one after the other.
+
+    """
+    builder = RecordBuilder()
+    for record in records:
+        record.write(builder)
+    return builder.end()
+
+
 def _string(text):
     raw = text.encode('utf-8')
     return struct.pack('<I', len(raw)) + raw
-
-
-def _kv_map(mapping):
-    body = b''.join(_string(str(k)) + _string(str(v)) for k, v in mapping.items())
-    return struct.pack('<I', len(body)) + body
-
-
-def _record(opcode, body):
-    return struct.pack('<BQ', opcode, len(body)) + body
-
-
-def _int_map(mapping, key_fmt):
-    body = b''.join(struct.pack('<' + key_fmt + 'Q', k, v) for k, v in sorted(mapping.items()))
-    return struct.pack('<I', len(body)) + body
 
 
 def _compress(compression, data, level):
