@@ -21,6 +21,7 @@ Pure Python and numpy: no ROS import.
 from dataclasses import dataclass
 import struct
 
+from msg_adapters.cdr import align, CdrWriter
 import numpy as np
 
 from reducer_twin.core.errors import InvalidInput
@@ -88,10 +89,6 @@ class MultiArray:
         return self.data
 
 
-def _align(pos, size):
-    return 4 + ((pos - 4 + size - 1) // size) * size
-
-
 def _dims(layout, rows):
     n_fields = len(layout.fields)
     if layout.batch:
@@ -126,21 +123,20 @@ def multiarray_template(layout, rows=None):
     if layout.batch and (rows is None or int(rows) < 0):
         raise InvalidInput(f'{layout.name} is a batch layout: rows must be >= 0, got {rows!r}')
     dims = _dims(layout, int(rows or 0))
-    out = bytearray(b'\x00\x01\x00\x00')
-    out += struct.pack('<I', len(dims))
+    msg = CdrWriter()
+    msg.u32(len(dims))
     for label, size, stride in dims:
-        raw = label.encode('utf-8')
-        out += bytes(_align(len(out), 4) - len(out))
-        out += struct.pack('<I', len(raw) + 1) + raw + b'\x00'
-        out += bytes(_align(len(out), 4) - len(out))
-        out += struct.pack('<II', size, stride)
+        msg.string(label, 'a dimension label')
+        msg.u32(size)
+        msg.u32(stride)
     count = dims[0][2] if layout.batch else dims[0][1]
-    out += struct.pack('<II', 0, count)
+    msg.u32(0)   # data_offset
+    msg.u32(count)
     if count:
-        out += bytes(_align(len(out), 8) - len(out))
-    data_offset = len(out)
-    out += bytes(8 * count)
-    return np.frombuffer(bytes(out), np.uint8), data_offset
+        msg.align(8)
+    data_offset = len(msg)
+    msg.zeros(8 * count)
+    return np.frombuffer(msg.getvalue(), np.uint8), data_offset
 
 
 def multiarray_columns(layout, values):
@@ -266,7 +262,7 @@ class _Reader:
                                f'{what} at byte {self.pos}')
 
     def u32(self, what):
-        self.pos = _align(self.pos, 4)
+        self.pos = align(self.pos, 4)
         self.need(4, what)
         value = struct.unpack_from(self.order + 'I', self.buf, self.pos)[0]
         self.pos += 4
@@ -313,7 +309,7 @@ def decode_multiarray(payload):
     data_offset = reader.u32('layout.data_offset')
     count = reader.u32('the data count')
     if count:
-        reader.pos = _align(reader.pos, 8)
+        reader.pos = align(reader.pos, 8)
     reader.need(8 * count, 'the data')
     data = np.frombuffer(reader.buf, reader.order + 'f8', count, reader.pos).astype(np.float64)
     return MultiArray(tuple(dims), data_offset, data)
