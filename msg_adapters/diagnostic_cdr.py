@@ -11,7 +11,7 @@ window and joint). The layout, XCDR1 little endian after the encapsulation heade
         uint32 count, then per value: string key, string value
 
 A string is ``uint32 n`` (aligned to 4) and ``n`` bytes ending in NUL. Values are
-formatted as :func:`msg_adapters.ros.diagnostic_status` formats them (floats with six
+formatted as :func:`reducer_twin.msg_adapters.ros.diagnostic_status` formats them (floats with six
 significant digits), so an offline analysis and a live recording read alike.
 """
 
@@ -19,8 +19,8 @@ import math
 import struct
 from typing import NamedTuple
 
-from msg_adapters.cdr import CdrWriter
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import CdrWriter
 
 MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 """ROS type of ``/diagnostics``."""

@@ -26,10 +26,10 @@ message path that handles any layout.
 from dataclasses import dataclass, replace
 import struct
 
-from msg_adapters.cdr import align, CdrWriter
 import numpy as np
 
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import align, CdrWriter
 
 MSGTYPE = 'sensor_msgs/msg/JointState'
 FIELDS = ('position', 'velocity', 'effort')

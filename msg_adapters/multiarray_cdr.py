@@ -1,7 +1,8 @@
 """
 Vectorised CDR encoding and decoding of ``std_msgs/msg/Float64MultiArray``.
 
-The twin's derived topics are labelled ``Float64MultiArray`` s (:mod:`msg_adapters.layouts`).
+The twin's derived topics are labelled ``Float64MultiArray`` s
+(:mod:`reducer_twin.msg_adapters.layouts`).
 In CDR (XCDR1, little endian, as rclpy puts it on the wire and rosbag2 stores it), after the
 4-byte encapsulation header ``00 01 00 00``::
 
@@ -21,10 +22,10 @@ Pure Python and numpy: no ROS import.
 from dataclasses import dataclass
 import struct
 
-from msg_adapters.cdr import align, CdrWriter
 import numpy as np
 
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import align, CdrWriter
 
 MSGTYPE = 'std_msgs/msg/Float64MultiArray'
 """ROS type of the derived topics."""
@@ -58,7 +59,7 @@ class MultiArray:
 
         Parameters
         ----------
-        layout : msg_adapters.layouts.Layout
+        layout : reducer_twin.msg_adapters.layouts.Layout
             Expected layout.
 
         Returns
@@ -102,7 +103,7 @@ def multiarray_template(layout, rows=None):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the message.
     rows : int, optional
         Samples per message (batch layouts only).
@@ -145,7 +146,7 @@ def multiarray_columns(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the messages.
     values : array_like
         ``(N, fields)`` records for a single-record layout, or ``(N, rows, fields)``
@@ -184,7 +185,7 @@ def encode_multiarrays(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the messages.
     values : array_like
         As for :func:`multiarray_columns`.
@@ -217,7 +218,7 @@ def encode_multiarray(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the message.
     values : array_like
         ``(rows, fields)`` for a batch layout, ``(fields,)`` for a record.
@@ -321,7 +322,7 @@ def decode_layout_batch(layout, payloads):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Expected layout.
     payloads : iterable of bytes-like
         CDR payloads.

@@ -7,7 +7,7 @@ The twin's processing stages, shared by the live nodes and the bag analysis.
   level (the ``life_publisher`` node).
 
 Stages exchange plain records keyed like the topic layouts of
-:mod:`msg_adapters.layouts` (unit-suffixed names, SI), so a live recording
+:mod:`reducer_twin.msg_adapters.layouts` (unit-suffixed names, SI), so a live recording
 and an offline analysis carry the same values.
 """
 

@@ -149,7 +149,7 @@ def trend_figure(trend, title, limit_rad):
         Two panels side by side.
 
     """
-    from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
+    from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
     plt = _pyplot()
 
     def col(array, layout, name):

@@ -19,13 +19,13 @@ McapBagWriter`), which ``simulate`` keeps for its million-message bags.
 
 from pathlib import Path
 
-from msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
 import numpy as np
 from reducer_twin.io.mcap_array_writer import McapBagWriter
 from reducer_twin.io.mcap_format import DEFAULT_CHUNK_SIZE
 from reducer_twin.io.mcap_writer import LibraryMcapWriter
 from reducer_twin.io.outputs import foreign_bag_entries, OUTPUT_KEY_PREFIX, OutputDir
 from reducer_twin.io.rosbag2_metadata import bag_metadata, DEFAULT_QOS, dump_yaml
+from reducer_twin.msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
 
 __all__ = ['BagDirWriter', 'write_bag_dir', 'foreign_bag_entries', 'OUTPUT_KEY_PREFIX']
 

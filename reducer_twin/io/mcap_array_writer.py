@@ -31,7 +31,6 @@ import zlib
 from mcap.records import (
     Channel, ChunkIndex, DataEnd, Footer, Header, Metadata, MetadataIndex, Schema, Statistics,
     SummaryOffset)
-from msg_adapters import ros_schemas
 import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
 from reducer_twin.io.mcap_format import (
@@ -40,6 +39,7 @@ from reducer_twin.io.mcap_format import (
     OP_METADATA_INDEX, OP_SCHEMA, OP_STATISTICS, PROFILE, record_bytes)
 from reducer_twin.io.rosbag2_metadata import (
     bag_metadata, DEFAULT_QOS, dump_yaml, parse_qos_profiles)
+from reducer_twin.msg_adapters import ros_schemas
 
 
 def message_times(log_times_ns, publish_times_ns=None):

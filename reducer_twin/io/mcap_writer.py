@@ -20,14 +20,14 @@ chunks as arrays is several times faster).
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
-from msg_adapters import ros_schemas
-from msg_adapters.jointstate_cdr import fill_columns
 import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
 from reducer_twin.io.mcap_array_writer import _Topic, message_times, TopicBook
 from reducer_twin.io.mcap_format import DEFAULT_CHUNK_SIZE, PROFILE
 from reducer_twin.io.rosbag2_metadata import (
     bag_metadata, DEFAULT_QOS, dump_yaml, parse_qos_profiles)
+from reducer_twin.msg_adapters import ros_schemas
+from reducer_twin.msg_adapters.jointstate_cdr import fill_columns
 
 _COMPRESSION = {'none': CompressionType.NONE, '': CompressionType.NONE,
                 'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}

@@ -26,9 +26,6 @@ import os
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
-from msg_adapters.ros import to_multiarray
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, out_of_range
 from reducer_twin.core.errors import StateFileError
@@ -37,6 +34,9 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import m_to_um
 from reducer_twin.io.state_file import StateFile
+from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import BackgroundWorker, create_background_timer
 from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, joint_topic
 from reducer_twin.nodes.base import latest_qos, Node

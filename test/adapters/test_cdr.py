@@ -1,8 +1,8 @@
 """The CDR primitives the encoders share, checked against rosbags' serialiser."""
 
-from msg_adapters.cdr import align, cdr_string, CdrWriter, ENCAPSULATION
 import pytest
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import align, cdr_string, CdrWriter, ENCAPSULATION
 from rosbags.typesys import get_typestore, Stores
 
 

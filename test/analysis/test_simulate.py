@@ -5,8 +5,6 @@ import math
 from pathlib import Path
 
 from mcap.reader import make_reader
-from msg_adapters.layouts import GROUND_TRUTH
-from msg_adapters.multiarray_cdr import decode_layout_batch
 import numpy as np
 import pytest
 from reducer_twin.analysis.simulate import AGING_KEY, ROBOT_KEY, SIMULATION_KEY, SimulationSpec
@@ -16,6 +14,8 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.bag import open_bag
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH
+from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml

@@ -12,7 +12,6 @@ import json
 import math
 from types import SimpleNamespace
 
-from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 import pytest
 from reducer_twin.core import wear
@@ -26,6 +25,7 @@ from reducer_twin.core.te_extraction import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.io.state_file import backup_path, decode_state, StateFile
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 PARAMS = ReducerParams()
 NOISE = 0.05 * ARCMIN

@@ -11,9 +11,6 @@ the project's array writer for the same input, for every chunk compression.
 from mcap.reader import make_reader
 from mcap.writer import LIBRARY_IDENTIFIER
 from mcap_ros2.decoder import DecoderFactory
-from msg_adapters import ros_schemas
-from msg_adapters.layouts import TE_BATCH
-from msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidInput
@@ -21,6 +18,9 @@ from reducer_twin.io.bag import open_bag
 from reducer_twin.io.bag_writer import BagDirWriter
 from reducer_twin.io.mcap_writer import LibraryMcapWriter
 from reducer_twin.io.rosbag2_metadata import QosProfile
+from reducer_twin.msg_adapters import ros_schemas
+from reducer_twin.msg_adapters.layouts import TE_BATCH
+from reducer_twin.msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml

@@ -18,8 +18,6 @@ import os
 import signal
 import subprocess
 
-from msg_adapters.layouts import GROUND_TRUTH, record_values, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -28,6 +26,9 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.state_file import backup_path, decode_state, load_with_fallback, StateFile
+from reducer_twin.msg_adapters.layouts import (
+    GROUND_TRUTH, record_values, TE_FEATURES, WEAR_ESTIMATE)
+from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from std_msgs.msg import Float64MultiArray
 from window_records import feature_records

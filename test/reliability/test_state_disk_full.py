@@ -13,8 +13,6 @@ import os
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from full_disk import fill, FillingFile, small_tmpfs
-from msg_adapters.layouts import record_values, TE_FEATURES
-from msg_adapters.ros import to_multiarray
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -23,6 +21,8 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.state_file import backup_path, decode_state, encode_state, StateFile
+from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
