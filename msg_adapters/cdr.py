@@ -17,6 +17,9 @@ from reducer_twin.core.errors import InvalidInput
 ENCAPSULATION = b'\x00\x01\x00\x00'
 """CDR little endian, no options: the first 4 bytes of every message the encoders write."""
 
+_ZEROS = tuple(bytes(n) for n in range(8))
+_U32 = struct.Struct('<I').pack
+
 
 def align(pos, size):
     """
@@ -66,7 +69,7 @@ def cdr_string(text, what):
         raise InvalidInput(f'{what} must be a str, got {text!r}') from err
     if b'\x00' in raw:
         raise InvalidInput(f'{what} must not contain NUL characters, got {text!r}')
-    return struct.pack('<I', len(raw) + 1) + raw + b'\x00'
+    return _U32(len(raw) + 1) + raw + b'\x00'
 
 
 class CdrWriter:
@@ -85,17 +88,19 @@ class CdrWriter:
 
     def align(self, size):
         """Pad with zero bytes to the alignment ``size`` (4 or 8)."""
-        self.out += bytes(align(len(self.out), size) - len(self.out))
+        self.out += _ZEROS[(4 - len(self.out)) % size]
 
     def u32(self, value):
         """Append a uint32 (aligned to 4)."""
-        self.align(4)
-        self.out += struct.pack('<I', value)
+        out = self.out
+        out += _ZEROS[-len(out) % 4]
+        out += _U32(value)
 
     def string(self, text, what):
         """Append a CDR string, its length aligned to 4 (see :func:`cdr_string`)."""
-        self.align(4)
-        self.out += cdr_string(text, what)
+        out = self.out
+        out += _ZEROS[-len(out) % 4]
+        out += cdr_string(text, what)
 
     def raw(self, data):
         """Append bytes as they are (a byte, a stamp already packed)."""

@@ -20,6 +20,7 @@ Pure Python and numpy: no ROS import.
 """
 
 from dataclasses import dataclass
+import functools
 import struct
 
 import numpy as np
@@ -123,7 +124,13 @@ def multiarray_template(layout, rows=None):
     """
     if layout.batch and (rows is None or int(rows) < 0):
         raise InvalidInput(f'{layout.name} is a batch layout: rows must be >= 0, got {rows!r}')
-    dims = _dims(layout, int(rows or 0))
+    return _template(layout, int(rows or 0))
+
+
+@functools.lru_cache(maxsize=512)
+def _template(layout, rows):
+    """Build the (read-only) template of a layout and sample count; a few per analysis."""
+    dims = _dims(layout, rows)
     msg = CdrWriter()
     msg.u32(len(dims))
     for label, size, stride in dims:
