@@ -10,6 +10,7 @@ document of ``metadata.yaml`` and of the MCAP file's ``rosbag2`` record, and its
 
 from dataclasses import dataclass
 import functools
+import json
 import re
 
 import numpy as np
@@ -205,53 +206,33 @@ def _reads_back(text):
     return yaml.safe_load(text) == text
 
 
-class _YamlCppStyle(yaml.SafeDumper):
-    """PyYAML's safe dumper, set to write what yaml-cpp (and so rosbag2) writes."""
-
-    def increase_indent(self, flow=False, indentless=False):
-        """Indent a sequence under a key by two spaces, as yaml-cpp does."""
-        return super().increase_indent(flow, False)
-
-
-def _represent_str(dumper, text):
-    style = '' if _PLAIN.fullmatch(text) and _reads_back(text) else '"'
-    return dumper.represent_scalar('tag:yaml.org,2002:str', text, style=style)
-
-
-_YamlCppStyle.add_representer(str, _represent_str)
-_YamlCppStyle.add_representer(
-    type(None), lambda dumper, _: dumper.represent_scalar('tag:yaml.org,2002:null', '~'))
-_YamlCppStyle.add_multi_representer(np.integer,
-                                    lambda dumper, value: dumper.represent_int(int(value)))
-_YamlCppStyle.add_representer(tuple, lambda dumper, value: dumper.represent_list(list(value)))
-_EMPTY_SEQUENCE_VALUE = re.compile(r'^( *)(\S.*):\ \[\]$', re.M)
+def _scalar(value):
+    if value is None:
+        return '~'
+    if isinstance(value, bool):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    text = str(value)
+    if _PLAIN.fullmatch(text) and _reads_back(text):
+        return text
+    return json.dumps(text, ensure_ascii=False)
 
 
-def _plain_values(node, under_key=False):
-    """Return the document with yaml-cpp's choices: an empty mapping under a key is ``~``."""
-    if isinstance(node, dict):
-        if not node and under_key:
-            return None
-        return {key: _plain_values(value, True) for key, value in node.items()}
-    if isinstance(node, (list, tuple)):
-        return [_plain_values(item) for item in node]
-    if isinstance(node, float):
-        return str(node)
-    return node
-
-
-def dump_yaml(node):
+def dump_yaml(node, indent=0):
     """
-    Serialise nested dicts and lists with PyYAML the way yaml-cpp (and so rosbag2) writes them.
+    Serialise nested dicts and lists the way yaml-cpp (and so rosbag2) writes them.
 
     Block style; a sequence under a key is indented by two spaces; empty sequences
-    are written as ``[]`` on a line of their own and empty mappings under a key as
-    ``~``; strings that YAML would read as something else are double-quoted.
+    are written as ``[]`` and empty or missing mappings as ``~``; strings that YAML
+    would read as something else are double-quoted.
 
     Parameters
     ----------
     node : dict, list or scalar
         The document.
+    indent : int
+        Indentation of the top level, in spaces.
 
     Returns
     -------
@@ -259,11 +240,34 @@ def dump_yaml(node):
         The YAML text, without a trailing newline.
 
     """
-    text = yaml.dump(_plain_values(node), Dumper=_YamlCppStyle, sort_keys=False,
-                     default_flow_style=False, allow_unicode=True, width=float('inf'))
-    if text.endswith('\n...\n'):   # a lone scalar
-        text = text[:-4]
-    return _EMPTY_SEQUENCE_VALUE.sub(r'\1\2:\n\1  []', text.rstrip('\n'))
+    pad = ' ' * indent
+    if isinstance(node, dict):
+        if not node:
+            return pad + '{}'
+        lines = []
+        for key, value in node.items():
+            head = f'{pad}{_scalar(key)}:'
+            if isinstance(value, dict) and value:
+                lines.append(head + '\n' + dump_yaml(value, indent + 2))
+            elif isinstance(value, (list, tuple)):
+                lines.append(head + '\n' + dump_yaml(list(value), indent + 2))
+            elif isinstance(value, dict):
+                lines.append(head + ' ~')
+            else:
+                lines.append(f'{head} {_scalar(value)}')
+        return '\n'.join(lines)
+    if isinstance(node, (list, tuple)):
+        if not node:
+            return pad + '[]'
+        lines = []
+        for item in node:
+            if isinstance(item, (dict, list, tuple)) and item:
+                body = dump_yaml(item, indent + 2)
+                lines.append(pad + '- ' + body[indent + 2:])
+            else:
+                lines.append(f'{pad}- {_scalar(item) if not isinstance(item, dict) else "{}"}')
+        return '\n'.join(lines)
+    return pad + _scalar(node)
 
 
 def bag_metadata(topics, files, custom_data=None, storage_identifier='mcap'):
