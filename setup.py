@@ -16,7 +16,11 @@ package_name = 'reducer_twin'
 setup(
     name=package_name,
     version='0.1.0',
-    packages=find_packages(exclude=['test', 'test.*', 'bench']),
+    # msg_adapters/ (the only code that knows both ROS message fields and core types) is
+    # installed inside the package, as reducer_twin.msg_adapters, not as a top-level name.
+    packages=find_packages(exclude=['test', 'test.*', 'bench', 'msg_adapters',
+                                    'msg_adapters.*']) + ['reducer_twin.msg_adapters'],
+    package_dir={'reducer_twin.msg_adapters': 'msg_adapters'},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

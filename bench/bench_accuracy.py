@@ -59,7 +59,6 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import independent_generator as indep  # noqa: E402
-from msg_adapters.layouts import TE_FEATURES  # noqa: E402
 import numpy as np  # noqa: E402
 from reducer_twin.core.estimator import EstimatorConfig, lost_motion_curve  # noqa: E402
 from reducer_twin.core.kinematics import total_ratio  # noqa: E402
@@ -73,6 +72,7 @@ from reducer_twin.core.simulator import JointSimulator, SimConfig  # noqa: E402
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer  # noqa: E402
 from reducer_twin.core.transmission_error import model_tables  # noqa: E402
 from reducer_twin.core.units import ARCMIN, HOUR, UM  # noqa: E402
+from reducer_twin.msg_adapters.layouts import TE_FEATURES  # noqa: E402
 
 WINDOW_S = 2.0
 RATE_HZ = 500.0

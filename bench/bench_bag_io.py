@@ -20,9 +20,9 @@ import sys
 import tempfile
 import time
 
-from msg_adapters.jointstate_cdr import JointStateBatch
 import numpy as np
-from reducer_twin.analysis.bag import BagDirWriter, open_bag
+from reducer_twin.io.bag import BagDirWriter, open_bag
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 T0 = 1_700_000_000_000_000_000

@@ -19,11 +19,11 @@ from pathlib import Path
 import tempfile
 import time
 
-from msg_adapters.dynamic_joint_state import MSGTYPE as DJS
 import numpy as np
-from reducer_twin.analysis.bag import open_bag
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.io.bag import open_bag
+from reducer_twin.msg_adapters.dynamic_joint_state import MSGTYPE as DJS
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 IV = 'control_msgs/msg/InterfaceValue'

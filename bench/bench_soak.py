@@ -150,7 +150,7 @@ def main():
     import numpy as np
     import rclpy
     from reducer_twin.core.errors import StateFileError
-    from reducer_twin.core.estimator import decode_state
+    from reducer_twin.io.state_file import decode_state
 
     nodes, executor, state_dir = start_bringup(args.joints, 'bench-soak-')
     reclaimed = CycleCount()
@@ -197,7 +197,7 @@ def main():
     while time.monotonic() < drain:
         executor.spin_once(timeout_sec=0.05)
     lost = sum(sim.sent - nodes['te'][j].samples for j in joints)
-    writers = [nodes['estimator'][j].stage.writer for j in joints]
+    writers = [nodes['estimator'][j].stage.store.writer for j in joints]
     for j in joints:
         nodes['estimator'][j].close()        # queued updates done, last state written
     written = sum(w.written for w in writers if w is not None)

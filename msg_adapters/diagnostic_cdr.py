@@ -11,7 +11,7 @@ window and joint). The layout, XCDR1 little endian after the encapsulation heade
         uint32 count, then per value: string key, string value
 
 A string is ``uint32 n`` (aligned to 4) and ``n`` bytes ending in NUL. Values are
-formatted as :func:`msg_adapters.ros.diagnostic_status` formats them (floats with six
+formatted as :func:`reducer_twin.msg_adapters.ros.diagnostic_status` formats them (floats with six
 significant digits), so an offline analysis and a live recording read alike.
 """
 
@@ -20,6 +20,7 @@ import struct
 from typing import NamedTuple
 
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import CdrWriter
 
 MSGTYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 """ROS type of ``/diagnostics``."""
@@ -70,25 +71,6 @@ def format_value(value):
     return str(value)
 
 
-def _string(parts, length, text, what):
-    """Append a CDR string at ``length`` bytes after the encapsulation header; return the end."""
-    raw = text.encode('utf-8')
-    if b'\x00' in raw:
-        raise InvalidInput(f'{what} must not contain NUL characters, got {text!r}')
-    pad = -length % 4
-    parts.append(_PADS[pad] + struct.pack('<I', len(raw) + 1) + raw + b'\x00')
-    return length + pad + 4 + len(raw) + 1
-
-
-def _u32(parts, length, value):
-    pad = -length % 4
-    parts.append(_PADS[pad] + struct.pack('<I', value))
-    return length + pad + 4
-
-
-_PADS = (b'', b'\x00', b'\x00\x00', b'\x00\x00\x00')
-
-
 def encode_diagnostic_array(stamp_ns, statuses, frame_id=''):
     """
     Serialise a ``DiagnosticArray``.
@@ -116,20 +98,20 @@ def encode_diagnostic_array(stamp_ns, statuses, frame_id=''):
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     if not 0 <= sec < 2**31:
         raise InvalidInput(f'stamp_ns must be in [0, 2^31) s, got {stamp_ns!r} ns')
-    parts = [b'\x00\x01\x00\x00', struct.pack('<iI', sec, nanosec)]
-    n = _string(parts, 8, frame_id, 'frame_id')   # lengths count from the header's end
-    n = _u32(parts, n, len(statuses))
+    msg = CdrWriter()
+    msg.raw(struct.pack('<iI', sec, nanosec))
+    msg.string(frame_id, 'frame_id')
+    msg.u32(len(statuses))
     for status in statuses:
         if status.level not in LEVELS:
             raise InvalidInput(f'diagnostic level must be one of {sorted(LEVELS)}, got '
                                f'{status.level!r}')
-        parts.append(bytes((LEVELS[status.level],)))
-        n += 1
-        n = _string(parts, n, str(status.name), 'status name')
-        n = _string(parts, n, str(status.message), 'status message')
-        n = _string(parts, n, str(status.hardware_id), 'hardware_id')
-        n = _u32(parts, n, len(status.values))
+        msg.raw(bytes((LEVELS[status.level],)))
+        msg.string(str(status.name), 'status name')
+        msg.string(str(status.message), 'status message')
+        msg.string(str(status.hardware_id), 'hardware_id')
+        msg.u32(len(status.values))
         for key, value in status.values.items():
-            n = _string(parts, n, str(key), 'key')
-            n = _string(parts, n, format_value(value), f'value of {key}')
-    return b''.join(parts)
+            msg.string(str(key), 'key')
+            msg.string(format_value(value), f'value of {key}')
+    return msg.getvalue()

@@ -12,8 +12,8 @@ on ``/dynamic_joint_states``; a motor-side encoder exported as a joint state int
         float64[] values
 
 The twin does not require ``control_msgs``: payloads are walked by the definition the bag
-stores (:mod:`msg_adapters.msgdef_decoder`; :data:`DEFINITION` only when a bag of an older
-distribution stores none). Messages of one layout are read as columns.
+stores (:mod:`reducer_twin.msg_adapters.msgdef_decoder`; :data:`DEFINITION` only when a bag
+of an older distribution stores none). Messages of one layout are read as columns.
 
 Each joint becomes up to two JointState entries, the form ``encoder_ingest`` reads from
 one topic: ``<joint>`` with the joint interfaces (position, velocity, effort) and
@@ -22,10 +22,10 @@ one topic: ``<joint>`` with the joint interfaces (position, velocity, effort) an
 
 from dataclasses import dataclass, fields
 
-from msg_adapters.jointstate_cdr import JointStateBatch
-from msg_adapters.jointstate_ros1 import join_groups, stamps_of
 import numpy as np
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
+from reducer_twin.msg_adapters.jointstate_ros1 import join_groups, stamps_of
 
 MSGTYPE = 'control_msgs/msg/DynamicJointState'
 

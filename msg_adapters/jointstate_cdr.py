@@ -29,6 +29,7 @@ import struct
 import numpy as np
 
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import align, CdrWriter
 
 MSGTYPE = 'sensor_msgs/msg/JointState'
 FIELDS = ('position', 'velocity', 'effort')
@@ -154,40 +155,22 @@ def empty_batch(names=()):
 # --------------------------------------------------------------------------- encoding
 
 
-def _align(pos, size):
-    """Align an absolute offset to ``size``, counting from the encapsulation header end."""
-    return 4 + ((pos - 4 + size - 1) // size) * size
-
-
-def _cdr_string(text, what):
-    try:
-        raw = text.encode('utf-8')
-    except (AttributeError, UnicodeEncodeError) as err:
-        raise InvalidInput(f'{what} must be a str, got {text!r}') from err
-    if b'\x00' in raw:
-        raise InvalidInput(f'{what} must not contain NUL characters, got {text!r}')
-    return struct.pack('<I', len(raw) + 1) + raw + b'\x00'
-
-
 def _template(frame_id, names, counts):
     """Build the bytes of one message and the offsets of its stamp and float fields."""
-    out = bytearray(b'\x00\x01\x00\x00')
-    out += bytes(8)
-    out += _cdr_string(frame_id, 'frame_id')
-    out += bytes(_align(len(out), 4) - len(out))
-    out += struct.pack('<I', len(names))
+    msg = CdrWriter()
+    msg.raw(bytes(8))
+    msg.string(frame_id, 'frame_id')
+    msg.u32(len(names))
     for i, name in enumerate(names):
-        out += bytes(_align(len(out), 4) - len(out))
-        out += _cdr_string(name, f'names[{i}]')
+        msg.string(name, f'names[{i}]')
     offsets = []
     for count in counts:
-        out += bytes(_align(len(out), 4) - len(out))
-        out += struct.pack('<I', count)
+        msg.u32(count)
         if count:
-            out += bytes(_align(len(out), 8) - len(out))
-        offsets.append(len(out))
-        out += bytes(8 * count)
-    return np.frombuffer(bytes(out), np.uint8), offsets
+            msg.align(8)
+        offsets.append(len(msg))
+        msg.zeros(8 * count)
+    return np.frombuffer(msg.getvalue(), np.uint8), offsets
 
 
 def _field_array(values, what, n, n_joints):
@@ -365,7 +348,7 @@ def _parse_layout(payload, where):
                           f'byte {size}')
 
     def read_u32(pos, what):
-        pos = _align(pos, 4)
+        pos = align(pos, 4)
         need(pos, 4, what)
         return u32.unpack_from(payload, pos)[0], pos
 
@@ -406,7 +389,7 @@ def _parse_layout(payload, where):
         spans.append((pos, pos + 4))
         pos += 4
         if count:
-            pos = _align(pos, 8)
+            pos = align(pos, 8)
             if count > (size - pos) // 8:
                 raise _reject(where, pos - 4, f'{field}[] count {count} needs {8 * count} '
                               f'bytes but the payload ends at byte {size}')

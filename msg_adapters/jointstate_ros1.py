@@ -9,15 +9,16 @@ A ROS 1 JointState is, with no alignment and little endian::
     uint32 count, float64[count]                position, velocity, effort
 
 The payloads are walked by the connection's own message definition with
-:class:`~msg_adapters.msgdef_decoder.MessageDecoder`; messages of one layout (the same
-names every tick) are read as columns, as :func:`~msg_adapters.jointstate_cdr.
+:class:`~reducer_twin.msg_adapters.msgdef_decoder.MessageDecoder`; messages of one layout (the same
+names every tick) are read as columns, as :func:`~reducer_twin.msg_adapters.jointstate_cdr.
 decode_joint_states` reads CDR. The result follows the same rules: NaN where a field is
 empty or not as long as the names, the union of names across layouts.
 """
 
-from msg_adapters.jointstate_cdr import concat_batches, empty_batch, FIELDS, JointStateBatch
 import numpy as np
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.jointstate_cdr import (
+    concat_batches, empty_batch, FIELDS, JointStateBatch)
 
 MSGTYPE = 'sensor_msgs/msg/JointState'
 _NS_PER_S = 1_000_000_000

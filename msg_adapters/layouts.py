@@ -8,7 +8,7 @@ labelled with the comma-joined field names; batches use two dimensions,
 ``samples`` then the fields. Field names carry their unit, SI throughout.
 
 This module is pure Python (no ROS import): the live nodes wrap the values
-into ``std_msgs/msg/Float64MultiArray`` with :mod:`msg_adapters.ros`, and
+into ``std_msgs/msg/Float64MultiArray`` with :mod:`reducer_twin.msg_adapters.ros`, and
 the offline analysis encodes the same layout to CDR bytes.
 """
 

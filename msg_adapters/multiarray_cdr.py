@@ -1,7 +1,8 @@
 """
 Vectorised CDR encoding and decoding of ``std_msgs/msg/Float64MultiArray``.
 
-The twin's derived topics are labelled ``Float64MultiArray`` s (:mod:`msg_adapters.layouts`).
+The twin's derived topics are labelled ``Float64MultiArray`` s
+(:mod:`reducer_twin.msg_adapters.layouts`).
 In CDR (XCDR1, little endian, as rclpy puts it on the wire and rosbag2 stores it), after the
 4-byte encapsulation header ``00 01 00 00``::
 
@@ -19,11 +20,13 @@ Pure Python and numpy: no ROS import.
 """
 
 from dataclasses import dataclass
+import functools
 import struct
 
 import numpy as np
 
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.cdr import align, CdrWriter
 
 MSGTYPE = 'std_msgs/msg/Float64MultiArray'
 """ROS type of the derived topics."""
@@ -57,7 +60,7 @@ class MultiArray:
 
         Parameters
         ----------
-        layout : msg_adapters.layouts.Layout
+        layout : reducer_twin.msg_adapters.layouts.Layout
             Expected layout.
 
         Returns
@@ -88,10 +91,6 @@ class MultiArray:
         return self.data
 
 
-def _align(pos, size):
-    return 4 + ((pos - 4 + size - 1) // size) * size
-
-
 def _dims(layout, rows):
     n_fields = len(layout.fields)
     if layout.batch:
@@ -105,7 +104,7 @@ def multiarray_template(layout, rows=None):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the message.
     rows : int, optional
         Samples per message (batch layouts only).
@@ -125,22 +124,27 @@ def multiarray_template(layout, rows=None):
     """
     if layout.batch and (rows is None or int(rows) < 0):
         raise InvalidInput(f'{layout.name} is a batch layout: rows must be >= 0, got {rows!r}')
-    dims = _dims(layout, int(rows or 0))
-    out = bytearray(b'\x00\x01\x00\x00')
-    out += struct.pack('<I', len(dims))
+    return _template(layout, int(rows or 0))
+
+
+@functools.lru_cache(maxsize=512)
+def _template(layout, rows):
+    """Build the (read-only) template of a layout and sample count; a few per analysis."""
+    dims = _dims(layout, rows)
+    msg = CdrWriter()
+    msg.u32(len(dims))
     for label, size, stride in dims:
-        raw = label.encode('utf-8')
-        out += bytes(_align(len(out), 4) - len(out))
-        out += struct.pack('<I', len(raw) + 1) + raw + b'\x00'
-        out += bytes(_align(len(out), 4) - len(out))
-        out += struct.pack('<II', size, stride)
+        msg.string(label, 'a dimension label')
+        msg.u32(size)
+        msg.u32(stride)
     count = dims[0][2] if layout.batch else dims[0][1]
-    out += struct.pack('<II', 0, count)
+    msg.u32(0)   # data_offset
+    msg.u32(count)
     if count:
-        out += bytes(_align(len(out), 8) - len(out))
-    data_offset = len(out)
-    out += bytes(8 * count)
-    return np.frombuffer(bytes(out), np.uint8), data_offset
+        msg.align(8)
+    data_offset = len(msg)
+    msg.zeros(8 * count)
+    return np.frombuffer(msg.getvalue(), np.uint8), data_offset
 
 
 def multiarray_columns(layout, values):
@@ -149,7 +153,7 @@ def multiarray_columns(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the messages.
     values : array_like
         ``(N, fields)`` records for a single-record layout, or ``(N, rows, fields)``
@@ -188,7 +192,7 @@ def encode_multiarrays(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the messages.
     values : array_like
         As for :func:`multiarray_columns`.
@@ -221,7 +225,7 @@ def encode_multiarray(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the message.
     values : array_like
         ``(rows, fields)`` for a batch layout, ``(fields,)`` for a record.
@@ -266,7 +270,7 @@ class _Reader:
                                f'{what} at byte {self.pos}')
 
     def u32(self, what):
-        self.pos = _align(self.pos, 4)
+        self.pos = align(self.pos, 4)
         self.need(4, what)
         value = struct.unpack_from(self.order + 'I', self.buf, self.pos)[0]
         self.pos += 4
@@ -313,7 +317,7 @@ def decode_multiarray(payload):
     data_offset = reader.u32('layout.data_offset')
     count = reader.u32('the data count')
     if count:
-        reader.pos = _align(reader.pos, 8)
+        reader.pos = align(reader.pos, 8)
     reader.need(8 * count, 'the data')
     data = np.frombuffer(reader.buf, reader.order + 'f8', count, reader.pos).astype(np.float64)
     return MultiArray(tuple(dims), data_offset, data)
@@ -325,7 +329,7 @@ def decode_layout_batch(layout, payloads):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Expected layout.
     payloads : iterable of bytes-like
         CDR payloads.

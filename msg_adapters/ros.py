@@ -13,9 +13,9 @@ import math
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from msg_adapters.layouts import parse_values
 import numpy as np
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.layouts import parse_values
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
@@ -79,7 +79,7 @@ def to_multiarray(layout, values):
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Layout of the message.
     values : sequence of float or ndarray
         One record in field order, or an array (samples, fields) for a batch
@@ -119,7 +119,7 @@ class BatchPublisherMessage:
 
     Parameters
     ----------
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Batch layout.
 
     """
@@ -182,7 +182,7 @@ def from_multiarray(msg, layout):
     ----------
     msg : std_msgs.msg.Float64MultiArray
         Received message.
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Expected layout.
 
     Returns
@@ -203,7 +203,7 @@ def batch_array(msg, layout):
     ----------
     msg : std_msgs.msg.Float64MultiArray
         Received batch message.
-    layout : msg_adapters.layouts.Layout
+    layout : reducer_twin.msg_adapters.layouts.Layout
         Expected batch layout.
 
     Returns
@@ -367,7 +367,7 @@ class JointStatePicker:
             The message's ``name``.
         position, velocity, effort : array.array or ndarray
             Its float fields (as rclpy or
-            :class:`~msg_adapters.jointstate_cdr.JointStateReader` gives them).
+            :class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateReader` gives them).
 
         Returns
         -------

@@ -12,6 +12,7 @@ import importlib
 import sys
 
 from reducer_twin.core.errors import ReducerTwinError
+from reducer_twin.io import table_cache
 
 COMMANDS = ('paper', 'model', 'simulate', 'analyze', 'demo', 'fleet', 'replace')
 
@@ -67,6 +68,7 @@ def main(argv=None):
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    table_cache.install()   # the core's tables are kept on disk between runs
     try:
         return int(args.run(args) or 0)
     except ReducerTwinError as err:

@@ -83,6 +83,12 @@ settings.register_profile('reducer_twin', settings.default, deadline=None)
 settings.load_profile('reducer_twin')
 
 
+def pytest_configure(config):
+    """Keep the core's transmission-error tables on disk, as the command and the nodes do."""
+    from reducer_twin.io import table_cache
+    table_cache.install()
+
+
 def pytest_report_header(config):
     """Show the ROS network set-up at the top of the test report."""
     names = ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE', 'FASTDDS_BUILTIN_TRANSPORTS')

@@ -118,7 +118,7 @@ def test_analyze_applies_an_aging_factor_written_as_3_6e4(bag, tmp_path, capsys)
     code, errors = _analyze(['analyze', bag, '--out', tmp_path / 'd', '--json', '--config',
                              _file(tmp_path, 'twin:\n  aging_factor: 3.6e4\n')], capsys)
     assert code == 0 and errors == []
-    from reducer_twin.analysis.bag import open_bag
+    from reducer_twin.io.bag import open_bag
     with open_bag(tmp_path / 'd') as derived:
         assert float(derived.metadata['reducer_twin.aging_factor']) == 36_000.0
     assert Path(tmp_path / 'd').is_dir()

@@ -44,18 +44,7 @@ import math
 from pathlib import Path
 import time
 
-from msg_adapters.diagnostic_cdr import encode_diagnostic_array, MSGTYPE as DIAGNOSTICS
-from msg_adapters.diagnostic_cdr import Status
-from msg_adapters.dynamic_joint_state import InterfaceMap
-from msg_adapters.jointstate_cdr import concat_batches, MSGTYPE as JOINT_STATE
-from msg_adapters.layouts import GROUND_TRUTH, record_values, REMAINING_LIFE, TE_BATCH
-from msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
-from msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
 import numpy as np
-from reducer_twin.analysis.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
-from reducer_twin.analysis.mcap_io import DEFAULT_QOS, ReadWarning
-from reducer_twin.analysis.outputs import refuse_inside_inputs
 from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
@@ -66,6 +55,19 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, LifeConfig
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.io.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
+from reducer_twin.io.mcap_reader import ReadWarning
+from reducer_twin.io.outputs import refuse_inside_inputs
+from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
+from reducer_twin.msg_adapters.diagnostic_cdr import (
+    encode_diagnostic_array, MSGTYPE as DIAGNOSTICS)
+from reducer_twin.msg_adapters.diagnostic_cdr import Status
+from reducer_twin.msg_adapters.dynamic_joint_state import InterfaceMap
+from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, MSGTYPE as JOINT_STATE
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH, record_values, REMAINING_LIFE, TE_BATCH
+from reducer_twin.msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
+from reducer_twin.msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
 
 CHUNK_MESSAGES = 1 << 17
 """JointState messages cleaned, paired and analysed per step."""
@@ -285,7 +287,8 @@ def plan_joints(bag, settings):
     names the same joints as the link topic (or ``<joint><motor_suffix>``). The
     configured ``link_topic`` is used when the bag has it, else the topic that holds
     pairs. A DynamicJointState topic counts as a JointState topic with ``<joint>`` and
-    ``<joint><motor_suffix>`` entries (:mod:`msg_adapters.dynamic_joint_state`): alone,
+    ``<joint><motor_suffix>`` entries
+    (:mod:`reducer_twin.msg_adapters.dynamic_joint_state`): alone,
     or beside ``/joint_states`` that has no motor entries, it gives the combined form.
 
     Parameters

@@ -19,10 +19,11 @@ import io
 import math
 from pathlib import Path
 
-from msg_adapters.layouts import GROUND_TRUTH, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
-from reducer_twin.analysis.outputs import OutputDir
 from reducer_twin.core.units import ARCMIN, HOUR, UM
+from reducer_twin.io.outputs import OutputDir
+from reducer_twin.msg_adapters.layouts import (
+    GROUND_TRUTH, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE)
 
 GENERATOR = '<meta name="generator" content="reducer-twin">'
 """The tag that marks an ``index.html`` as a report of reducer-twin."""

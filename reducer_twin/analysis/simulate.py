@@ -28,15 +28,16 @@ from dataclasses import asdict, dataclass, field
 import json
 import math
 
-from msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
-from msg_adapters.layouts import GROUND_TRUTH
-from msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 import numpy as np
-from reducer_twin.analysis.bag_writer import BagDirWriter
-from reducer_twin.analysis.mcap_io import DEFAULT_QOS, MESSAGE_HEADER, QosProfile
 from reducer_twin.core.errors import InvalidParameter, out_of_range
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.units import ARCMIN, HOUR, m_to_um
+from reducer_twin.io.bag_writer import BagDirWriter
+from reducer_twin.io.mcap_format import MESSAGE_HEADER
+from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS, QosProfile
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH
+from reducer_twin.msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 
 START_NS = 1_767_225_600 * 1_000_000_000
 """Stamp of the first sample: 2026-01-01T00:00:00Z (fixed, so equal seeds give equal bags)."""
@@ -269,8 +270,8 @@ def estimated_bytes(spec):
         Bytes on disk.
 
     """
-    from msg_adapters.jointstate_cdr import joint_state_columns
-    from msg_adapters.multiarray_cdr import multiarray_template
+    from reducer_twin.msg_adapters.jointstate_cdr import joint_state_columns
+    from reducer_twin.msg_adapters.multiarray_cdr import multiarray_template
 
     def joint_state_bytes(names, fields):
         row = np.zeros((1, len(names)))

@@ -13,14 +13,14 @@ records in the same order.
 
 from types import SimpleNamespace
 
-from msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
-from msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 import numpy as np
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import features_from_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
+from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 
 TE_BATCH_S = 0.1
 """Stream seconds of TE per ``te`` message (the node sends 20 ms batches)."""

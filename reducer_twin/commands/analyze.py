@@ -138,8 +138,8 @@ def _check_outputs(args, names):
         Derived bag directories and report directories, one per bag.
 
     """
-    from reducer_twin.analysis.outputs import check_target, foreign_bag_entries
-    from reducer_twin.analysis.outputs import refuse_inside_inputs
+    from reducer_twin.io.outputs import check_target, foreign_bag_entries
+    from reducer_twin.io.outputs import refuse_inside_inputs
     from reducer_twin.analysis.report import foreign_report_entries
     inputs = [('input bag', bag) for bag in args.bags]
     if args.config:
@@ -196,7 +196,7 @@ def run(args):
     if missing:
         raise InvalidParameter(f'BAG {missing[0]} does not exist; expected a rosbag2 bag '
                                'directory, a .mcap or a .db3 file, or a ROS 1 .bag file')
-    from reducer_twin.analysis.outputs import check_input_kind
+    from reducer_twin.io.outputs import check_input_kind
     for bag in args.bags:
         check_input_kind(bag)
     single = len(args.bags) == 1

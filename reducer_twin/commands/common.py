@@ -6,6 +6,7 @@ import sys
 
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.io.params_file import read_reducer_params
 
 
 def add_params_option(parser):
@@ -54,7 +55,7 @@ def load_params(args):
         except ValueError:
             raise InvalidParameter(f'--set {key.strip()} expects a number, got {value!r}')
     if getattr(args, 'params', None):
-        return ReducerParams.from_yaml(args.params, overrides)
+        return read_reducer_params(args.params, overrides)
     return ReducerParams().with_overrides(overrides) if overrides else ReducerParams()
 
 

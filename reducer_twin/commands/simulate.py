@@ -99,8 +99,8 @@ def add_parser(sub):
 
 def run(args):
     """Validate the request, simulate, write the bag and print the summary."""
-    from reducer_twin.analysis.bag_writer import foreign_bag_entries
-    from reducer_twin.analysis.outputs import check_target, DiskFull, free_bytes, human_bytes
+    from reducer_twin.io.bag_writer import foreign_bag_entries
+    from reducer_twin.io.outputs import check_target, DiskFull, free_bytes, human_bytes
     from reducer_twin.analysis.simulate import estimated_bytes, SimulationSpec, simulate_bag
     if args.seed < 0:
         raise InvalidParameter(f'--seed must be a whole number >= 0, got {args.seed}')

@@ -14,7 +14,6 @@ configurable because they were not checked against a vendor sheet.
 
 from dataclasses import dataclass, field, fields, replace
 import math
-from pathlib import Path
 
 from .errors import InvalidParameter, out_of_range
 
@@ -375,16 +374,19 @@ class ReducerParams:
                 for name in SECTIONS}
 
     @classmethod
-    def from_yaml(cls, path, overrides=None):
+    def from_mapping(cls, data, overrides=None, source='reducer parameters'):
         """
-        Load parameters from a YAML file (SI units), then apply overrides.
+        Build parameters from a mapping (as a YAML file holds them, SI), then apply overrides.
 
         Parameters
         ----------
-        path : str or Path
-            YAML file with top-level key ``reducer`` (or the sections directly).
+        data : mapping or None
+            ``{'reducer': {section: {name: value}}}`` or the sections directly;
+            None or empty gives the defaults.
         overrides : mapping, optional
             Extra overrides, as for :meth:`with_overrides`.
+        source : str
+            Where the mapping came from (a file name), for messages.
 
         Returns
         -------
@@ -394,22 +396,17 @@ class ReducerParams:
         Raises
         ------
         InvalidParameter
-            If the file cannot be read, is not a mapping or holds bad values.
+            If the data is not a mapping of sections or holds bad values.
 
         """
-        import yaml
-        try:
-            text = Path(path).read_text(encoding='utf-8')
-            data = yaml.safe_load(text) or {}
-        except (OSError, yaml.YAMLError) as err:
-            raise InvalidParameter(f'cannot read reducer parameters from {path}: {err}') from err
+        data = {} if data is None else data
         if not isinstance(data, dict):
             raise InvalidParameter(
-                f'{path}: expected a mapping of sections, got {type(data).__name__}')
+                f'{source}: expected a mapping of sections, got {type(data).__name__}')
         data = data.get('reducer', data)
         if not isinstance(data, dict):
             raise InvalidParameter(
-                f"{path}: 'reducer' must be a mapping of sections, got {type(data).__name__}")
+                f"{source}: 'reducer' must be a mapping of sections, got {type(data).__name__}")
         params = cls().with_overrides(data)
         return params.with_overrides(overrides) if overrides else params
 
@@ -435,24 +432,3 @@ def iter_specs(params=None):
         for f in fields(obj):
             if 'unit' in f.metadata:
                 yield f'{section}.{f.name}', getattr(obj, f.name), f.metadata
-
-
-def default_config_path():
-    """
-    Return the path of the packaged ``config/rv80e.yaml`` if it can be found.
-
-    Returns
-    -------
-    Path or None
-        The source-tree copy, the installed ``share/reducer_twin/config``
-        copy, or None.
-
-    """
-    import sys
-    here = Path(__file__).resolve()
-    candidates = [here.parents[2] / 'config' / 'rv80e.yaml',
-                  Path(sys.prefix) / 'share' / 'reducer_twin' / 'config' / 'rv80e.yaml']
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
-    return None

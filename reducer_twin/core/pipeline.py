@@ -7,17 +7,16 @@ The twin's processing stages, shared by the live nodes and the bag analysis.
   level (the ``life_publisher`` node).
 
 Stages exchange plain records keyed like the topic layouts of
-:mod:`msg_adapters.layouts` (unit-suffixed names, SI), so a live recording
+:mod:`reducer_twin.msg_adapters.layouts` (unit-suffixed names, SI), so a live recording
 and an offline analysis carry the same values.
 """
 
 from dataclasses import dataclass
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import InvalidInput, InvalidParameter, StateFileError
+from .errors import InvalidInput, InvalidParameter
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LOST_MOTION_LIMIT
 from .life import remaining_life
 from .params import _Validated, spec
@@ -169,55 +168,6 @@ def features_record(f, params):
     return rec
 
 
-class StateWriter:
-    """
-    Write estimator state files on one background thread, in order.
-
-    The state is snapshotted (encoded) by the caller at once; only the file
-    work (backup, temporary file, fsync, rename) runs on the thread, so a
-    1 kHz executor never waits for the disk. A write that fails (a full disk)
-    leaves the previous file in place, is kept as :attr:`error` and counted;
-    the next one is tried as usual, and the first that succeeds clears
-    :attr:`error` and counts a recovery.
-
-    """
-
-    def __init__(self):
-        import queue
-        import threading
-        self._queue = queue.Queue()
-        self.error = None
-        self.failures = 0
-        self.recoveries = 0
-        self.written = 0
-        self._thread = threading.Thread(target=self._run, name='state-writer', daemon=True)
-        self._thread.start()
-
-    def submit(self, path, data):
-        """Queue ``data`` (encoded state) for ``path``."""
-        self._queue.put((path, data))
-
-    def flush(self):
-        """Wait until every queued state is written."""
-        self._queue.join()
-
-    def _run(self):
-        from .estimator import write_state_file
-        while True:
-            path, data = self._queue.get()
-            try:
-                write_state_file(path, data)
-                self.written += 1
-                if self.error is not None:
-                    self.error = None
-                    self.recoveries += 1
-            except StateFileError as err:
-                self.error = err
-                self.failures += 1
-            finally:
-                self._queue.task_done()
-
-
 class EstimatorStage:
     """
     Kalman wear estimation with persistence, one reducer.
@@ -228,42 +178,32 @@ class EstimatorStage:
         Reducer parameters.
     config : EstimatorConfig, optional
         Filter tuning.
-    state_path : str or Path, optional
-        State file: restored on start (falling back to its ``.bak`` copy),
-        written atomically after every window.
+    store : object, optional
+        Where the state persists (e.g. :class:`reducer_twin.io.state_file.StateFile`):
+        ``restore(params, config)`` returns a loaded state (``estimator``,
+        ``path``, ``used_backup``, ``primary_error``) or None for a new
+        reducer, ``save(state_dict)`` persists a state, ``flush()`` waits for
+        queued saves and ``path`` names it. None keeps the state in memory.
     log : callable, optional
         Called with one line of text for notable events (restore, reset).
-    background_save : bool
-        Write the state file on a :class:`StateWriter` thread (live nodes)
-        instead of in :meth:`process` (offline, tests).
 
     Raises
     ------
     StateFileError
-        If a state file exists but neither it nor its backup can be used, or
-        its directory cannot be created.
+        If the store holds a state but neither it nor its backup can be used.
 
     """
 
-    def __init__(self, params, config=None, state_path=None, log=None, background_save=False):
-        from .estimator import backup_path, load_with_fallback, WearEstimator
+    def __init__(self, params, config=None, store=None, log=None):
+        from .estimator import WearEstimator
         self.params = params
-        self.state_path = Path(state_path) if state_path else None
-        self.writer = StateWriter() if (background_save and self.state_path) else None
+        self.store = store
         self.log = log or (lambda text: None)
         self.last_observation = float('nan')
         self.skipped_replays = 0
         self.restored_from = None
-        if self.state_path:
-            # A fresh machine has no ~/.local/state/reducer_twin: make it now, so that the
-            # first save does not fail in the middle of a run.
-            try:
-                self.state_path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as err:
-                raise StateFileError(f'cannot create the directory of the estimator state '
-                                     f'{self.state_path}: {err}') from err
-        if self.state_path and (self.state_path.exists() or backup_path(self.state_path).exists()):
-            loaded = load_with_fallback(self.state_path, params, config)
+        loaded = store.restore(params, config) if store is not None else None
+        if loaded is not None:
             self.estimator = loaded.estimator
             self.restored_from = str(loaded.path)
             note = f' (primary unusable: {loaded.primary_error})' if loaded.used_backup else ''
@@ -272,8 +212,13 @@ class EstimatorStage:
                      f'{self.estimator.exposure_s / HOUR:.1f} h')
         else:
             self.estimator = WearEstimator(params, config)
-            if self.state_path:
-                self.log(f'no estimator state at {self.state_path}: starting from a new reducer')
+            if store is not None:
+                self.log(f'no estimator state at {store.path}: starting from a new reducer')
+
+    @property
+    def state_path(self):
+        """Return the path of the state (None without a store)."""
+        return None if self.store is None else self.store.path
 
     def process(self, features):
         """
@@ -305,19 +250,14 @@ class EstimatorStage:
         return result.status
 
     def save(self):
-        """Persist the state now, or queue it for the writer thread."""
-        if not self.state_path:
-            return
-        if self.writer is None:
-            self.estimator.save(self.state_path)
-            return
-        from .estimator import encode_state
-        self.writer.submit(self.state_path, encode_state(self.estimator.state_dict()))
+        """Hand the state to the store (at once, or queued by a background store)."""
+        if self.store is not None:
+            self.store.save(self.estimator.state_dict())
 
     def flush(self):
-        """Wait until the queued state files are written (a no-op without a writer)."""
-        if self.writer is not None:
-            self.writer.flush()
+        """Wait until the store has written the queued states (a no-op without a store)."""
+        if self.store is not None:
+            self.store.flush()
 
     def reset(self, reason):
         """

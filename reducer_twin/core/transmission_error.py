@@ -459,14 +459,54 @@ class ModelTables:
         return np.interp(lost_motion_rad, lm, self.wear)
 
 
+_TABLE_STORE = None
+
+
+def use_table_store(store):
+    """
+    Keep the period-mean rotation tables in ``store`` between processes.
+
+    The tables take a few seconds to build. A store (the disk cache of
+    :mod:`reducer_twin.io.table_cache`) lets every process of the same
+    parameters reuse them; the core itself keeps them in memory only.
+
+    Parameters
+    ----------
+    store : object or None
+        ``load(key, shape)`` returns a finite array of ``shape`` or None,
+        ``save(key, array)`` keeps one (and must not raise); None computes
+        the tables in every process.
+
+    """
+    global _TABLE_STORE
+    _TABLE_STORE = store
+
+
+def table_key(params, torque, wear):
+    """
+    Return the key of a rotation table: a digest of everything it depends on.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    torque, wear : ndarray
+        Grid nodes [N·m], [m].
+
+    Returns
+    -------
+    str
+        24 hexadecimal digits.
+
+    """
+    import hashlib
+    return hashlib.sha256(repr((params, _PHASE_SAMPLES, torque.tobytes(), wear.tobytes(),
+                                TABLE_VERSION)).encode()).hexdigest()[:24]
+
+
 def _cached_table(params, torque, wear):
     """
-    Compute the period-mean rotation on a grid, cached on disk per parameter set.
-
-    The table takes a few seconds to build; every process (nodes, CLI,
-    tests) of the same parameters and grid reuses the file in
-    ``$XDG_CACHE_HOME/reducer_twin`` (``~/.cache``). A missing, unreadable
-    or mismatched file is simply rebuilt.
+    Compute the period-mean rotation on a grid, or take it from the table store.
 
     Parameters
     ----------
@@ -481,33 +521,20 @@ def _cached_table(params, torque, wear):
         Mean beta [rad].
 
     """
-    import hashlib
-    import os
-    from pathlib import Path
-    key = hashlib.sha256(repr((params, _PHASE_SAMPLES, torque.tobytes(), wear.tobytes(),
-                               TABLE_VERSION)).encode()).hexdigest()[:24]
-    root = Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'reducer_twin'
-    path = root / f'mesh-table-{key}.npy'
-    try:
-        beta = np.load(path, allow_pickle=False)
-        if beta.shape == (torque.size, wear.size) and np.all(np.isfinite(beta)):
+    store = _TABLE_STORE
+    key = table_key(params, torque, wear) if store is not None else None
+    if store is not None:
+        beta = store.load(key, (torque.size, wear.size))
+        if beta is not None:
             return beta
-    except (OSError, ValueError):
-        pass
     grid = _phase_grid(params.geometry)
     tt, ww = np.meshgrid(torque, wear, indexing='ij')
     psi = np.tile(grid, tt.size)
     beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
                          np.repeat(ww.ravel(), grid.size), params)
     beta = beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f'{path.name}.{os.getpid()}.tmp')
-        with open(tmp, 'wb') as fh:
-            np.save(fh, beta, allow_pickle=False)
-        os.replace(tmp, path)
-    except OSError:
-        pass
+    if store is not None:
+        store.save(key, beta)
     return beta
 
 

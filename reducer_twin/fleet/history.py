@@ -144,7 +144,7 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
         If the bag cannot be read or has no encoder pairs.
 
     """
-    from reducer_twin.analysis.bag import open_bag
+    from reducer_twin.io.bag import open_bag
     from reducer_twin.analysis.pipeline import plan_joints
     from reducer_twin.analysis.simulate import ROBOT_KEY
     with open_bag(path) as bag:
@@ -394,7 +394,7 @@ def _run_chain(items, start, settings, overwrite):
 
 def segments_of(item, result, settings):
     """Build the store segments of one analysed bag (the joints it was analysed for)."""
-    from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
+    from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
     import numpy as np
     stamp = WEAR_ESTIMATE.fields.index('stamp_s')
     exposure = TE_FEATURES.fields.index('exposure_s')

@@ -32,7 +32,6 @@ import threading
 from types import SimpleNamespace
 import uuid
 
-from msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.pipeline import features_from_record, LifeStage
@@ -40,6 +39,8 @@ from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
 from reducer_twin.fleet.store import StoreConflict, StoreError
+from reducer_twin.msg_adapters.layouts import (
+    record_values, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE)
 
 LOCK_WAIT_S = 0.5
 """Longest wait for another writer's lock before a flush is left for the next one [s]."""

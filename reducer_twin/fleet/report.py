@@ -149,7 +149,7 @@ def trend_figure(trend, title, limit_rad):
         Two panels side by side.
 
     """
-    from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
+    from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
     plt = _pyplot()
 
     def col(array, layout, name):
@@ -243,7 +243,7 @@ def write_fleet_report(store, rows, out_dir):
         verdict_table(rows), '<h2>Rules</h2>', rules_html(),
         '<h2>Trends across bags</h2>', ''.join(sections) or '<p>No reducer observed yet.</p>',
         '</body></html>', ''])
-    from reducer_twin.analysis.outputs import OutputDir
+    from reducer_twin.io.outputs import OutputDir
     from reducer_twin.analysis.report import foreign_report_entries
     data = page.encode('utf-8')
     out = Path(out_dir)

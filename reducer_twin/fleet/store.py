@@ -6,7 +6,7 @@ the reducer in service, and a replacement retires it and installs a new one. Per
 reducer the store keeps where its estimator ended (the state the next bag continues
 from), and per analysed bag a *segment*: the bag's span, counts, the summary at its end
 and every window's ``te_features``, ``wear`` and ``remaining_life`` records (float64
-arrays in the layouts of :mod:`msg_adapters.layouts`, zlib-compressed), so trends span
+arrays in the layouts of :mod:`reducer_twin.msg_adapters.layouts`, zlib-compressed), so trends span
 bags. Bags are known by a fingerprint of their files' content, not by their path.
 
 The live twin joins the same history: a ``wear_estimator`` with a ``store`` writes its
@@ -33,9 +33,9 @@ from pathlib import Path
 import sqlite3
 import zlib
 
-from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 STORE_KIND = 'reducer_twin.fleet'
 """``store_info`` value of ``kind`` that marks a fleet store."""

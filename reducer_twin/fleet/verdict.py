@@ -229,7 +229,7 @@ def bag_rows(result, life=None, params=None):
         :func:`fleet_row` rows (robot ''), ranked.
 
     """
-    from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES
+    from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES
     from reducer_twin.core.params import ReducerParams
     from reducer_twin.core.pipeline import LifeConfig
     from reducer_twin.fleet.store import Reducer

@@ -19,7 +19,7 @@ Motor angles are raw (input side) or already divided by the gear ratio
 entry (in motor units, times the ratio, or joint units: ``motor_effort_units``),
 or the link entry where it has one (``effort_source: auto``). The subscriptions
 take the messages as their serialised bytes, read by
-:class:`~msg_adapters.jointstate_cdr.JointStateReader` (the same values rclpy
+:class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateReader` (the same values rclpy
 would give, without building a message object of names and arrays per
 controller tick). Every stream goes through the core ingestion
 rules (:mod:`reducer_twin.core.ingest`); clean, time-aligned samples are
@@ -36,10 +36,6 @@ batch and joint.
 """
 
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.jointstate_cdr import JointStateReader
-from msg_adapters.layouts import PAIRED_SAMPLES
-from msg_adapters.ros import BatchPublisherMessage, diagnostic_array, diagnostic_status
-from msg_adapters.ros import JointStatePicker
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
@@ -49,6 +45,11 @@ from reducer_twin.core.ingest import SpikeFilterBank
 from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
+from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
+from reducer_twin.msg_adapters.ros import (
+    BatchPublisherMessage, diagnostic_array, diagnostic_status)
+from reducer_twin.msg_adapters.ros import JointStatePicker
 from reducer_twin.nodes.base import create_background_timer, create_spread_timer
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node

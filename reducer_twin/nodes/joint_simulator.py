@@ -17,9 +17,6 @@ import threading
 import time
 from types import SimpleNamespace
 
-from msg_adapters.jointstate_cdr import encode_joint_states
-from msg_adapters.layouts import GROUND_TRUTH, record_values
-from msg_adapters.ros import to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidParameter
@@ -27,6 +24,9 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
+from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH, record_values
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import create_spread_timer, encoder_qos, joint_topic, latest_qos, Node
 from reducer_twin.nodes.base import run_nodes, SpecParameters, WORKER
 from sensor_msgs.msg import JointState

@@ -13,14 +13,15 @@ remaining life as key/values.
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
-from msg_adapters.ros import to_multiarray
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.msg_adapters.layouts import (
+    record_values, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE)
+from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import create_background_timer, diagnostics_qos, joint_topic
 from reducer_twin.nodes.base import latest_qos, Node
 from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos

@@ -24,9 +24,6 @@ The node also measures how long samples take from their stamp to their TE
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
-from msg_adapters.ros import batch_array, BatchPublisherMessage, diagnostic_array
-from msg_adapters.ros import diagnostic_status, to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
@@ -36,6 +33,9 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
+from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
+from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, diagnostic_array
+from reducer_twin.msg_adapters.ros import diagnostic_status, to_multiarray
 from reducer_twin.nodes.base import create_background_timer, create_spread_timer
 from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
 from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer

@@ -26,9 +26,6 @@ import os
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
-from msg_adapters.ros import to_multiarray
 from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, out_of_range
 from reducer_twin.core.errors import StateFileError
@@ -36,6 +33,10 @@ from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import m_to_um
+from reducer_twin.io.state_file import StateFile
+from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import BackgroundWorker, create_background_timer
 from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, joint_topic
 from reducer_twin.nodes.base import latest_qos, Node
@@ -119,8 +120,9 @@ class WearEstimatorNode(Node):
         else:
             path = Path(state_file) if state_file else (
                 Path(state_dir) if state_dir else default_state_dir()) / f'{joint}.json'
-        self.stage = EstimatorStage(self.params, self.est_params.value, path,
-                                    log=self.get_logger().info, background_save=True)
+        self.stage = EstimatorStage(self.params, self.est_params.value,
+                                    StateFile(path, background=True) if path else None,
+                                    log=self.get_logger().info)
         self.live = None
         if store:
             self._join_store(store, robot, store_period)
@@ -269,18 +271,16 @@ class WearEstimatorNode(Node):
 
     def _publish_diagnostics(self):
         est = self.stage.estimator
+        writer = self.stage.store.writer if self.stage.store is not None else None
         values = {'wear_um': m_to_um(est.wear), 'wear_std_um': m_to_um(est.wear_std),
                   'rate_scale': est.rate_scale, 'updates': est.updates,
                   'rejected_updates': est.rejected, 'replayed_windows': self.stage.skipped_replays,
                   'rejected_messages': self.rejects.total,
-                  'state_writes_failed': (self.stage.writer.failures
-                                          if self.stage.writer else 0),
-                  'state_writes_recovered': (self.stage.writer.recoveries
-                                             if self.stage.writer else 0),
+                  'state_writes_failed': writer.failures if writer else 0,
+                  'state_writes_recovered': writer.recoveries if writer else 0,
                   'state_file': str(self.stage.state_path or 'none'),
                   'restored_from': self.stage.restored_from or 'new reducer'}
         level = 'OK' if self.rejects.total == 0 else 'WARN'
-        writer = self.stage.writer
         error = writer.error if writer is not None else None
         if error is not None:   # the file on disk is the last good state
             level = 'ERROR'

@@ -1,11 +1,11 @@
 """ros2_control's DynamicJointState read as the joint and motor entries encoder_ingest pairs."""
 
-from msg_adapters.dynamic_joint_state import (
-    decode_dynamic_joint_states, DEFINITION, InterfaceMap, MSGTYPE)
-from msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.msg_adapters.dynamic_joint_state import (
+    decode_dynamic_joint_states, DEFINITION, InterfaceMap, MSGTYPE)
+from reducer_twin.msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 IV = 'control_msgs/msg/InterfaceValue'

@@ -2,12 +2,12 @@
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from msg_adapters.jointstate_cdr import (
-    concat_batches, decode_joint_states, encode_joint_states, JointStateBatch, JointStateReader)
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from reducer_twin.core.errors import InvalidInput, ReducerTwinError
+from reducer_twin.msg_adapters.jointstate_cdr import (
+    concat_batches, decode_joint_states, encode_joint_states, JointStateBatch, JointStateReader)
 from rosbags.typesys import get_typestore, Stores
 from sensor_msgs.msg import JointState
 

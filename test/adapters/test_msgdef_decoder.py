@@ -2,10 +2,10 @@
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from msg_adapters.msgdef_decoder import Block, load_definitions, MessageDecoder
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.msgdef_decoder import Block, load_definitions, MessageDecoder
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 DJS = 'control_msgs/msg/DynamicJointState'

@@ -4,14 +4,15 @@ import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from msg_adapters.diagnostic_cdr import encode_diagnostic_array, format_value, Status
-from msg_adapters.layouts import GROUND_TRUTH, LAYOUTS, TE_BATCH, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.multiarray_cdr import decode_layout_batch, decode_multiarray
-from msg_adapters.multiarray_cdr import encode_multiarray, encode_multiarrays
-from msg_adapters.multiarray_cdr import multiarray_columns
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, format_value, Status
+from reducer_twin.msg_adapters.layouts import (
+    GROUND_TRUTH, LAYOUTS, TE_BATCH, TE_FEATURES, WEAR_ESTIMATE)
+from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch, decode_multiarray
+from reducer_twin.msg_adapters.multiarray_cdr import encode_multiarray, encode_multiarrays
+from reducer_twin.msg_adapters.multiarray_cdr import multiarray_columns
 from rosbags.typesys import get_typestore, Stores
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)

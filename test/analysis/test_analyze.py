@@ -8,14 +8,8 @@ import sqlite3
 from cli_runs import run_cli as _run
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
-from msg_adapters.layouts import LAYOUTS, record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
-from msg_adapters.layouts import WEAR_ESTIMATE
-from msg_adapters.multiarray_cdr import decode_layout_batch
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag, write_bag_dir
-from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.analysis.stages import TE_MAX_GAP_S
@@ -25,6 +19,14 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
+from reducer_twin.io.bag import open_bag, write_bag_dir
+from reducer_twin.io.mcap_array_writer import McapBagWriter
+from reducer_twin.io.rosbag2_metadata import bag_metadata, dump_yaml
+from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
+from reducer_twin.msg_adapters.layouts import (
+    LAYOUTS, record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES)
+from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
+from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml

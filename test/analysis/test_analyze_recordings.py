@@ -12,13 +12,13 @@ import re
 import sqlite3
 
 from cli_runs import run_cli as _run
-from msg_adapters.dynamic_joint_state import MSGTYPE as DJS
-from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 import numpy as np
 import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.core.errors import BagError
+from reducer_twin.msg_adapters.dynamic_joint_state import MSGTYPE as DJS
+from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from rosbags.convert import convert
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Writer1

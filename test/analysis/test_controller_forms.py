@@ -10,16 +10,16 @@ declared not observed, with the reason, a WARNING line and exit status 3.
 
 import json
 
-from msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
 import numpy as np
 import pytest
 from reducer_twin.analysis import pipeline
-from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
 
 AGING = 180_000.0
 SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,

@@ -5,17 +5,17 @@ import math
 from pathlib import Path
 
 from mcap.reader import make_reader
-from msg_adapters.layouts import GROUND_TRUTH
-from msg_adapters.multiarray_cdr import decode_layout_batch
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag
 from reducer_twin.analysis.simulate import AGING_KEY, ROBOT_KEY, SIMULATION_KEY, SimulationSpec
 from reducer_twin.analysis.simulate import simulate_bag, START_HOURS_KEY, START_NS
 from reducer_twin.cli import main
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.units import HOUR
+from reducer_twin.io.bag import open_bag
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH
+from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml

@@ -9,11 +9,11 @@ Spec: the Foxglove layout shows the derived topics a derived bag really has, fie
 import json
 import re
 
-from msg_adapters.layouts import LAYOUTS
 import pytest
-from reducer_twin.analysis.bag import open_bag
 from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.io.bag import open_bag
+from reducer_twin.msg_adapters.layouts import LAYOUTS
 
 PATH = re.compile(r'^(/reducer_twin/(\w+)/(\w+))\.data\[(\d+)\]$')
 

@@ -8,7 +8,6 @@ plus white noise of 0.05 arcmin, reported as such.
 """
 
 from dataclasses import dataclass, replace
-import gc
 import json
 import math
 
@@ -19,10 +18,9 @@ import pytest
 
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
-from reducer_twin.core.estimator import (backup_path, encode_state, EstimatorConfig,
-                                         load_with_fallback, lost_motion_curve,
-                                         params_fingerprint, run_in_free_wear,
-                                         wear_from_run_in_free, WearEstimator)
+from reducer_twin.core.estimator import (
+    EstimatorConfig, lost_motion_curve, params_fingerprint, run_in_free_wear,
+    wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
@@ -410,131 +408,6 @@ def test_a_state_dict_survives_a_json_round_trip_bit_for_bit(params):
         est.step(f)
         restored.step(f)
         assert np.array_equal(restored.x, est.x) and np.array_equal(restored.P, est.P)
-
-
-def test_save_and_load_restore_exactly_and_keep_the_previous_copy(params, tmp_path):
-    est, features = stepped_estimator(params)
-    path = tmp_path / 'wear_state.json'
-    est.save(path)
-    first = est.state_dict()
-    est.step(features[60])
-    est.save(path)
-    assert WearEstimator.load(path, params).state_dict() == est.state_dict()
-    assert WearEstimator.load(backup_path(path), params).state_dict() == first
-    assert [p.name for p in tmp_path.iterdir() if p.name.endswith('.tmp')] == []
-
-
-def test_a_state_file_is_written_without_leaving_reference_cycles(params):
-    # An estimator writes its file after every window for months: the encoding must leave
-    # nothing for the cycle collector (the indenting json encoder leaves ~30 objects a call).
-    est, _ = stepped_estimator(params, n=5)
-    gc.collect()
-    gc.disable()
-    try:
-        data = [encode_state(est.state_dict()) for _ in range(20)]
-        assert gc.collect() == 0
-    finally:
-        gc.enable()
-    lines = data[0].decode().splitlines()
-    assert [line.split(':')[0] for line in lines[1:4]] == [' "format"', ' "sha256"', ' "state"']
-    assert json.loads(data[0])['state'] == est.state_dict()
-
-
-def corrupt_flip_digit(data):
-    """Change the first digit of the wear in x: valid JSON, wrong checksum."""
-    text = data.decode()
-    i = text.index('"x":[')
-    i += next(k for k, c in enumerate(text[i:]) if c in '123456789')
-    return (text[:i] + ('1' if text[i] != '1' else '2') + text[i + 1:]).encode()
-
-
-def reencode_with(data, **changes):
-    state = json.loads(data)['state']
-    state.update(changes)
-    return encode_state(state)
-
-
-@pytest.mark.parametrize('mangle, message', [
-    (lambda d: d[:len(d) // 2], 'not valid JSON'),
-    (lambda d: b'', 'not valid JSON'),
-    (lambda d: b'\xff\xfe garbage', 'not valid JSON'),
-    (corrupt_flip_digit, 'checksum mismatch'),
-    (lambda d: reencode_with(d, version=99), 'version'),
-    (lambda d: reencode_with(d, params_sha256='0' * 64), 'other reducer parameters'),
-    (lambda d: reencode_with(d, components=[[0.0, [1.0], [1.0]]]), 'malformed'),
-    (lambda d: reencode_with(d, growth={'sxx': [[1.0]]}), 'malformed'),
-    (lambda d: reencode_with(d, counters={}), 'malformed'),
-    (lambda d: json.dumps({'format': 'something else'}).encode(), 'format'),
-    (lambda d: b'[1, 2, 3]', 'format'),
-])
-def test_a_bad_state_file_raises_state_file_error(params, tmp_path, mangle, message):
-    est, _ = stepped_estimator(params, n=5)
-    path = tmp_path / 'state.json'
-    est.save(path)
-    path.write_bytes(mangle(path.read_bytes()))
-    with pytest.raises(StateFileError, match=message):
-        WearEstimator.load(path, params)
-
-
-def test_a_state_of_another_reducer_is_detected_as_foreign(params, tmp_path):
-    other = params.with_overrides({'geometry.equidistant_modification': 0.04e-3})
-    assert params_fingerprint(other) != params_fingerprint(params)
-    est, _ = stepped_estimator(params, n=5)
-    est.save(tmp_path / 'state.json')
-    with pytest.raises(StateFileError, match='other reducer parameters'):
-        WearEstimator.load(tmp_path / 'state.json', other)
-
-
-def test_a_missing_file_raises_state_file_error(params, tmp_path):
-    with pytest.raises(StateFileError, match='cannot read'):
-        WearEstimator.load(tmp_path / 'absent.json', params)
-
-
-def test_a_corrupt_primary_falls_back_to_the_backup_and_says_so(params, tmp_path):
-    est, features = stepped_estimator(params)
-    path = tmp_path / 'state.json'
-    est.save(path)
-    good = est.state_dict()
-    est.step(features[60])
-    est.save(path)
-    path.write_bytes(path.read_bytes()[:100])
-    loaded = load_with_fallback(path, params)
-    assert loaded.used_backup and loaded.path == backup_path(path)
-    assert 'not valid JSON' in loaded.primary_error
-    assert loaded.estimator.state_dict() == good
-    # Saving over the corrupt primary must not overwrite the good backup with it.
-    loaded.estimator.save(path)
-    assert WearEstimator.load(backup_path(path), params).state_dict() == good
-
-
-def test_fallback_without_a_usable_file_raises_naming_both(params, tmp_path):
-    path = tmp_path / 'state.json'
-    path.write_bytes(b'{"truncated')
-    with pytest.raises(StateFileError, match='no usable estimator state.*backup'):
-        load_with_fallback(path, params)
-
-
-def test_an_intact_primary_is_used_without_fallback(params, tmp_path):
-    est, _ = stepped_estimator(params, n=5)
-    est.save(tmp_path / 'state.json')
-    loaded = load_with_fallback(tmp_path / 'state.json', params)
-    assert not loaded.used_backup and loaded.primary_error is None
-
-
-def test_a_state_of_the_two_state_estimator_is_converted_on_load(params, tmp_path):
-    est, features = stepped_estimator(params)
-    old = est.state_dict()
-    old.update(version=1, x=[3e-6, 0.2], P=[[1e-14, 0.0], [0.0, 0.01]])
-    for key in ('components', 'noise', 'trend', 'growth', 'archard_exposure', 'trend_score',
-                'duty_batch', 'duty_batch_sums'):
-        del old[key]
-    path = tmp_path / 'old.json'
-    path.write_bytes(encode_state(old))
-    loaded = WearEstimator.load(path, params)
-    assert loaded.wear == pytest.approx(3e-6) and loaded.x[1] == pytest.approx(0.2)
-    assert loaded.components == 1 and loaded.baseline == 0.0
-    loaded.step(features[60])
-    assert math.isfinite(loaded.wear)
 
 
 # --------------------------------------------------------------------------- reset

@@ -1,4 +1,4 @@
-"""Parameters: the paper's defaults, the YAML file, overrides and rejected values."""
+"""Parameters: the paper's defaults, overrides from mappings and rejected values."""
 
 import dataclasses
 import math
@@ -47,31 +47,6 @@ def test_short_amplitude_factor_is_a_zp_over_rp():
     # Paper, after eq 16: k1 = a*Zp/Rp; physics notes 1: K1 = 0.76856.
     assert ReducerParams().geometry.k1 == pytest.approx(2.2 * 40 / 114.5, rel=1e-12)
     assert ReducerParams().geometry.k1 == pytest.approx(0.76856, abs=5e-6)
-
-
-def test_config_file_loads_equal_to_the_defaults(repo_root):
-    loaded = ReducerParams.from_yaml(repo_root / 'config' / 'rv80e.yaml')
-    assert loaded.to_dict() == ReducerParams().to_dict()
-    assert loaded == ReducerParams()
-
-
-def test_yaml_sections_may_sit_at_the_top_level(tmp_path):
-    path = tmp_path / 'flat.yaml'
-    path.write_text('geometry:\n  pin_radius: 0.0045\n', encoding='utf-8')
-    assert ReducerParams.from_yaml(path).geometry.pin_radius == 0.0045
-
-
-def test_yaml_overrides_apply_after_the_file(tmp_path):
-    path = tmp_path / 'p.yaml'
-    path.write_text('reducer:\n  geometry:\n    pin_radius: 0.0045\n', encoding='utf-8')
-    params = ReducerParams.from_yaml(path, {'geometry.pin_radius': 0.004})
-    assert params.geometry.pin_radius == 0.004
-
-
-def test_an_empty_yaml_file_gives_the_defaults(tmp_path):
-    path = tmp_path / 'empty.yaml'
-    path.write_text('', encoding='utf-8')
-    assert ReducerParams.from_yaml(path) == ReducerParams()
 
 
 @pytest.mark.parametrize('overrides', [
@@ -158,60 +133,3 @@ def test_a_bool_is_rejected_even_where_one_is_in_range(name):
 def test_a_huge_integer_is_rejected_as_out_of_range():
     with pytest.raises(InvalidParameter, match='geometry.z_pins'):
         ReducerParams().with_overrides({'geometry.z_pins': 10 ** 400})
-
-
-# Each row: YAML text, fragments of the message.
-BAD_YAML = [
-    ('list at top level', '- 1\n- 2\n', ['expected a mapping', 'list']),
-    ('scalar at top level', '42\n', ['expected a mapping', 'int']),
-    ('syntax error', 'geometry: [1, 2\n', ['cannot read']),
-    ('bad value', 'reducer:\n  geometry:\n    pin_radius: -0.005\n',
-     ['geometry.pin_radius', '-0.005', ' m']),
-    ('unknown name', 'reducer:\n  geometry:\n    pin_diameter: 0.01\n',
-     ['geometry.pin_diameter']),
-]
-
-
-@pytest.mark.parametrize('text, fragments', [row[1:] for row in BAD_YAML],
-                         ids=[row[0] for row in BAD_YAML])
-def test_bad_yaml_files_are_rejected(tmp_path, text, fragments):
-    path = tmp_path / 'bad.yaml'
-    path.write_text(text, encoding='utf-8')
-    with pytest.raises(InvalidParameter) as info:
-        ReducerParams.from_yaml(path)
-    for fragment in fragments:
-        assert fragment in str(info.value)
-
-
-@pytest.mark.parametrize('text', ['reducer: [1, 2]\n', 'reducer:\n', 'reducer: 5\n'],
-                         ids=['list', 'null', 'scalar'])
-def test_a_reducer_key_that_is_not_a_mapping_is_rejected(tmp_path, text):
-    path = tmp_path / 'bad.yaml'
-    path.write_text(text, encoding='utf-8')
-    with pytest.raises(InvalidParameter, match='reducer'):
-        ReducerParams.from_yaml(path)
-
-
-def test_missing_file_is_rejected_naming_the_path(tmp_path):
-    path = tmp_path / 'no_such.yaml'
-    with pytest.raises(InvalidParameter, match='no_such.yaml'):
-        ReducerParams.from_yaml(path)
-
-
-def test_unreadable_file_is_rejected(tmp_path):
-    # A directory cannot be read as a file, whoever runs the test (even root).
-    with pytest.raises(InvalidParameter, match='cannot read'):
-        ReducerParams.from_yaml(tmp_path)
-
-
-def test_yaml_loading_is_safe_a_python_tag_is_rejected_not_executed(tmp_path):
-    marker = tmp_path / 'pwned'
-    path = tmp_path / 'evil.yaml'
-    path.write_text(f'reducer: !!python/object/apply:os.mkdir ["{marker}"]\n', encoding='utf-8')
-    with pytest.raises(InvalidParameter):
-        ReducerParams.from_yaml(path)
-    assert not marker.exists(), 'the YAML loader executed a python tag'
-    path.write_text('reducer: !!python/object:reducer_twin.core.params.Geometry {}\n',
-                    encoding='utf-8')
-    with pytest.raises(InvalidParameter):
-        ReducerParams.from_yaml(path)

@@ -12,12 +12,10 @@ import json
 import math
 from types import SimpleNamespace
 
-from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 import pytest
 from reducer_twin.core import wear
-from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
-from reducer_twin.core.estimator import backup_path, decode_state, EstimatorConfig
+from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
@@ -25,6 +23,7 @@ from reducer_twin.core.pipeline import state_from_record
 from reducer_twin.core.te_extraction import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 PARAMS = ReducerParams()
 NOISE = 0.05 * ARCMIN
@@ -135,36 +134,6 @@ def test_the_estimate_follows_the_synthetic_truth(windows):
     assert stage.estimator.wear == pytest.approx(true_w[-1], rel=0.15)
 
 
-def test_a_restored_stage_continues_exactly_where_the_saved_one_stopped(windows, tmp_path):
-    path = tmp_path / 'joint_1.json'
-    logs = []
-    first = EstimatorStage(PARAMS, state_path=path, log=logs.append)
-    assert 'starting from a new reducer' in logs[0]
-    run(first, windows[:15])
-    second = EstimatorStage(PARAMS, state_path=path, log=logs.append)
-    assert second.restored_from == str(path)
-    assert 'restored estimator state' in logs[-1]
-    assert second.estimator.state_dict() == first.estimator.state_dict()
-    reference = EstimatorStage(PARAMS)
-    run(reference, windows)
-    run(second, windows[15:])
-    assert second.estimator.state_dict() == reference.estimator.state_dict()
-    assert decode_state(path.read_bytes(), path) == reference.estimator.state_dict()
-
-
-def test_a_window_seen_again_after_a_restart_is_skipped_as_a_replay(windows, tmp_path):
-    path = tmp_path / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path)
-    run(stage, windows[:6])
-    saved = path.read_bytes()
-    restarted = EstimatorStage(PARAMS, state_path=path)
-    assert run(restarted, windows[4:6]) == ['replay', 'replay']
-    assert restarted.skipped_replays == 2
-    assert restarted.estimator.exposure_s == stage.estimator.exposure_s
-    assert path.read_bytes() == saved, 'a replay changes nothing, not even the file'
-    assert run(restarted, windows[6:7]) != ['replay']
-
-
 @pytest.mark.parametrize('back_s, status', [
     (0.0, 'replay'),
     (CLOCK_RESET_S - 0.5, 'replay'),
@@ -184,54 +153,6 @@ def test_a_window_far_enough_back_is_a_clock_reset_and_is_accepted(windows, back
     assert grew == (status != 'replay')
     if status == 'accepted':
         assert stage.estimator.t_end == last - back_s
-
-
-def test_a_corrupt_state_file_falls_back_to_its_backup(windows, tmp_path):
-    path = tmp_path / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path)
-    run(stage, windows[:5])
-    previous = decode_state(backup_path(path).read_bytes())
-    path.write_bytes(path.read_bytes()[:40])     # a crash mid-write of some other tool
-    logs = []
-    restored = EstimatorStage(PARAMS, state_path=path, log=logs.append)
-    assert restored.restored_from == str(backup_path(path))
-    assert restored.estimator.state_dict() == previous
-    assert 'primary unusable' in logs[0]
-    assert restored.estimator.updates == stage.estimator.updates - 1
-
-
-def test_a_corrupt_state_file_without_backup_refuses_to_start_naming_the_file(tmp_path):
-    path = tmp_path / 'joint_1.json'
-    path.write_text('{"format": "reducer_twin.wear_estimator.file", "sha256": "0"')
-    with pytest.raises(StateFileError, match=str(path)):
-        EstimatorStage(PARAMS, state_path=path)
-
-
-def test_the_state_directory_is_created_when_missing(windows, tmp_path):
-    path = tmp_path / 'state' / 'reducer_twin' / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path)
-    run(stage, windows[:1])
-    assert decode_state(path.read_bytes())['t_end'] == windows[0].t_end
-
-
-def test_a_state_directory_that_cannot_be_made_refuses_to_start(tmp_path):
-    blocker = tmp_path / 'file'
-    blocker.write_text('not a directory')
-    with pytest.raises(StateFileError, match='directory'):
-        EstimatorStage(PARAMS, state_path=blocker / 'joint_1.json')
-
-
-def test_reset_returns_to_a_new_reducer_and_saves_the_event(windows, tmp_path):
-    path = tmp_path / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path)
-    run(stage, windows[:10])
-    assert stage.estimator.wear > 0.0
-    stage.reset('maintenance: reducer replaced')
-    assert stage.estimator.wear == EstimatorConfig().initial_wear
-    state = decode_state(path.read_bytes())
-    assert state['events'][-1]['reason'] == 'maintenance: reducer replaced'
-    assert state['exposure_since_reset_s'] == 0.0
-    assert state['exposure_s'] == pytest.approx(10 * EXPOSURE)
 
 
 # -- LifeStage --------------------------------------------------------------------------------
@@ -354,30 +275,3 @@ def test_life_config_error_above_warn_names_both_thresholds():
 def test_a_non_finite_wear_record_raises_invalid_input(worn_record):
     with pytest.raises(InvalidInput):
         LifeStage(PARAMS).process({**worn_record, 'wear_m': math.inf})
-
-
-def test_a_background_writer_saves_the_same_state_in_order(windows, tmp_path):
-    path = tmp_path / 'bg.json'
-    stage = EstimatorStage(PARAMS, state_path=path, background_save=True)
-    run(stage, windows[:10])
-    stage.flush()
-    saved = decode_state(path.read_bytes(), path)
-    assert saved == stage.estimator.state_dict()
-    assert stage.writer.written == 10 and stage.writer.failures == 0
-
-
-def test_a_failing_background_write_is_counted_and_the_stage_keeps_running(windows, tmp_path):
-    path = tmp_path / 'state' / 'bg.json'
-    stage = EstimatorStage(PARAMS, state_path=path, background_save=True)
-    run(stage, windows[:3])
-    stage.flush()
-    # The directory vanishes and a file takes its name (a full or broken disk).
-    for f in path.parent.iterdir():
-        f.unlink()
-    path.parent.rmdir()
-    path.parent.write_text('not a directory')
-    run(stage, windows[3:6])
-    stage.flush()
-    assert stage.writer.failures == 3
-    assert isinstance(stage.writer.error, StateFileError)
-    assert math.isfinite(stage.estimator.wear)

@@ -2,12 +2,12 @@
 
 import sqlite3
 
-from msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, MIGRATIONS, parse_time
 from reducer_twin.fleet.store import SCHEMA_VERSION, Segment, StoreConflict, StoreError
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 T0 = 1_767_225_600 * 1_000_000_000
 

@@ -16,13 +16,13 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from msg_adapters.layouts import PAIRED_SAMPLES
-from msg_adapters.ros import batch_array, make_joint_state
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
+from reducer_twin.msg_adapters.ros import batch_array, make_joint_state
 from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.encoder_ingest import EncoderIngest
 from sensor_msgs.msg import JointState

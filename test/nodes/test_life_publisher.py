@@ -12,9 +12,6 @@ import math
 import re
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from msg_adapters.layouts import record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
-from msg_adapters.layouts import WEAR_ESTIMATE
-from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rcl_interfaces.srv import SetParameters
@@ -27,6 +24,9 @@ from reducer_twin.core.pipeline import LifeConfig
 from reducer_twin.core.te_extraction import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
+from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
+from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
 from reducer_twin.nodes.base import joint_topic, latest_qos, stream_qos
 from reducer_twin.nodes.life_publisher import LifePublisher
 from std_msgs.msg import Float64MultiArray

@@ -12,8 +12,6 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
-from msg_adapters.ros import batch_array, from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -23,6 +21,8 @@ from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
+from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
+from reducer_twin.msg_adapters.ros import batch_array, from_multiarray, to_multiarray
 from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.te_monitor import TEMonitor
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension

@@ -16,8 +16,6 @@ import subprocess
 from cli_runs import run_cli
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from full_disk import fill, small_tmpfs
-from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -31,6 +29,8 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.store import FleetStore, iso_from_ns
+from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray

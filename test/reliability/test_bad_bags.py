@@ -26,14 +26,14 @@ import subprocess
 
 import bad_inputs as bad
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_adapters.jointstate_cdr import encode_joint_states
-from msg_adapters.ros import make_joint_state
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-from reducer_twin.analysis.bag import BagDirWriter, open_bag
 from reducer_twin.analysis.simulate import AGING_KEY
 from reducer_twin.cli import main
+from reducer_twin.io.bag import BagDirWriter, open_bag
+from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states
+from reducer_twin.msg_adapters.ros import make_joint_state
 
 
 pytestmark = pytest.mark.timeout(120, method='thread')

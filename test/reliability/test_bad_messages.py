@@ -22,12 +22,12 @@ import time
 
 import bad_inputs as bad
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from msg_adapters.layouts import REMAINING_LIFE, WEAR_ESTIMATE
-from msg_adapters.ros import from_multiarray, make_joint_state
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.ros import from_multiarray, make_joint_state
 from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.encoder_ingest import EncoderIngest
 from reducer_twin.nodes.life_publisher import LifePublisher

@@ -15,12 +15,12 @@ import socket
 import subprocess
 import sys
 
-from msg_adapters.jointstate_cdr import JointStateBatch
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.cli import main
+from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
 import yaml
 
 pytestmark = pytest.mark.timeout(120, method='thread')

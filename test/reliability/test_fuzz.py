@@ -18,17 +18,19 @@ import struct
 
 from hypothesis import given, HealthCheck, settings
 from hypothesis import strategies as st
-from msg_adapters.jointstate_cdr import decode_joint_states, encode_joint_states
-from msg_adapters.layouts import LAYOUTS, parse_values, record_values, TE_FEATURES
-from msg_adapters.multiarray_cdr import decode_layout_batch, decode_multiarray
-from msg_adapters.multiarray_cdr import encode_multiarray
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag, write_bag_dir
-from reducer_twin.analysis.mcap_io import custom_data_strings, McapBagReader
 from reducer_twin.core.errors import ReducerTwinError, StateFileError
-from reducer_twin.core.estimator import decode_state, encode_state, WearEstimator
+from reducer_twin.core.estimator import WearEstimator
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.io.bag import open_bag, write_bag_dir
+from reducer_twin.io.mcap_reader import McapBagReader
+from reducer_twin.io.rosbag2_metadata import custom_data_strings
+from reducer_twin.io.state_file import decode_state, encode_state
+from reducer_twin.msg_adapters.jointstate_cdr import decode_joint_states, encode_joint_states
+from reducer_twin.msg_adapters.layouts import LAYOUTS, parse_values, record_values, TE_FEATURES
+from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch, decode_multiarray
+from reducer_twin.msg_adapters.multiarray_cdr import encode_multiarray
 import yaml
 
 pytestmark = pytest.mark.timeout(120, method='thread')
@@ -190,7 +192,7 @@ def corpus(rosbag2_jazzy_dir, tmp_path_factory):
     ours = tmp_path_factory.mktemp('ours') / 'arm'
     stamps = 1_700_000_000_000_000_000 + np.arange(300) * 1_000_000
     rng = np.random.default_rng(1)
-    from msg_adapters.jointstate_cdr import JointStateBatch
+    from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
     batch = JointStateBatch(stamps, ('j', 'j_motor'), rng.normal(size=(300, 2)),
                             rng.normal(size=(300, 2)), rng.normal(size=(300, 2)))
     write_bag_dir(ours, {'/joint_states': batch}, compression='zstd')

@@ -18,16 +18,17 @@ import os
 import signal
 import subprocess
 
-from msg_adapters.layouts import GROUND_TRUTH, record_values, TE_FEATURES, WEAR_ESTIMATE
-from msg_adapters.ros import from_multiarray, to_multiarray
 import numpy as np
 import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import StateFileError
-from reducer_twin.core.estimator import backup_path, decode_state, load_with_fallback
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
+from reducer_twin.io.state_file import backup_path, decode_state, load_with_fallback, StateFile
+from reducer_twin.msg_adapters.layouts import (
+    GROUND_TRUTH, record_values, TE_FEATURES, WEAR_ESTIMATE)
+from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from std_msgs.msg import Float64MultiArray
 from window_records import feature_records
@@ -56,7 +57,7 @@ def records():
 
 def offline(records, params=PARAMS, state_path=None):
     """Return the EstimatorStage that stepped ``records`` uninterrupted (and saved them)."""
-    stage = EstimatorStage(params, state_path=state_path)
+    stage = EstimatorStage(params, store=StateFile(state_path) if state_path else None)
     for rec in records:
         stage.process(features_from_record(rec))
     return stage
@@ -275,7 +276,7 @@ def test_a_state_file_torn_at_any_byte_falls_back_to_the_backup_never_to_zeros(
     # Both copies torn: an error naming both, never a new reducer.
     backup_path(state).write_bytes(backup_path(state).read_bytes()[:40])
     with pytest.raises(StateFileError, match='backup: .*knee.json.bak'):
-        EstimatorStage(PARAMS, state_path=state)
+        EstimatorStage(PARAMS, store=StateFile(state))
 
 
 BRINGUP_YAML = """twin:

@@ -25,14 +25,14 @@ from cli_runs import run_cli
 from full_disk import fill, FillingFile, small_tmpfs
 from mcap.reader import make_reader
 import pytest
-from reducer_twin.analysis import mcap_io, mcap_writer, outputs
-from reducer_twin.analysis.bag import open_bag
-from reducer_twin.analysis.bag_writer import foreign_bag_entries
-from reducer_twin.analysis.outputs import DiskFull, OutputDir, TEMP_TAG
 from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.report import write_report
 from reducer_twin.analysis.simulate import estimated_bytes, simulate_bag, SimulationSpec
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.io import mcap_array_writer, mcap_writer, outputs
+from reducer_twin.io.bag import open_bag
+from reducer_twin.io.bag_writer import foreign_bag_entries
+from reducer_twin.io.outputs import DiskFull, OutputDir, TEMP_TAG
 import yaml
 
 pytestmark = pytest.mark.timeout(300, method='thread')
@@ -372,7 +372,8 @@ def test_a_full_disk_under_the_report_is_one_error_and_the_directory_stays_absen
         assert sorted(p.name for p in disk.iterdir()) == [filler.name]
 
 
-@pytest.mark.parametrize('module', [mcap_writer, mcap_io], ids=['library framing', 'fast'])
+@pytest.mark.parametrize('module', [mcap_writer, mcap_array_writer],
+                         ids=['library framing', 'fast'])
 def test_enospc_at_the_file_write_edge_leaves_nothing_at_the_bag_directory(
         bag, tmp_path, monkeypatch, module):
     monkeypatch.setattr(module, 'open', FillingFile(200_000).opener, raising=False)
@@ -387,7 +388,7 @@ def test_enospc_at_the_file_write_edge_leaves_nothing_at_the_bag_directory(
 
 
 def _fast_writer(*args, **kwargs):
-    from reducer_twin.analysis.bag_writer import BagDirWriter
+    from reducer_twin.io.bag_writer import BagDirWriter
     return BagDirWriter(*args, framing='fast', **kwargs)
 
 

@@ -13,16 +13,16 @@ import os
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from full_disk import fill, FillingFile, small_tmpfs
-from msg_adapters.layouts import record_values, TE_FEATURES
-from msg_adapters.ros import to_multiarray
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import StateFileError
-from reducer_twin.core.estimator import backup_path, decode_state, encode_state
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
+from reducer_twin.io.state_file import backup_path, decode_state, encode_state, StateFile
+from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES
+from reducer_twin.msg_adapters.ros import to_multiarray
 from reducer_twin.nodes.base import joint_topic, stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
@@ -47,7 +47,7 @@ def _no_space(monkeypatch):
 def test_a_full_disk_keeps_the_previous_state_and_names_the_file_and_the_bytes(
         tmp_path, monkeypatch):
     path = tmp_path / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path)
+    stage = EstimatorStage(PARAMS, store=StateFile(path))
     for window in _windows(RECORDS[:3]):
         stage.process(window)
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
@@ -67,7 +67,7 @@ def test_a_full_disk_keeps_the_previous_state_and_names_the_file_and_the_bytes(
 
 def test_the_background_writer_reports_the_full_disk_and_recovers(tmp_path, monkeypatch):
     path = tmp_path / 'joint_1.json'
-    stage = EstimatorStage(PARAMS, state_path=path, background_save=True)
+    stage = EstimatorStage(PARAMS, store=StateFile(path, background=True))
     for window in _windows(RECORDS[:2]):
         stage.process(window)
     stage.flush()
@@ -76,11 +76,12 @@ def test_the_background_writer_reports_the_full_disk_and_recovers(tmp_path, monk
         _no_space(patch)
         stage.process(_windows(RECORDS[2:3])[0])
         stage.flush()
-    assert isinstance(stage.writer.error, StateFileError) and stage.writer.failures == 1
+    writer = stage.store.writer
+    assert isinstance(writer.error, StateFileError) and writer.failures == 1
     assert path.read_bytes() == good
     stage.process(_windows(RECORDS[3:4])[0])
     stage.flush()
-    assert stage.writer.error is None and stage.writer.recoveries == 1
+    assert writer.error is None and writer.recoveries == 1
     assert decode_state(path.read_bytes(), path)['t_end'] == RECORDS[3]['window_end_s']
 
 

@@ -9,13 +9,13 @@ of noise. Every other feature is NaN, as a window without those figures.
 
 import math
 
-from msg_adapters.layouts import TE_FEATURES
 import numpy as np
 from reducer_twin.core import wear
 from reducer_twin.core.pipeline import duty_to_record
 from reducer_twin.core.te_extraction import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
+from reducer_twin.msg_adapters.layouts import TE_FEATURES
 
 
 def feature_records(params, n, seed, start_s, window_s, exposure_s, rate_scale=0.8):

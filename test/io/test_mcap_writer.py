@@ -1,7 +1,7 @@
 """
 Derived bags framed by the mcap library: rosbag2's layout, read back by three readers.
 
-The file :class:`~reducer_twin.analysis.mcap_writer.LibraryMcapWriter` writes must carry
+The file :class:`~reducer_twin.io.mcap_writer.LibraryMcapWriter` writes must carry
 what ``ros2 bag record -s mcap`` writes (profile ``ros2``, ``ros2msg`` schemas, ``cdr``
 channels with ``offered_qos_profiles`` and ``topic_type_hash``, the ``rosbag2`` metadata
 record) with the library's own identifier in the Header, and hold the same messages as
@@ -11,16 +11,16 @@ the project's array writer for the same input, for every chunk compression.
 from mcap.reader import make_reader
 from mcap.writer import LIBRARY_IDENTIFIER
 from mcap_ros2.decoder import DecoderFactory
-from msg_adapters import ros_schemas
-from msg_adapters.layouts import TE_BATCH
-from msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag
-from reducer_twin.analysis.bag_writer import BagDirWriter
-from reducer_twin.analysis.mcap_io import QosProfile
-from reducer_twin.analysis.mcap_writer import LibraryMcapWriter
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.io.bag import open_bag
+from reducer_twin.io.bag_writer import BagDirWriter
+from reducer_twin.io.mcap_writer import LibraryMcapWriter
+from reducer_twin.io.rosbag2_metadata import QosProfile
+from reducer_twin.msg_adapters import ros_schemas
+from reducer_twin.msg_adapters.layouts import TE_BATCH
+from reducer_twin.msg_adapters.multiarray_cdr import encode_multiarrays, MSGTYPE as MULTIARRAY
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml

@@ -2,12 +2,12 @@
 
 import struct
 
-from msg_adapters.jointstate_cdr import decode_joint_states, MSGTYPE as JOINT_STATE
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import open_bag
-from reducer_twin.analysis.ros1 import Rosbag1File
 from reducer_twin.core.errors import BagError
+from reducer_twin.io.bag import open_bag
+from reducer_twin.io.rosbag1 import Rosbag1File
+from reducer_twin.msg_adapters.jointstate_cdr import decode_joint_states, MSGTYPE as JOINT_STATE
 from rosbags.rosbag1 import Reader, Writer
 from rosbags.typesys import get_typestore, Stores
 

@@ -7,7 +7,7 @@ are replaced by arrays (one ``INDEX_DATA`` record becomes one structured array),
 messages are not taken one by one through ``Reader.messages``: each chunk that holds a
 wanted connection is decompressed once, and the message data records the index points
 at are located in it with vectorised reads of their record headers. A chunk becomes one
-:class:`~reducer_twin.analysis.mcap_io.RawBatch` whose payloads are ROS 1 serialised, in
+:class:`~reducer_twin.io.mcap_array_writer.RawBatch` whose payloads are ROS 1 serialised, in
 file order (the order rosbag recorded them), with the index's receive times as log times.
 
 A bag that is not indexed, is encrypted or uses a compression rosbags does not know is
@@ -19,8 +19,8 @@ import os
 from pathlib import Path
 
 import numpy as np
-from reducer_twin.analysis.mcap_io import RawBatch, ReadWarning
 from reducer_twin.core.errors import BagError
+from reducer_twin.io.mcap_reader import RawBatch, ReadWarning
 
 MAGIC = b'#ROSBAG V'
 VERSION = b'2.0'

@@ -12,7 +12,7 @@ file is closed. The Header names the library (``mcap-python/<version>``). Chunk 
 written (readers detect corruption with them); the data-section CRC is not, as neither
 rosbag2 nor the library writes it by default.
 
-The interface is the one of :class:`~reducer_twin.analysis.mcap_io.McapBagWriter`, whose
+The interface is the one of :class:`~reducer_twin.io.mcap_array_writer.McapBagWriter`, whose
 own framing stays for ``simulate`` (about a million messages per bag, where building
 chunks as arrays is several times faster).
 """
@@ -20,13 +20,14 @@ chunks as arrays is several times faster).
 from pathlib import Path
 
 from mcap.writer import CompressionType, Writer
-from msg_adapters import ros_schemas
-from msg_adapters.jointstate_cdr import fill_columns
 import numpy as np
-from reducer_twin.analysis.mcap_io import (
-    _Topic, bag_metadata, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, message_times,
-    parse_qos_profiles, PROFILE, TopicBook)
 from reducer_twin.core.errors import BagError, InvalidInput
+from reducer_twin.io.mcap_array_writer import _Topic, message_times, TopicBook
+from reducer_twin.io.mcap_format import DEFAULT_CHUNK_SIZE, PROFILE
+from reducer_twin.io.rosbag2_metadata import (
+    bag_metadata, DEFAULT_QOS, dump_yaml, parse_qos_profiles)
+from reducer_twin.msg_adapters import ros_schemas
+from reducer_twin.msg_adapters.jointstate_cdr import fill_columns
 
 _COMPRESSION = {'none': CompressionType.NONE, '': CompressionType.NONE,
                 'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4}

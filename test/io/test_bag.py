@@ -6,12 +6,13 @@ import sqlite3
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 import numpy as np
 import pytest
-from reducer_twin.analysis.bag import BagDirWriter, open_bag, write_bag_dir
-from reducer_twin.analysis.mcap_io import bag_metadata, dump_yaml, McapBagWriter
 from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
+from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
+from reducer_twin.io.mcap_array_writer import McapBagWriter
+from reducer_twin.io.rosbag2_metadata import bag_metadata, dump_yaml
+from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
@@ -404,7 +405,7 @@ def test_malformed_jointstate_messages_in_a_bag_are_skipped_with_one_warning(tmp
 
 def test_two_publishers_of_one_topic_in_one_chunk_keep_their_file_order(tmp_path):
     from mcap.writer import Writer as McapWriter
-    from msg_adapters.ros_schemas import message_definition
+    from reducer_twin.msg_adapters.ros_schemas import message_definition
     stamps = T0 + np.arange(40, dtype=np.int64) * 1_000_000
     buf, bounds = encode_joint_states(stamps, ['j'], np.arange(40.0)[:, None])
     with open(tmp_path / 'two.mcap', 'wb') as stream:

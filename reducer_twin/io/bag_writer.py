@@ -2,7 +2,7 @@
 Writing rosbag2 bag directories, whole or not at all.
 
 ``BagDirWriter`` writes ``<out_dir>/<name>_0.mcap`` and a ``metadata.yaml`` of version 9
-as rosbag2 Jazzy does. The directory is an :class:`~reducer_twin.analysis.outputs.
+as rosbag2 Jazzy does. The directory is an :class:`~reducer_twin.io.outputs.
 OutputDir`: the files are written into a temporary sibling and renamed into place when
 the bag is complete, so a run that fails or is killed leaves nothing at ``out_dir`` that
 looks like a bag; a non-empty ``out_dir`` is replaced only with ``overwrite`` and only
@@ -12,19 +12,20 @@ time writes a given ``out_dir``; a full disk is one :class:`~reducer_twin.analys
 outputs.DiskFull` error.
 
 Framing: ``'library'`` (the default, and what ``analyze`` writes) frames the MCAP file
-with the mcap library (:class:`~reducer_twin.analysis.mcap_writer.LibraryMcapWriter`);
-``'fast'`` with the project's array writer (:class:`~reducer_twin.analysis.mcap_io.
+with the mcap library (:class:`~reducer_twin.io.mcap_writer.LibraryMcapWriter`);
+``'fast'`` with the project's array writer (:class:`~reducer_twin.io.mcap_array_writer.
 McapBagWriter`), which ``simulate`` keeps for its million-message bags.
 """
 
 from pathlib import Path
 
-from msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
 import numpy as np
-from reducer_twin.analysis.mcap_io import (
-    bag_metadata, DEFAULT_CHUNK_SIZE, DEFAULT_QOS, dump_yaml, McapBagWriter)
-from reducer_twin.analysis.mcap_writer import LibraryMcapWriter
-from reducer_twin.analysis.outputs import foreign_bag_entries, OUTPUT_KEY_PREFIX, OutputDir
+from reducer_twin.io.mcap_array_writer import McapBagWriter
+from reducer_twin.io.mcap_format import DEFAULT_CHUNK_SIZE
+from reducer_twin.io.mcap_writer import LibraryMcapWriter
+from reducer_twin.io.outputs import foreign_bag_entries, OUTPUT_KEY_PREFIX, OutputDir
+from reducer_twin.io.rosbag2_metadata import bag_metadata, DEFAULT_QOS, dump_yaml
+from reducer_twin.msg_adapters.jointstate_cdr import joint_state_columns, MSGTYPE as JOINT_STATE
 
 __all__ = ['BagDirWriter', 'write_bag_dir', 'foreign_bag_entries', 'OUTPUT_KEY_PREFIX']
 

@@ -3,20 +3,21 @@ rosbag2 bags: open any recording the analysis may get, write the ones it produce
 
 ``open_bag`` accepts a bag directory (``metadata.yaml`` of version 1 to 9, possibly split
 over several storage files), a bare ``.mcap`` file, an sqlite3 ``.db3`` bag of older
-distributions, or a ROS 1 ``.bag`` file (:mod:`reducer_twin.analysis.ros1`). QoS may be
+distributions, or a ROS 1 ``.bag`` file (:mod:`reducer_twin.io.rosbag1`). QoS may be
 written with integer or string policies. The returned :class:`Bag` lists topics and reads
-joint state topics as vectorised :class:`~msg_adapters.jointstate_cdr.JointStateBatch` es
+joint state topics as vectorised
+:class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateBatch` es
 in receive-time order: ``sensor_msgs/msg/JointState`` (CDR or ROS 1) and ros2_control's
 ``control_msgs/msg/DynamicJointState``, the latter walked by the message definition the
 bag stores and turned into ``<joint>`` and ``<joint><motor_suffix>`` entries
-(:mod:`msg_adapters.dynamic_joint_state`).
+(:mod:`reducer_twin.msg_adapters.dynamic_joint_state`).
 
 Problems that leave data readable (a listed file missing, counts that disagree, a
-recording cut short, a corrupt chunk) become :class:`~reducer_twin.analysis.mcap_io.
+recording cut short, a corrupt chunk) become :class:`~reducer_twin.io.mcap_array_writer.
 ReadWarning` s in ``Bag.warnings``; problems that leave nothing to read raise
 :class:`~reducer_twin.core.errors.BagError`.
 
-Writing lives in :mod:`reducer_twin.analysis.bag_writer` (``BagDirWriter`` and
+Writing lives in :mod:`reducer_twin.io.bag_writer` (``BagDirWriter`` and
 ``write_bag_dir`` are importable from here too); the output of the analysis is always MCAP.
 """
 
@@ -28,18 +29,20 @@ import sqlite3
 import stat
 from typing import NamedTuple
 
-from msg_adapters import dynamic_joint_state as djs
-from msg_adapters.jointstate_cdr import concat_batches, decode_joint_states, empty_batch
-from msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
-from msg_adapters.jointstate_ros1 import decode_ros1_joint_states
-from msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 import numpy as np
-from reducer_twin.analysis.bag_writer import BagDirWriter, write_bag_dir  # noqa: F401
-from reducer_twin.analysis.mcap_io import (
-    custom_data_strings, MAGIC, McapBagReader, parse_qos_profiles, RawBatch, ReadWarning)
-from reducer_twin.analysis.ros1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
-from reducer_twin.analysis.ros1 import VERSION as ROS1_VERSION
 from reducer_twin.core.errors import BagError, InvalidInput
+from reducer_twin.io.bag_writer import BagDirWriter, write_bag_dir  # noqa: F401
+from reducer_twin.io.mcap_format import MAGIC
+from reducer_twin.io.mcap_reader import McapBagReader, RawBatch, ReadWarning
+from reducer_twin.io.rosbag1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
+from reducer_twin.io.rosbag1 import VERSION as ROS1_VERSION
+from reducer_twin.io.rosbag2_metadata import custom_data_strings, parse_qos_profiles
+from reducer_twin.msg_adapters import dynamic_joint_state as djs
+from reducer_twin.msg_adapters.jointstate_cdr import (
+    concat_batches, decode_joint_states, empty_batch)
+from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
+from reducer_twin.msg_adapters.jointstate_ros1 import decode_ros1_joint_states
+from reducer_twin.msg_adapters.msgdef_decoder import load_definitions, MessageDecoder
 import yaml
 
 SQLITE_MAGIC = b'SQLite format 3\x00'

@@ -6,13 +6,14 @@ from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.writer import Writer as ReferenceMcapWriter
 from mcap_ros2.decoder import DecoderFactory
-from msg_adapters import ros_schemas
-from msg_adapters.jointstate_cdr import decode_joint_states, encode_joint_states
 import numpy as np
 import pytest
-from reducer_twin.analysis.mcap_io import (
-    dump_yaml, McapBagReader, McapBagWriter, parse_qos_profiles, QosProfile)
 from reducer_twin.core.errors import BagError, InvalidInput, ReducerTwinError
+from reducer_twin.io.mcap_array_writer import McapBagWriter
+from reducer_twin.io.mcap_reader import McapBagReader
+from reducer_twin.io.rosbag2_metadata import dump_yaml, parse_qos_profiles, QosProfile
+from reducer_twin.msg_adapters import ros_schemas
+from reducer_twin.msg_adapters.jointstate_cdr import decode_joint_states, encode_joint_states
 from rosbags.rosbag2 import Reader as RosbagsReader
 from rosbags.typesys import get_typestore, Stores
 import yaml
