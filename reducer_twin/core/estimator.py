@@ -1059,14 +1059,9 @@ class WearEstimator:
 
         ``p0`` (``config.trend_probability``) moved by the prequential log-score
         difference of the two models; 0 for a reducer of unknown history (the
-        exposure since new is unknown, so the law cannot be placed), and 0
-        until the law has predicted a window (:data:`SCORE_AFTER`): a law
-        through one or two windows is no law, and its extrapolation alone
-        moved a short recording's lost motion by a third.
+        exposure since new is unknown, so the law cannot be placed).
         """
         p0 = self.config.trend_probability
-        if self._scored == 0 and p0 < 1.0:
-            return 0.0
         if self.config.new_unit_probability == 0.0 or p0 in (0.0, 1.0):
             return 0.0 if self.config.new_unit_probability == 0.0 else p0
         logit = math.log(p0 / (1.0 - p0)) + self._score
