@@ -149,6 +149,20 @@ def test_beyond_the_table_the_rate_continues_as_one_contact_under_a_proportional
     assert math.log(d[1] / d[0]) / math.log(5.0) == pytest.approx(2.219, rel=1e-9)
 
 
+@pytest.mark.parametrize('torque', [0.0, 0.3, 7.84, 100.0, 784.0, -784.0, 1e5, 1e7])
+def test_scalar_and_array_torques_give_the_same_depth(torque):
+    one = wear.depth_per_mesh_pass(torque, PARAMS)
+    many = wear.depth_per_mesh_pass(np.array([torque, torque]), PARAMS)
+    assert np.ndim(one) == 0
+    np.testing.assert_allclose(many, [one, one], rtol=1e-12)
+    assert float(wear.depth_per_mesh_pass(np.float64(torque), PARAMS)) == float(one)
+
+
+def test_a_torque_that_is_not_a_number_gives_no_rate():
+    rate = wear.wear_rate(np.array([math.nan, T0, math.inf]), N0, 0.0, PARAMS)
+    assert math.isnan(rate[0]) and rate[1] > 0.0 and rate[2] == math.inf
+
+
 def test_wear_multiplies_the_rate_by_the_run_in_of_eq_7s_roughness_term():
     for w in (5e-6, 20e-6, 60e-6):
         ratio = float(wear.wear_rate(T0, N0, w, PARAMS) / wear.wear_rate(T0, N0, 0.0, PARAMS))
