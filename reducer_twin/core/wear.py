@@ -6,8 +6,8 @@ once wears at its own load and phase, the depth per pass of each from its
 Hertz pressure and sliding distance (eqs 3, 5-8, 10-11, ``K`` of eq 7),
 summed over the engaged pins and averaged over the mesh period
 (:func:`mesh_depth_per_pass`). Load sharing makes this grow as about
-``T^1.3-1.4`` between 10 and 1000 N·m, where one contact under a
-proportional load would give ``T^2.219``. The law is tabulated once per
+``T^1.4`` between 10 and 1000 N·m (local slopes 1.37-1.43), where one
+contact under a proportional load would give ``T^2.219``. The law is tabulated once per
 parameter set over torque and interpolated (:func:`depth_per_mesh_pass`),
 so :func:`wear_rate` stays as cheap as a closed form for the estimator and
 the simulator.
@@ -361,8 +361,13 @@ def wear_rate(torque, output_speed, wear, params):
     fitted to the paper's Table 2 (``wear.rate_multiplier``).
 
     The torque law follows the load sharing: as more pins engage, the peak
-    force grows as about ``T^0.5`` and the rate as ``T^1.3-1.4`` between
-    10 and 1000 N·m, not as ``T^2.219`` of a fixed load-sharing shape.
+    force grows as about ``T^0.5`` and the rate as about ``T^1.4`` between
+    10 and 1000 N·m, not as ``T^2.219`` of a fixed load-sharing shape. It
+    also follows the clearance pattern: eq 7 makes ``K ∝ R*^-2.81``, so the
+    strongly curved flank phases that carry the load in the as-built mesh
+    dominate, and a unit built 3 µm looser (load moved towards the flatter
+    phases) wears 0.39-0.66 times as fast at 100-784 N·m, one 2 µm tighter
+    1.5-3.5 times.
 
     Parameters
     ----------

@@ -126,6 +126,17 @@ def test_at_100_nm_the_mesh_wears_5_to_9_times_more_than_a_proportional_load_pre
     assert 5.0 < ratio / (100.0 / T0) ** 2.219 < 9.0
 
 
+@pytest.mark.parametrize('offset, low, high', [(3e-6, 0.35, 0.7), (-2e-6, 1.4, 3.6)])
+def test_a_looser_unit_wears_slower_and_a_tighter_one_faster(offset, low, high):
+    # K ~ R*^-2.81 (eq 7): the load moves between flank phases of very different curvature.
+    g = PARAMS.geometry
+    unit = PARAMS.with_overrides({'geometry.equidistant_modification':
+                                  g.equidistant_modification + offset})
+    torque = np.array([100.0, 400.0, T0])
+    ratio = wear.wear_rate(torque, N0, 0.0, unit) / wear.wear_rate(torque, N0, 0.0, PARAMS)
+    assert np.all((ratio > low) & (ratio < high))
+
+
 @settings(max_examples=60)
 @given(t1=st.floats(0.0, 5 * T0), t2=st.floats(0.0, 5 * T0))
 def test_wear_rate_never_falls_as_the_torque_grows(t1, t2):
