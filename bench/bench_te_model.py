@@ -6,8 +6,10 @@ loaded mesh solved exactly per sample) at rated torque 784 N*m and 10 um of
 wear on 200k input angles, and ``contact.solve_mesh`` (the same solve plus
 the force bookkeeping) on the same angles; best of 5 runs each. Also prints
 how well the tabulated observation model (``ModelTables``) agrees with the
-exact mean TE. Prints figures; asserts nothing (the issue's floor is 200k
-samples/s on one core, shown as PASS / below floor).
+exact mean TE, and the cost of the wear rate (``wear.wear_rate``: the loaded
+mesh's Archard depth summed over the engaged pins, tabulated over torque once
+per parameter set, then interpolated). Prints figures; asserts nothing (the
+issue's floor is 200k samples/s on one core, shown as PASS / below floor).
 
 Run: ``.venv/bin/python bench/bench_te_model.py [--samples N] [--repeat R]``
 """
@@ -24,7 +26,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS',
     os.environ[_var] = '1'
 
 import numpy as np  # noqa: E402
-from reducer_twin.core import contact, transmission_error  # noqa: E402
+from reducer_twin.core import contact, transmission_error, wear  # noqa: E402
 from reducer_twin.core.kinematics import eccentric_angle, total_ratio  # noqa: E402
 from reducer_twin.core.params import ReducerParams  # noqa: E402
 from reducer_twin.core.units import ARCSEC  # noqa: E402
@@ -104,6 +106,43 @@ def table_agreement(params, n_points=400, seed=1):
     return {'build_s': build, 'full': full, 'worn': worn, 'corner': corner}
 
 
+def wear_rate_cost(params, n_samples, repeat):
+    """
+    Time the wear-rate table's build and the rate on arrays and on scalars.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        Reducer parameters.
+    n_samples : int
+        Torque samples per vectorised call.
+    repeat : int
+        Number of timed calls.
+
+    Returns
+    -------
+    dict
+        ``build_s`` (the table, once per parameter set), ``vector``
+        [samples/s], ``scalar_us`` [µs per call] and ``exact`` [torques/s
+        of the exact mesh average the table is built from].
+
+    """
+    rng = np.random.default_rng(2)
+    t0 = params.rating.rated_torque
+    torque = rng.uniform(-1.5 * t0, 1.5 * t0, n_samples)
+    speed = np.full(n_samples, params.rating.rated_output_speed)
+    fresh = params.with_overrides({'geometry.disc_width': params.geometry.disc_width * 1.0001})
+    start = time.perf_counter()
+    wear.wear_rate(t0, 1.0, 0.0, fresh)
+    build = time.perf_counter() - start
+    vector = best_rate(lambda: wear.wear_rate(torque, speed, 0.0, params), n_samples, repeat)
+    calls = 2000
+    scalar = best_rate(lambda: [wear.wear_rate(t0, 1.0, 0.0, params) for _ in range(calls)],
+                       calls, repeat)
+    exact = best_rate(lambda: wear.mesh_depth_per_pass(torque[:200], params), 200, repeat)
+    return {'build_s': build, 'vector': vector, 'scalar_us': 1e6 / scalar, 'exact': exact}
+
+
 def main(argv=None):
     """Run the benchmark and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -134,6 +173,11 @@ def main(argv=None):
     print(f'  |T| <= 3 T0, w in [0, 150] um:   {agree["full"]:.3f} arcsec')
     print(f'  |T| <= 3 T0, w in [4, 150] um:   {agree["worn"]:.3f} arcsec')
     print(f'  T in [0, 0.1 T0], w in [0, 4] um: {agree["corner"]:.3f} arcsec')
+    cost = wear_rate_cost(params, n, args.repeat)
+    print(f'wear.wear_rate (loaded mesh, table built in {cost["build_s"]:.2f} s):')
+    print(f'  {n} torques in one call:          {cost["vector"]:12,.0f} samples/s')
+    print(f'  one scalar call:                  {cost["scalar_us"]:12.1f} us')
+    print(f'  exact mesh average (no table):    {cost["exact"]:12,.0f} torques/s')
     return 0
 
 

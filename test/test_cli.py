@@ -41,6 +41,7 @@ def test_paper_json_from_the_installed_script_has_the_three_tables():
         assert {'hours', 'paper_mm', 'model_mm', 'rel_error'} <= set(row)
         assert abs(row['rel_error']) < 0.01
     assert data['table2'][0]['paper_mm'] == pytest.approx(0.004732318, rel=1e-12)  # Table 2
+    assert 'fit, not a validation' in data['table2_fit']['note']
     t4 = data['table4']
     assert t4['ratio'] == 81.0                                      # paper Table 4
     assert t4['output_speed_deg_s'] == pytest.approx(90.0, rel=1e-12)
@@ -88,6 +89,8 @@ def test_model_and_paper_print_tables_without_json(capsys):
     code, out, err = _run(['paper'], capsys)
     assert code == 0, err
     assert 'Table 2' in out and 'Table 4' in out and 'Table 5' in out
+    flat = ' '.join(out.split())
+    assert 'Fitted to Table 2: rate multiplier' in flat and 'fit, not a validation' in flat
 
 
 # Usage errors: argparse rejects the command line, exit 2.

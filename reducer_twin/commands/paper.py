@@ -16,7 +16,8 @@ def add_parser(sub):
 def run(args):
     """Compute and print the tables."""
     params = load_params(args)
-    result = {'table2': paper.table2(params), 'table4': paper.table4(params),
+    result = {'table2': paper.table2(params), 'table2_fit': paper.table2_fit(params),
+              'table4': paper.table4(params),
               'table5': paper.table5(params), 'explanations': paper.EXPLANATIONS}
     if args.json:
         print_json(result)
@@ -35,6 +36,7 @@ def _render(result):
         t.add_row(f"{r['hours']:.0f}", f"{r['paper_mm']:.9f}", f"{r['model_mm']:.9f}",
                   f"{r['rel_error'] * 100:+.3f} %", f"{r['integrated_mm']:.6f}")
     out.print(t)
+    out.print(result['table2_fit']['note'])
     out.print(result['explanations']['table2'], style='dim')
     t = Table(title='Table 4: speeds at 7290 deg/s input')
     for col in ('quantity', 'model', 'paper theory', 'paper ADAMS', 'ADAMS vs model'):

@@ -213,24 +213,32 @@ class Wear(_Validated):
     """
     Archard wear with the Janakiraman coefficient (eqs 1-11) and its calibration.
 
-    ``composite_roughness`` is the one knob that sets the level of the curve
-    (the coefficient of eq 7 is too sensitive to be a prediction, physics
-    notes section 2). ``run_in_fraction`` and ``run_in_depth`` describe how
-    the composite roughness polishes down as wear accumulates; they are fitted
-    to the two rate re-evaluations visible in the paper's Table 2.
+    ``rate_multiplier`` is the one number fitted to the paper's Table 2
+    (:func:`.wear.calibrate_to_paper`): the coefficient of eq 7 is too
+    sensitive to be a prediction (physics notes section 2), so the level is a
+    fit, not a validation. ``composite_roughness`` is a nominal value, not
+    fitted. ``run_in_fraction`` and ``run_in_depth`` describe a hypothesis:
+    the roughness polishing down as wear accumulates, fitted to the two rate
+    re-evaluations visible in Table 2 and checked by nothing else (0 drops
+    it).
     """
 
     _prefix = 'wear'
     pressure_viscosity: float = spec(2.0e-8, '1/Pa', 0.0, 1e-7,
                                      'lubricant pressure-viscosity coefficient, alpha0',
                                      lo_open=True)
-    composite_roughness: float = spec(0.8285e-6, 'm', 0.0, 1e-5,
-                                      'composite RMS roughness of the flanks, Rrms (calibrated)',
-                                      lo_open=True)
+    composite_roughness: float = spec(0.5e-6, 'm', 0.0, 1e-5,
+                                      'composite RMS roughness of ground flanks and pins, Rrms '
+                                      '(nominal, not fitted)', lo_open=True)
+    rate_multiplier: float = spec(0.3420, '', 0.0, 1e6,
+                                  'multiplier on the Archard rate of the loaded mesh (the one '
+                                  'number fitted to paper Table 2)', lo_open=True)
     run_in_fraction: float = spec(0.0731, '', 0.0, 1.0,
-                                  'fraction of the roughness removed by running-in', hi_open=True)
+                                  'fraction of the roughness removed by running-in (hypothesis '
+                                  'fitted to paper Table 2)', hi_open=True)
     run_in_depth: float = spec(18.76e-6, 'm', 0.0, 1e-3,
-                               'wear depth over which running-in acts (e-folding)', lo_open=True)
+                               'wear depth over which running-in acts, e-folding (hypothesis '
+                               'fitted to paper Table 2)', lo_open=True)
     janakiraman_constant: float = spec(3.981e29, '', 0.0, 1e40,
                                        'prefactor of the Janakiraman coefficient (eq 7)',
                                        lo_open=True)

@@ -102,6 +102,16 @@ def test_reference_results_at_rated_torque_with_the_papers_modifications():
     assert summary['peak_pressure'].max() == pytest.approx(1.06e9, rel=0.05)
 
 
+def test_peak_pin_force_grows_as_about_the_square_root_of_torque():
+    # Load sharing with clearance: more pins engage as the torque grows, so the peak force is
+    # far from proportional to T (issue 12: F_max ~ T^0.5-0.63) between 100 and 800 N*m.
+    torque = np.geomspace(100.0, 800.0, 8)
+    peak = np.array([contact.solve_mesh(_one_period(), t, PARAMS).max_force.mean()
+                     for t in torque])
+    local = np.diff(np.log(peak)) / np.diff(np.log(torque))
+    assert np.all((local > 0.45) & (local < 0.65))
+
+
 def test_effective_modulus_is_113_gpa():
     # 1/E* = (1-mu1^2)/E1 + (1-mu2^2)/E2 (paper eq 5); physics notes 2: E* = 113.2 GPa.
     assert PARAMS.materials.effective_modulus == pytest.approx(206e9 / (2 * (1 - 0.3 ** 2)))
