@@ -56,12 +56,13 @@ import numpy as np
 from reducer_twin.analysis.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
 from reducer_twin.analysis.mcap_io import DEFAULT_QOS, ReadWarning
 from reducer_twin.analysis.outputs import refuse_inside_inputs
-from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
+from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
 from reducer_twin.config import load_config_sources
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, StreamCleaner
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, LifeConfig

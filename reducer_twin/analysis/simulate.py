@@ -35,6 +35,7 @@ import numpy as np
 from reducer_twin.analysis.bag_writer import BagDirWriter
 from reducer_twin.analysis.mcap_io import DEFAULT_QOS, MESSAGE_HEADER, QosProfile
 from reducer_twin.core.errors import InvalidParameter, out_of_range
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.units import ARCMIN, HOUR, m_to_um
 
@@ -68,11 +69,6 @@ MAX_JOINTS = 12
 
 LATEST_QOS = (QosProfile(durability='transient_local'),)
 """QoS rosbag2 records for the nodes' transient-local topics (estimates, truth)."""
-
-
-def joint_topic(joint, suffix):
-    """Return ``/reducer_twin/<joint>/<suffix>`` (the nodes' ``joint_topic``, without rclpy)."""
-    return f'/reducer_twin/{joint}/{suffix}'
 
 
 @dataclass(frozen=True)

@@ -42,17 +42,21 @@ from msg_adapters.ros import BatchPublisherMessage, diagnostic_array, diagnostic
 from msg_adapters.ros import JointStatePicker
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import choose_effort, EFFORT_SOURCES, IngestConfig, Pairer
 from reducer_twin.core.ingest import motor_effort_scale, MOTOR_EFFORT_UNITS, SpikeFilter
 from reducer_twin.core.ingest import SpikeFilterBank
 from reducer_twin.core.ingest import StreamCleaner
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.nodes.base import create_background_timer, create_spread_timer
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
-from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node
-from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import diagnostics_qos, encoder_qos
+from reducer_twin.nodes.rejects import RejectCounter
+from reducer_twin.nodes.runtime import run_nodes
+from reducer_twin.nodes.timers import create_background_timer, create_spread_timer
+from reducer_twin.nodes.timers import LISTENERS_PERIOD_S
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

@@ -22,13 +22,17 @@ from msg_adapters.layouts import GROUND_TRUTH, record_values
 from msg_adapters.ros import to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
-from reducer_twin.nodes.base import create_spread_timer, encoder_qos, joint_topic, latest_qos, Node
-from reducer_twin.nodes.base import run_nodes, SpecParameters, WORKER
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import encoder_qos, latest_qos
+from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.timers import create_spread_timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

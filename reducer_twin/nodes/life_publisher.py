@@ -17,14 +17,17 @@ from msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES, WEA
 from msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
 from msg_adapters.ros import to_multiarray
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
-from reducer_twin.nodes.base import create_background_timer, diagnostics_qos, joint_topic
-from reducer_twin.nodes.base import latest_qos, Node
-from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
-from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import diagnostics_qos, latest_qos, stream_qos, WINDOW_DEPTH
+from reducer_twin.nodes.rejects import RejectCounter
+from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.timers import create_background_timer
 from std_msgs.msg import Float64MultiArray
 
 

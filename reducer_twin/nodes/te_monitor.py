@@ -29,18 +29,21 @@ from msg_adapters.ros import batch_array, BatchPublisherMessage, diagnostic_arra
 from msg_adapters.ros import diagnostic_status, to_multiarray
 import numpy as np
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 # features_record lives in the ROS-free core (the bag analysis uses it too); importable from here.
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
-from reducer_twin.nodes.base import create_background_timer, create_spread_timer
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
-from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
-from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW_DEPTH
-from reducer_twin.nodes.base import WORKER
+from reducer_twin.nodes.buffers import RowBuffer
+from reducer_twin.nodes.qos import diagnostics_qos, encoder_qos, stream_qos, WINDOW_DEPTH
+from reducer_twin.nodes.rejects import RejectCounter
+from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.timers import create_background_timer, create_spread_timer
+from reducer_twin.nodes.timers import LISTENERS_PERIOD_S
 from std_msgs.msg import Float64MultiArray
 
 _TE_COLUMNS = [0, 2, 5, 3]

@@ -16,12 +16,13 @@ With ``twin.store`` (and ``twin.robot``) the estimators write the live history i
 that fleet store and continue from it (see ``wear_estimator``).
 """
 
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 # The configuration lives in a ROS-free module (the bag analysis reads it too); its
 # names stay importable from here.
 from reducer_twin.config import default_config, DEFAULTS, load_config  # noqa: F401
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.nodes.base import Node, run_nodes
+from reducer_twin.nodes.runtime import run_nodes
 
 
 def build_nodes(config, sim_overrides=None):

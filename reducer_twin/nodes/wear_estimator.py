@@ -30,17 +30,19 @@ from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.ros import diagnostic_array, diagnostic_status, from_multiarray
 from msg_adapters.ros import to_multiarray
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, out_of_range
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import EstimatorConfig
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import m_to_um
-from reducer_twin.nodes.base import BackgroundWorker, create_background_timer
-from reducer_twin.nodes.base import create_spread_timer, diagnostics_qos, joint_topic
-from reducer_twin.nodes.base import latest_qos, Node
-from reducer_twin.nodes.base import RejectCounter, run_nodes, SpecParameters, stream_qos
-from reducer_twin.nodes.base import WINDOW_DEPTH, WORKER
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import diagnostics_qos, latest_qos, stream_qos, WINDOW_DEPTH
+from reducer_twin.nodes.rejects import RejectCounter
+from reducer_twin.nodes.runtime import BackgroundWorker, run_nodes, WORKER
+from reducer_twin.nodes.timers import create_background_timer, create_spread_timer
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 

@@ -27,11 +27,12 @@ from reducer_twin.analysis.simulate import START_NS
 from reducer_twin.analysis.stages import JointBack
 from reducer_twin.cli import main
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.store import FleetStore, iso_from_ns
-from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.qos import stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger

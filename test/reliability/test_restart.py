@@ -25,10 +25,11 @@ import pytest
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import backup_path, decode_state, load_with_fallback
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
-from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.qos import stream_qos
 from std_msgs.msg import Float64MultiArray
 from window_records import feature_records
 
