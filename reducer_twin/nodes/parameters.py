@@ -174,3 +174,18 @@ def check_choice(name, value, allowed):
         raise InvalidParameter(f'{name} must be one of '
                                f'{", ".join(repr(a) for a in allowed)}, got {value!r}')
     return value
+
+
+def check_period(name, value, longest_s=3600.0):
+    """
+    Check a period parameter [s]: in (0, ``longest_s``].
+
+    Raises
+    ------
+    InvalidParameter
+        Naming the parameter, the range and the value found.
+
+    """
+    if not 0.0 < value <= longest_s:
+        raise InvalidParameter(f'{name} must be in (0, {longest_s:g}] s, got {value!r}')
+    return value

@@ -2,6 +2,7 @@
 
 from concurrent.futures import Future as TaskFuture
 import os
+from pathlib import Path
 import queue
 import signal
 import sys
@@ -113,6 +114,50 @@ Window analysis, estimator and remaining-life updates and simulator block
 generation run here in order; the executor thread keeps only the light,
 latency-critical callbacks.
 """
+
+
+_STORE_WORKER = []
+
+
+def store_worker():
+    """
+    Return the process's fleet-store thread (made on first use).
+
+    Every live estimator of the process writes its segments there, one after the other:
+    SQLite and ``fsync`` never run on the executor thread nor hold the background
+    worker that steps the windows, and the joints of a bringup never compete for the
+    store's writer lock among themselves.
+    """
+    if not _STORE_WORKER:
+        _STORE_WORKER.append(BackgroundWorker())
+    return _STORE_WORKER[0]
+
+
+def default_state_dir():
+    """Return ``$XDG_STATE_HOME/reducer_twin`` (``~/.local/state/reducer_twin``)."""
+    base = os.environ.get('XDG_STATE_HOME') or Path.home() / '.local' / 'state'
+    return Path(base) / 'reducer_twin'
+
+
+def state_path(joint, state_file='', state_dir=''):
+    """
+    Return the estimator state file of a joint, or None to keep no state.
+
+    Parameters
+    ----------
+    joint : str
+        The joint.
+    state_file : str
+        A file; ``''`` = ``<state_dir>/<joint>.json``; ``'none'`` = no state.
+    state_dir : str
+        Directory of state files; ``''`` = :func:`default_state_dir`.
+
+    """
+    if state_file == 'none':
+        return None
+    if state_file:
+        return Path(state_file)
+    return (Path(state_dir) if state_dir else default_state_dir()) / f'{joint}.json'
 
 
 def make_executor():
