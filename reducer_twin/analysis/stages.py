@@ -43,53 +43,29 @@ _FLUSH = '!flush'
 """Control messages of the worker protocol."""
 
 
-def defer_filterpy_extras():
+def warm_up_estimator():
     """
-    Keep a fresh process from importing the parts of filterpy the estimator does not use.
+    Import the estimator's libraries (filterpy, a second of imports) on a background thread.
 
-    ``import filterpy.kalman`` runs ``filterpy/__init__.py``, which imports every
-    subpackage (``discrete_bayes`` pulls in ``scipy.ndimage``), and ``filterpy.kalman``
-    imports ``filterpy.stats`` (and ``scipy.stats``) only for ``logpdf``, which the wear
-    estimator never calls (it reads no likelihood): together 0.8 s to 2 s of the
-    command's start-up, a third of the whole analysis of a 1M-message bag. This
-    registers ``filterpy`` and ``filterpy.stats`` as their packages, not yet executed
-    (submodules still import normally), with a ``logpdf`` that loads the real one on
-    first use. The filter itself is the same code. Nothing is done once filterpy is
-    loaded, so it is a no-op in processes that already use it (tests, the nodes);
-    ``reducer-twin analyze`` calls it before the estimator is built.
+    For a process that runs the estimator stages itself (no stage worker): the imports
+    proceed while the bag is opened and its first chunk read and analysed, instead of
+    when the first window reaches the estimator.
 
     Returns
     -------
-    bool
-        True when the deferral was installed.
+    threading.Thread
+        The importing thread (a daemon).
 
     """
-    import importlib.util
-    import os
-    import sys
-    if any(name == 'filterpy' or name.startswith('filterpy.') for name in sys.modules):
-        return False
-    spec = importlib.util.find_spec('filterpy')
-    if spec is None or not spec.submodule_search_locations:
-        return False
-    package = importlib.util.module_from_spec(spec)
-    folder = os.path.join(list(spec.submodule_search_locations)[0], 'stats')
-    stats_spec = importlib.util.spec_from_file_location(
-        'filterpy.stats', os.path.join(folder, '__init__.py'),
-        submodule_search_locations=[folder])
-    if stats_spec is None:
-        return False
-    stats = importlib.util.module_from_spec(stats_spec)
+    import threading
 
-    def logpdf(*args, **kwargs):
-        from filterpy.stats.stats import logpdf as real
-        return real(*args, **kwargs)
+    def load():
+        from reducer_twin.core import estimator, life  # noqa: F401
+        from filterpy.kalman import MerweScaledSigmaPoints  # noqa: F401
 
-    stats.logpdf = logpdf
-    package.stats = stats
-    sys.modules['filterpy'] = package
-    sys.modules['filterpy.stats'] = stats
-    return True
+    thread = threading.Thread(target=load, name='estimator-import', daemon=True)
+    thread.start()
+    return thread
 
 
 class JointFront:
@@ -402,7 +378,7 @@ def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
         # Warm up while the parent imports, opens the bag and reads the first chunk.
-        from filterpy.kalman import UnscentedKalmanFilter  # noqa: F401
+        from filterpy.kalman import MerweScaledSigmaPoints  # noqa: F401
         from reducer_twin.core import estimator, life  # noqa: F401
         local = LocalBacks()
         while True:

@@ -277,37 +277,29 @@ def test_malformed_joint_states_are_skipped_counted_and_reported(sim, tmp_path, 
     assert '3 malformed JointState message(s) on /joint_states skipped' in warning
 
 
-ESTIMATE_IN_A_FRESH_PROCESS = """
+ANALYZE_IN_A_FRESH_PROCESS = """
 import json, sys
-from reducer_twin.analysis.stages import defer_filterpy_extras, JointBack
-from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import LifeConfig
-deferred = defer_filterpy_extras() if sys.argv[1] == 'defer' else False
-back = JointBack('j', ReducerParams(), LifeConfig())
-records = json.loads(sys.stdin.read())
-out = [back.process(r)['wear'] for r in records]
-json.dump({'deferred': deferred, 'wear': out,
-           'loaded': [m for m in ('scipy.stats', 'scipy.ndimage') if m in sys.modules]},
+from reducer_twin.cli import main
+code = main(sys.argv[1:])
+json.dump({'code': code, 'filterpy': [m for m in sys.modules if m.startswith('filterpy')]},
           sys.stdout)
 """
 
 
-def test_deferring_filterpys_unused_imports_changes_no_estimate(analysed):
+@pytest.mark.parametrize('stage_process', ['yes', 'no'])
+def test_filterpy_is_imported_by_the_estimators_process_only(sim, tmp_path, stage_process):
+    # The estimator's libraries cost a second of imports: with a stage worker they are
+    # loaded there while this process reads; without one, here, on a thread of their own.
     import subprocess
     import sys
-    records = [dict(zip(TE_FEATURES.fields, row.tolist()))
-               for row in analysed.joints['joint_1'].features[:8]]
-    runs = {}
-    for mode in ('defer', 'plain'):
-        done = subprocess.run([sys.executable, '-c', ESTIMATE_IN_A_FRESH_PROCESS, mode],
-                              input=json.dumps(records), capture_output=True, text=True,
-                              timeout=120, check=True)
-        runs[mode] = json.loads(done.stdout)
-    assert runs['defer']['deferred'] and runs['defer']['loaded'] == []
-    assert runs['plain']['loaded'] == ['scipy.stats', 'scipy.ndimage']
-    assert runs['defer']['wear'] == runs['plain']['wear']
-    np.testing.assert_array_equal(np.array(runs['plain']['wear']),
-                                  analysed.joints['joint_1'].wear[1:9])
+    done = subprocess.run([sys.executable, '-c', ANALYZE_IN_A_FRESH_PROCESS, 'analyze',
+                           str(sim[0]), '--out', str(tmp_path / 'd'), '--stage-process',
+                           stage_process, '--json'], capture_output=True, text=True,
+                          timeout=300, check=True)
+    # The command's --json comes first, then what the process had imported.
+    report = json.loads(done.stdout[done.stdout.rindex('{"code"'):])
+    assert report['code'] == 0
+    assert bool(report['filterpy']) == (stage_process == 'no')
 
 
 # --------------------------------------------------------------------------- inputs
