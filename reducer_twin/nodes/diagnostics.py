@@ -2,14 +2,11 @@
 
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_adapters.ros import diagnostic_array, diagnostic_status
-from rcl_interfaces.msg import ParameterDescriptor
 from reducer_twin.core.units import m_to_um
-from reducer_twin.nodes.parameters import check_period
+from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import diagnostics_qos
+from reducer_twin.nodes.settings import DiagnosticsSettings
 from reducer_twin.nodes.timers import create_background_timer
-
-DIAGNOSTICS_PERIOD_S = 1.0
-"""Default period of every node's ``/diagnostics`` [s]."""
 
 
 def publish_diagnostics(node, statuses):
@@ -37,10 +34,7 @@ def publish_diagnostics(node, statuses):
         If the period is not in (0, 3600] s.
 
     """
-    period = node.declare_parameter('diagnostics_period_s', DIAGNOSTICS_PERIOD_S,
-                                    ParameterDescriptor(description='period of /diagnostics [s]',
-                                                        read_only=True)).value
-    check_period('diagnostics_period_s', period)
+    period = SpecParameters(node, '', DiagnosticsSettings()).value.diagnostics_period_s
     publisher = node.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
 
     def report():

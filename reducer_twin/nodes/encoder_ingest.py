@@ -34,6 +34,7 @@ from reducer_twin.nodes.parameters import check_choice, declare_plain, SpecParam
 from reducer_twin.nodes.qos import encoder_qos
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes
+from reducer_twin.nodes.settings import IngestSettings
 from reducer_twin.nodes.timers import create_spread_timer, LISTENERS_PERIOD_S
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -58,8 +59,9 @@ class EncoderIngest(Node):
         self.ingest_params = SpecParameters(self, 'ingest', IngestConfig())
         self.rejects = RejectCounter(self)
         self.joints = p['joints']
-        ratio = total_ratio(Geometry()) if p['gear_ratio'] <= 0 else p['gear_ratio']
-        self.batch_ns = int(p['batch_period_s'] * 1e9)
+        s = SpecParameters(self, '', IngestSettings()).value
+        ratio = s.gear_ratio or total_ratio(Geometry())
+        self.batch_ns = int(s.batch_period_s * 1e9)
         self.split = bool(p['motor_topic'])
         self.ingest = RobotIngest(self.joints, ratio, self.ingest_params.value, self.split,
                                   p['motor_angles'], p['effort_source'], p['motor_effort_units'])
@@ -84,22 +86,16 @@ class EncoderIngest(Node):
         self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True)
         publish_diagnostics(self, self._statuses)
         if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
-            self.create_timer(max(p['batch_period_s'] * 5, 0.01), self._flush_stale)
+            self.create_timer(max(s.batch_period_s * 5, 0.01), self._flush_stale)
         create_spread_timer(self, LISTENERS_PERIOD_S, self._check_listeners)
 
     def _declare_plain(self):
         out = declare_plain(self, {
             **STREAMS,
-            'gear_ratio': (0.0, 'total ratio; <= 0 takes it from the RV-80E geometry (81)'),
-            'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription'),
-            'batch_period_s': (0.002, 'longest time a sample waits to be published [s]; 0: '
-                                      'every controller message at once')})
+            'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription')})
         check_choice('motor_angles', out['motor_angles'], ('raw', 'output'))
         check_choice('effort_source', out['effort_source'], EFFORT_SOURCES)
         check_choice('motor_effort_units', out['motor_effort_units'], MOTOR_EFFORT_UNITS)
-        if not 0.0 <= out['batch_period_s'] <= 1.0:
-            raise InvalidParameter(
-                f"batch_period_s must be in [0, 1] s, got {out['batch_period_s']!r}")
         check_streams(out['joints'], out['link_topic'], out['motor_topic'], out['motor_suffix'])
         return out
 

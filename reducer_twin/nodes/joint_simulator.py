@@ -28,6 +28,7 @@ from reducer_twin.nodes.buffers import PublishLog
 from reducer_twin.nodes.parameters import check_choice, declare_plain, SpecParameters
 from reducer_twin.nodes.qos import encoder_qos, latest_qos
 from reducer_twin.nodes.runtime import run_nodes
+from reducer_twin.nodes.settings import SimulatorSettings
 from reducer_twin.nodes.sim_stream import SimulatedStream
 from reducer_twin.nodes.timers import create_spread_timer
 from sensor_msgs.msg import JointState
@@ -83,7 +84,8 @@ class JointSimulatorNode(Node):
         self.sent = 0
         self.publish_log = PublishLog(PUBLISH_LOG)
         self.stream = SimulatedStream(self.sims, self.rate_hz, self.split)
-        self.max_catch_up = int(plain['max_catch_up'])
+        settings = SpecParameters(self, '', SimulatorSettings()).value
+        self.max_catch_up = settings.max_catch_up
         self._stop = threading.Event()
         if plain['own_thread']:
             # A robot controller publishes on its own clock, not when the twin's executor
@@ -95,7 +97,7 @@ class JointSimulatorNode(Node):
         else:
             self._thread = None
             self.create_timer(1.0 / self.rate_hz, self._tick)
-        create_spread_timer(self, plain['truth_period_s'], self._publish_truth)
+        create_spread_timer(self, settings.truth_period_s, self._publish_truth)
         self.get_logger().info(
             f'simulating {len(self.sims)} joint(s) {self.names} at {self.rate_hz:g} Hz, '
             f'aging factor {base.aging_factor:g}, profile {plain["profile"]}')
@@ -112,8 +114,6 @@ class JointSimulatorNode(Node):
             'motor_topic': ('/motor_states', "topic of the motor side with layout 'split'"),
             'exact_mesh': (False, 'TE by the exact loaded mesh (slow, ground-truth studies) '
                                   'instead of the period-mean table (< 0.1 arcsec apart)'),
-            'truth_period_s': (1.0, 'period of the ground-truth topics [s]'),
-            'max_catch_up': (50, 'most samples published in one late timer tick'),
             'own_thread': (False, 'publish from a thread of its own instead of an executor '
                                   'timer (measured slower here: the GIL is shared)'),
         }

@@ -72,7 +72,10 @@ class SpecParameters:
             except (InvalidParameterTypeException, InvalidParameterValueException) as err:
                 raise InvalidParameter(
                     f'{node.get_name()}: {_refused_override(node, name, meta, err)}') from err
-            values[f.name] = param.value
+            try:        # named as the node's parameter (an open bound is declared closed)
+                values[f.name] = check_value(name, param.value, meta)
+            except InvalidParameter as err:
+                raise InvalidParameter(f'{node.get_name()}: {err}') from err
         try:
             self.value = replace(instance, **values)
         except InvalidParameter as err:
@@ -173,19 +176,4 @@ def check_choice(name, value, allowed):
     if value not in allowed:
         raise InvalidParameter(f'{name} must be one of '
                                f'{", ".join(repr(a) for a in allowed)}, got {value!r}')
-    return value
-
-
-def check_period(name, value, longest_s=3600.0):
-    """
-    Check a period parameter [s]: in (0, ``longest_s``].
-
-    Raises
-    ------
-    InvalidParameter
-        Naming the parameter, the range and the value found.
-
-    """
-    if not 0.0 < value <= longest_s:
-        raise InvalidParameter(f'{name} must be in (0, {longest_s:g}] s, got {value!r}')
     return value

@@ -30,11 +30,12 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.nodes.buffers import ArrivalBatches
 from reducer_twin.nodes.diagnostics import publish_diagnostics
-from reducer_twin.nodes.parameters import check_choice, check_period, declare_plain
+from reducer_twin.nodes.parameters import check_choice, declare_plain
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import encoder_qos, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.settings import TEMonitorSettings
 from reducer_twin.nodes.timers import create_spread_timer, LISTENERS_PERIOD_S
 from std_msgs.msg import Float64MultiArray
 
@@ -69,12 +70,9 @@ class TEMonitor(Node):
         super().__init__(node_name, **kwargs)
         p = declare_plain(self, {
             'joint': ('joint_1', 'joint whose encoder pairs are monitored'),
-            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)"),
-            'te_publish_period_s': (0.02, 'longest wait of a TE row for its '
-                                    'batch while the stream flows [s] (the last rows of a '
-                                    'stopped stream go with the next analysis)')})
+            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)")})
         check_choice('window', p['window'], ('auto', 'revolution', 'duration'))
-        check_period('te_publish_period_s', p['te_publish_period_s'])
+        s = SpecParameters(self, '', TEMonitorSettings()).value
         self.config = SpecParameters(self, '', TwinConfig()).value
         self.params = params or ReducerParams()
         self.joint = p['joint']
@@ -92,7 +90,7 @@ class TEMonitor(Node):
                                      self._on_pairs, encoder_qos())
         create_spread_timer(self, self.config.analysis_period_s, self._analyze)
         publish_diagnostics(self, self._statuses)
-        self.batches = ArrivalBatches(self.twin.ratio, p['te_publish_period_s'], LATENCY_KEEP)
+        self.batches = ArrivalBatches(self.twin.ratio, s.te_publish_period_s, LATENCY_KEEP)
         self.latency = self.batches.latency
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         self.samples = 0

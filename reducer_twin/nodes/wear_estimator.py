@@ -20,7 +20,7 @@ or ERROR until a write succeeds).
 from msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from msg_adapters.ros import from_multiarray, to_multiarray
 from rclpy.node import Node
-from reducer_twin.core.errors import InvalidInput, InvalidParameter, out_of_range
+from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
@@ -30,12 +30,10 @@ from reducer_twin.nodes.parameters import declare_plain, SpecParameters
 from reducer_twin.nodes.qos import latest_qos, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes, state_path, store_worker, WORKER
+from reducer_twin.nodes.settings import StoreSettings
 from reducer_twin.nodes.timers import create_spread_timer
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
-
-STORE_PERIOD_RANGE_S = (0.01, 86400.0)
-"""Allowed ``store_period_s`` [s]."""
 
 CLOSE_FLUSH_TIMEOUT_S = 30.0
 """Longest wait for the last live segment when the node stops [s]."""
@@ -65,10 +63,8 @@ class WearEstimatorNode(Node):
             'state_dir': ('', "directory of state files; '' = $XDG_STATE_HOME/reducer_twin"),
             'store': ('', 'fleet store (SQLite, as analyze --store writes) the live history '
                           "is written to and continued from; '' = none"),
-            'robot': ('', 'robot of this reducer in the fleet store (needed with store)'),
-            'store_period_s': (60.0, 'period of live segments written to the fleet store [s] '
-                                     f'({STORE_PERIOD_RANGE_S[0]:g} .. '
-                                     f'{STORE_PERIOD_RANGE_S[1]:g})')})
+            'robot': ('', 'robot of this reducer in the fleet store (needed with store)')})
+        period = SpecParameters(self, '', StoreSettings()).value.store_period_s
         self.joint = joint = p['joint']
         self.params = params or ReducerParams()
         self.est_params = SpecParameters(self, 'estimator', EstimatorConfig())
@@ -77,7 +73,7 @@ class WearEstimatorNode(Node):
                                     log=self.get_logger().info, background_save=True)
         self.live = None
         if p['store']:
-            self._join_store(p['store'], p['robot'], p['store_period_s'])
+            self._join_store(p['store'], p['robot'])
         self.rejects = RejectCounter(self)
         self._rejected_seen = 0
         self.statuses = {}
@@ -89,16 +85,12 @@ class WearEstimatorNode(Node):
         publish_diagnostics(self, self._statuses)
         self._flush_queued = False
         if self.live is not None:
-            create_spread_timer(self, p['store_period_s'], self._queue_store_flush)
+            create_spread_timer(self, period, self._queue_store_flush)
         self._publish()
 
-    def _join_store(self, store, robot, period):
+    def _join_store(self, store, robot):
         """Continue from the fleet store when it is newer, and keep the live history there."""
         from reducer_twin.fleet.live import join_store
-        if not STORE_PERIOD_RANGE_S[0] <= float(period) <= STORE_PERIOD_RANGE_S[1]:
-            raise InvalidParameter(out_of_range(
-                'store_period_s', period, 's',
-                f'{STORE_PERIOD_RANGE_S[0]:g} .. {STORE_PERIOD_RANGE_S[1]:g}'))
         self.life_params = SpecParameters(self, 'life', LifeConfig(),
                                           on_change=self._life_changed)
         self.live = join_store(self.stage, store, robot, self.joint, self.params,

@@ -352,7 +352,7 @@ def test_a_full_disk_keeps_the_stored_state_says_error_and_recovers(
     ([Parameter('store', value='x.db'), Parameter('robot', value='two words')],
      "got 'two words'"),
     ([Parameter('store', value='x.db'), Parameter('robot', value='r1'),
-      Parameter('store_period_s', value=0.0)], 'store_period_s must be 0.01 .. 86400 s'),
+      Parameter('store_period_s', value=0.0)], r'store_period_s must be in \[0\.01, 86400\] s'),
 ], ids=['no robot', 'a robot name with a space', 'no period'])
 def test_a_store_without_a_robot_or_with_a_bad_period_is_refused_by_name(
         ros, tmp_path, overrides, fragment):
