@@ -17,6 +17,7 @@ from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.robot_ingest import check_streams, STREAMS
+from reducer_twin.nodes.settings import StoreSettings
 
 _TWIN = TwinConfig()
 
@@ -26,7 +27,7 @@ DEFAULTS = {
              'aging_factor': _TWIN.aging_factor,
              'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s, 'state_dir': '',
              'simulate': False, 'intra_process': True, 'robot': '', 'store': '',
-             'store_period_s': 60.0, 'interfaces': {}},
+             'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
     'reducers': {},
 }
