@@ -62,11 +62,10 @@ from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, StreamCleaner
-from reducer_twin.core.joint_twin import joint_topic, TwinConfig
+from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import LifeConfig
-from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 
 CHUNK_MESSAGES = 1 << 17
 """JointState messages cleaned, paired and analysed per step."""
@@ -610,20 +609,12 @@ class JointResult:
             not observed, else None).
 
         """
-        nan = float('nan')
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
             len(self.wear) else {}
         life = dict(zip(REMAINING_LIFE.fields, self.life[-1])) if self.life is not None and \
             len(self.life) else {}
-        out = {'wear_um': m_to_um(wear.get('wear_m', nan)),
-               'wear_std_um': m_to_um(wear.get('wear_std_m', nan)),
-               'rul_p10_h': life.get('p10_s', nan) / HOUR,
-               'rul_p50_h': life.get('p50_s', nan) / HOUR,
-               'rul_p90_h': life.get('p90_s', nan) / HOUR,
-               'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
         observed = self.observed
-        # Not observed: no number stands for the reducer (a model guess is not a finding).
-        out = {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
+        out = estimate_numbers(wear, life, observed)
         out['messages'] = int(self.messages)
         out['rejected'] = int(self.rejected)
         out['observed'] = observed

@@ -235,6 +235,35 @@ def assess(stage, wear_record):
     return LifeEstimate(MappingProxyType(record), level, message)
 
 
+def estimate_numbers(wear, life, observed):
+    """
+    Return a reducer's estimate in edge units: the numbers of ``analyze --json`` and ``fleet``.
+
+    Parameters
+    ----------
+    wear, life : Mapping
+        The last ``wear`` and ``remaining_life`` records (empty: none yet).
+    observed : bool
+        Whether the estimate rests on a lost motion; if not, no number stands for the
+        reducer (a model guess is not a finding).
+
+    Returns
+    -------
+    dict
+        ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
+        ``lost_motion_arcmin``; None where not observed or not finite.
+
+    """
+    nan = float('nan')
+    out = {'wear_um': m_to_um(wear.get('wear_m', nan)),
+           'wear_std_um': m_to_um(wear.get('wear_std_m', nan)),
+           'rul_p10_h': life.get('p10_s', nan) / HOUR,
+           'rul_p50_h': life.get('p50_s', nan) / HOUR,
+           'rul_p90_h': life.get('p90_s', nan) / HOUR,
+           'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
+    return {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
+
+
 def reducer_status_name(joint):
     """Return the ``/diagnostics`` name of a joint's reducer status."""
     return f'reducer_twin: {joint} reducer'

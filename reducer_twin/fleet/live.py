@@ -35,8 +35,9 @@ import uuid
 from msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
+from reducer_twin.core.joint_twin import estimate_numbers
 from reducer_twin.core.pipeline import features_from_record, LifeStage
-from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
 from reducer_twin.fleet.store import StoreConflict, StoreError
@@ -454,19 +455,12 @@ class LiveHistory:
     @staticmethod
     def _summary(features, wear, life):
         """Return the ``--json`` summary of the joint at the segment's end (as a bag's)."""
-        nan = float('nan')
         w = dict(zip(WEAR_ESTIMATE.fields, wear[-1])) if len(wear) else {}
         lf = dict(zip(REMAINING_LIFE.fields, life[-1])) if len(life) else {}
         # Observed: the estimate rests on at least one lost motion, in this segment or
         # before it (the live estimate carries on; a quiet minute is no new reducer).
         observed = int(w.get('updates', 0)) > 0
-        out = {'wear_um': m_to_um(w.get('wear_m', nan)),
-               'wear_std_um': m_to_um(w.get('wear_std_m', nan)),
-               'rul_p10_h': lf.get('p10_s', nan) / HOUR,
-               'rul_p50_h': lf.get('p50_s', nan) / HOUR,
-               'rul_p90_h': lf.get('p90_s', nan) / HOUR,
-               'lost_motion_arcmin': rad_to_arcmin(w.get('lost_motion_rad', nan))}
-        out = {k: (float(v) if observed and np.isfinite(v) else None) for k, v in out.items()}
+        out = estimate_numbers(w, lf, observed)
         out['observed'] = observed
         out['windows'] = int(np.sum(np.isfinite(features[:, _LOST_MOTION])))
         out['reason'] = None if observed else 'the joint never reversed under load while ' \

@@ -13,7 +13,8 @@ from dataclasses import FrozenInstanceError
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidParameter
-from reducer_twin.core.joint_twin import HealthSummary, joint_topic, JointTwin, TwinBack
+from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
+from reducer_twin.core.joint_twin import TwinBack
 from reducer_twin.core.joint_twin import TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
@@ -115,3 +116,13 @@ def test_the_topics_of_a_joint_are_named_in_one_place():
 def test_a_bad_joint_setting_is_refused_naming_it(name, value, message):
     with pytest.raises(InvalidParameter, match=message):
         TwinConfig(**{name: value})
+
+
+def test_an_unobserved_reducer_has_no_number_in_the_summaries_and_an_observed_one_has(updates):
+    # analyze --json and the fleet's live segments say the same numbers (estimate_numbers).
+    u = updates[-1]
+    seen = estimate_numbers(u.wear.record, u.life.record, observed=True)
+    assert seen['wear_um'] == pytest.approx(u.summary.wear_um, rel=1e-12)
+    assert seen['rul_p50_h'] == pytest.approx(u.summary.rul_p50_h, rel=1e-12)
+    assert set(estimate_numbers(u.wear.record, u.life.record, observed=False).values()) == {None}
+    assert set(estimate_numbers({}, {}, observed=True).values()) == {None}
