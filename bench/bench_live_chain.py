@@ -44,7 +44,7 @@ def main():
 
     spin_for(args.warmup_s)
     for te in nodes['te'].values():
-        te.reset_latency()
+        te.latency.reset()
     counts0 = nodes['ingest'].counts()
     sent0 = sim.sent
     rss0 = rss_mb()
@@ -68,7 +68,7 @@ def main():
                 dropped += value - counts0[j][key]
     for te in nodes['te'].values():
         te.flush_latency()
-    records = [te.latency_records() for te in nodes['te'].values()]
+    records = [te.latency.records() for te in nodes['te'].values()]
     stamps = np.concatenate([r[0] for r in records])
     te_time = np.concatenate([r[1] for r in records])
     lat = (te_time - stamps) * 1e3

@@ -33,7 +33,7 @@ def start_bringup(joints, state_prefix):
 
     """
     import rclpy
-    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.runtime import make_executor, quiet_gc
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     state_dir = tempfile.mkdtemp(prefix=state_prefix)
     config = load_config(None)

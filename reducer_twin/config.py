@@ -3,7 +3,10 @@ The bringup configuration (``config/twin.yaml``), shared by the nodes and the ba
 
 ROS-free: ``twin_bringup`` builds nodes from it, ``reducer-twin analyze --config`` reads
 the same file to find joints and topics, the aging factor, the window length, the
-life thresholds and the reducer overrides.
+life thresholds and the reducer parameters: ``reducer`` (overrides for every joint) and
+``reducers`` (per joint, a reducer file or overrides: a robot's base and wrist carry
+different reducers). The defaults of a joint's processing come from
+:class:`~reducer_twin.core.joint_twin.TwinConfig`, not from here.
 """
 
 import math
@@ -11,15 +14,22 @@ from pathlib import Path
 import sys
 
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import TwinConfig
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.robot_ingest import check_streams, STREAMS
+from reducer_twin.nodes.settings import StoreSettings
+
+_TWIN = TwinConfig()
 
 DEFAULTS = {
-    'twin': {'joints': ['joint_1'], 'link_topic': '/joint_states', 'motor_topic': '',
-             'motor_suffix': '_motor', 'motor_angles': 'raw', 'effort_source': 'auto',
-             'motor_effort_units': 'auto', 'aging_factor': 1.0,
-             'window_s': 2.0, 'state_dir': '', 'simulate': False,
-             'intra_process': True, 'robot': '', 'store': '', 'store_period_s': 60.0,
-             'interfaces': {}},
+    'twin': {**{name: (list(default) if isinstance(default, list) else default)
+                for name, (default, _) in STREAMS.items()},
+             'aging_factor': _TWIN.aging_factor,
+             'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s, 'state_dir': '',
+             'simulate': False, 'intra_process': True, 'robot': '', 'store': '',
+             'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
+    'reducers': {},
 }
 
 
@@ -77,11 +87,18 @@ def load_config_sources(path):
     unknown = set(data) - set(DEFAULTS)
     if unknown:
         raise InvalidParameter(f'{path}: unknown sections {sorted(unknown)}')
+    if path and isinstance(out['reducers'], dict):
+        # Reducer files named relative to this file are found beside it, wherever it runs.
+        out['reducers'] = {joint: _beside(path, value) for joint, value in out['reducers'].items()}
     joints = out['twin']['joints']
     named = isinstance(joints, list) and all(isinstance(j, str) and j for j in joints)
     if not joints or not named or len(set(joints)) != len(joints):
         raise InvalidParameter(f'{path}: twin.joints must be distinct names, got {joints!r}')
     _check_values(path, out)
+    unknown = sorted(set(out['reducers']) - set(joints)) if 'twin.joints' in given else []
+    if unknown:
+        raise InvalidParameter(f'{path}: reducers names joints that twin.joints does not have: '
+                               f'{unknown}; joints: {joints}')
     return out, given
 
 
@@ -149,7 +166,7 @@ def yaml_error_line(path, err):
 
 _BOOLEANS = ('simulate', 'intra_process')
 _STRINGS = ('link_topic', 'motor_topic', 'motor_suffix', 'motor_angles', 'state_dir')
-_NUMBERS = ('aging_factor', 'window_s')
+_NUMBERS = ('aging_factor', 'window_s', 'max_gap_s')
 
 
 def as_number(name, value, integer=False):
@@ -214,19 +231,15 @@ def _check_values(path, config):
                                    f'got {scales!r}')
         config['simulator']['wear_rate_scales'] = [
             as_number('simulator.wear_rate_scales[]', x) for x in scales]
+        twin_config(config)
+        joint_reducers(config, path)
     except InvalidParameter as err:
         raise InvalidParameter(f'{path}: {err}') from None
-    if twin['motor_topic'] and twin['motor_topic'] == twin['link_topic']:
-        link = twin['link_topic']
-        raise InvalidParameter(f'{path}: twin.motor_topic must differ from twin.link_topic '
-                               f"({link!r}); leave it '' when the motor entries are in the "
-                               'link topic')
-    if not twin['motor_topic'] and not twin['motor_suffix']:
-        link = twin['link_topic']
-        raise InvalidParameter(f'{path}: twin.motor_suffix must not be empty when the motor '
-                               f'entries are in twin.link_topic ({link!r}): <joint> and '
-                               '<joint><motor_suffix> would be the same entry; e.g. '
-                               "'_motor'")
+    try:
+        check_streams(twin['joints'], twin['link_topic'], twin['motor_topic'],
+                      twin['motor_suffix'], 'twin.')
+    except InvalidParameter as err:
+        raise InvalidParameter(f'{path}: {err}') from None
 
 
 def load_config(path):
@@ -251,3 +264,94 @@ def load_config(path):
 
     """
     return load_config_sources(path)[0]
+
+
+def twin_config(config):
+    """
+    Return the :class:`~reducer_twin.core.joint_twin.TwinConfig` of a loaded configuration.
+
+    Raises
+    ------
+    InvalidParameter
+        If a value is out of its range.
+
+    """
+    twin = config['twin']
+    return TwinConfig(aging_factor=twin['aging_factor'], window_s=twin['window_s'],
+                      max_gap_s=twin['max_gap_s'])
+
+
+def joint_reducers(config, path=None):
+    """
+    Return the reducer parameters of every joint: the common set and each joint's own.
+
+    ``reducer`` overrides the packaged defaults for every joint. ``reducers`` maps a
+    joint to its own reducer: a YAML file (as ``config/rv80e.yaml``; relative to the
+    configuration's folder), or a mapping of overrides of ``reducer``, which may name a
+    ``file`` to start from instead.
+
+    Parameters
+    ----------
+    config : dict
+        Output of :func:`load_config`.
+    path : str or Path, optional
+        The configuration file (relative reducer files are found beside it).
+
+    Returns
+    -------
+    common : ReducerParams
+        The reducer of every joint without its own.
+    own : dict of str to ReducerParams
+        Per joint named in ``reducers``.
+
+    Raises
+    ------
+    InvalidParameter
+        On an unreadable file, an unknown name or a value out of range, naming the joint.
+
+    """
+    common = ReducerParams().with_overrides(config['reducer']) if config['reducer'] \
+        else ReducerParams()
+    given = config.get('reducers') or {}
+    if not isinstance(given, dict):
+        raise InvalidParameter(f'reducers must map joint names to a reducer file or '
+                               f'overrides, got {given!r}')
+    own = {}
+    for joint, value in given.items():
+        try:
+            own[str(joint)] = _joint_reducer(common, value, path)
+        except InvalidParameter as err:
+            raise InvalidParameter(f'reducers.{joint}: {err}') from None
+    return common, own
+
+
+def _beside(path, value):
+    """Resolve the reducer file of a ``reducers`` entry against the configuration's folder."""
+    entry = {'file': value} if isinstance(value, str) else value
+    if not isinstance(entry, dict) or 'file' not in entry:
+        return value
+    file = Path(str(entry['file'])).expanduser()
+    if not file.is_absolute():
+        file = Path(path).resolve().parent / file
+    return {**entry, 'file': str(file)}
+
+
+def _joint_reducer(common, value, path):
+    if isinstance(value, str):
+        value = {'file': value}
+    if not isinstance(value, dict):
+        raise InvalidParameter(f'expected a reducer file or a mapping of overrides, got '
+                               f'{value!r}')
+    overrides = {k: v for k, v in value.items() if k != 'file'}
+    start = common
+    if 'file' in value:
+        file = Path(str(value['file'])).expanduser()
+        if not file.is_absolute() and path:
+            file = Path(path).resolve().parent / file
+        data = read_yaml(file, 'reducer parameters') or {}
+        data = data.get('reducer', data) if isinstance(data, dict) else data
+        if not isinstance(data, dict):
+            raise InvalidParameter(f'{file}: expected a mapping of sections, got '
+                                   f'{type(data).__name__}')
+        start = ReducerParams().with_overrides(data)
+    return start.with_overrides(overrides) if overrides else start

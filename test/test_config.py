@@ -15,8 +15,10 @@ import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
-from reducer_twin.config import default_config, load_config
+from reducer_twin.config import default_config, joint_reducers, load_config
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import TwinConfig
+from reducer_twin.core.params import ReducerParams
 
 
 def _file(tmp_path, text):
@@ -122,3 +124,57 @@ def test_analyze_applies_an_aging_factor_written_as_3_6e4(bag, tmp_path, capsys)
     with open_bag(tmp_path / 'd') as derived:
         assert float(derived.metadata['reducer_twin.aging_factor']) == 36_000.0
     assert Path(tmp_path / 'd').is_dir()
+
+
+# --------------------------------------------------------------------------- reducers per joint
+
+
+def test_each_joint_takes_its_own_reducer_from_a_file_or_overrides_and_the_rest_the_common(
+        tmp_path):
+    # A robot's base and wrist carry different reducers: one joint's from a file beside the
+    # configuration (as config/rv80e.yaml is written), another's as overrides of `reducer`.
+    (tmp_path / 'base.yaml').write_text('reducer:\n  rating:\n    rated_torque: 1568.0\n')
+    path = _file(tmp_path, 'twin:\n  joints: [joint_1, joint_2, joint_3]\n'
+                           'reducer:\n  rating:\n    rated_life: 3.6e7\n'
+                           'reducers:\n  joint_1: base.yaml\n'
+                           '  joint_3: {rating: {rated_torque: 392.0}}\n')
+    common, own = joint_reducers(load_config(path))
+    assert sorted(own) == ['joint_1', 'joint_3']
+    assert common.rating.rated_life == 3.6e7 and common.rating.rated_torque == 784.0
+    # A file is a whole reducer (from the packaged defaults); overrides start from `reducer`.
+    assert own['joint_1'].rating.rated_torque == 1568.0
+    assert own['joint_1'].rating.rated_life == ReducerParams().rating.rated_life
+    assert own['joint_3'].rating.rated_torque == 392.0 and own['joint_3'].rating.rated_life \
+        == 3.6e7
+
+
+BAD_REDUCERS = [
+    ('a joint the robot does not have', 'twin:\n  joints: [joint_1]\n'
+     'reducers:\n  joint_9: {rating: {rated_torque: 392.0}}\n',
+     "reducers names joints that twin.joints does not have: ['joint_9']"),
+    ('a missing reducer file', 'reducers:\n  joint_1: none.yaml\n',
+     'reducers.joint_1: '),
+    ('a value out of range', 'reducers:\n  joint_1: {rating: {rated_torque: -1.0}}\n',
+     'reducers.joint_1: rating.rated_torque must be in (0'),
+    ('not a file or a mapping', 'reducers:\n  joint_1: 5\n',
+     'reducers.joint_1: expected a reducer file or a mapping of overrides, got 5'),
+]
+
+
+@pytest.mark.parametrize('text, message', [row[1:] for row in BAD_REDUCERS],
+                         ids=[row[0] for row in BAD_REDUCERS])
+def test_a_bad_joint_reducer_is_refused_naming_the_joint(tmp_path, text, message):
+    path = _file(tmp_path, text)
+    with pytest.raises(InvalidParameter) as err:
+        load_config(path)
+    assert str(err.value).startswith(str(path)) and message in str(err.value), err.value
+
+
+def test_the_twin_defaults_are_the_core_spec_of_a_joints_processing():
+    config = load_config(None)
+    spec = TwinConfig()
+    assert (config['twin']['window_s'], config['twin']['max_gap_s'],
+            config['twin']['aging_factor']) == (spec.window_s, spec.max_gap_s,
+                                                spec.aging_factor)
+    settings = AnalysisSettings()
+    assert (settings.window_s, settings.max_gap_s) == (spec.window_s, spec.max_gap_s)

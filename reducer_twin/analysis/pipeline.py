@@ -26,14 +26,14 @@ Log times are the stamps of the data a message was computed from.
 
 Differences from a live run, on purpose: TE messages are longer; until the encoder time
 offset is learnt (or for ``CALIBRATION_WINDOWS`` windows) the stream is fed in
-0.1 s pieces as the node's analysis timer does, then in large chunks, so a calibration
+0.1 s pieces (``CALIBRATION_PIECE_S``), then in large chunks, so a calibration
 that is learnt late applies from the next chunk; the last, partial window is analysed
 (a node that stops drops it); the estimator starts from a new reducer and keeps no state
 file. Once the time offset applies, the motor angle of each piece's last link sample is
 extrapolated over the offset (the link encoder samples 50 µs after its stamp), so no
 sample is lost at piece boundaries, live or offline.
 
-Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
+Speed: the estimator and life stages (the Kalman step and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
 next chunk (``stage_worker=True``), and the bag can be read and decoded a few chunks
 ahead by a second forked process (``reader_process=True``); results are identical.
@@ -45,16 +45,16 @@ from pathlib import Path
 import time
 
 import numpy as np
-from reducer_twin.analysis.simulate import AGING_KEY, joint_topic, LATEST_QOS
+from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
-from reducer_twin.config import load_config_sources
+from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, StreamCleaner
+from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import features_record, LifeConfig
-from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.core.pipeline import LifeConfig
 from reducer_twin.io.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
 from reducer_twin.io.mcap_reader import ReadWarning
 from reducer_twin.io.outputs import refuse_inside_inputs
@@ -118,8 +118,13 @@ class AnalysisSettings:
         (``custom_data`` :data:`~reducer_twin.analysis.simulate.AGING_KEY`), else 1.
     window_s : float
         Analysis window [s of stream].
+    max_gap_s : float
+        Largest stamp gap TE extraction bridges inside a window [s].
     params : ReducerParams
-        Reducer parameters.
+        Reducer parameters of every joint without its own.
+    joint_params : tuple of (str, ReducerParams)
+        Reducer parameters of the joints that carry another reducer (an RV-160E at the
+        base, an RV-40E at the wrist); see :meth:`params_of`.
     life : LifeConfig
         Limit and thresholds of the remaining-life stage.
     ingest : IngestConfig
@@ -142,12 +147,21 @@ class AnalysisSettings:
     motor_effort_units: str = 'auto'
     interfaces: InterfaceMap = field(default_factory=InterfaceMap)
     aging_factor: float = None
-    window_s: float = 2.0
+    window_s: float = TwinConfig().window_s
+    max_gap_s: float = TwinConfig().max_gap_s
     params: ReducerParams = field(default_factory=ReducerParams)
+    joint_params: tuple = ()
     life: LifeConfig = field(default_factory=LifeConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
     compression: str = 'none'
     configured_topics: tuple = ()
+
+    def params_of(self, joint):
+        """Return the reducer parameters of ``joint`` (its own, else :attr:`params`)."""
+        for name, params in self.joint_params:
+            if name == joint:
+                return params
+        return self.params
 
     @classmethod
     def from_config(cls, path):
@@ -183,10 +197,12 @@ class AnalysisSettings:
         aging = None
         if 'twin.aging_factor' in given:
             aging = _number(path, 'twin.aging_factor', twin['aging_factor'], 0.0, 1e9)
-        window_s = _number(path, 'twin.window_s', twin['window_s'], 1e-3, 3600.0)
         try:
-            params = ReducerParams().with_overrides(config['reducer']) if config['reducer'] \
-                else ReducerParams()
+            spec = twin_config(config)
+        except InvalidParameter as err:
+            raise InvalidParameter(f'{path}: {err}') from None
+        try:
+            params, joint_params = joint_reducers(config, path)
             life = LifeConfig(**{k: (int(v) if k == 'n_samples' else float(v))
                                  for k, v in config['life'].items()})
         except TypeError as err:
@@ -207,8 +223,9 @@ class AnalysisSettings:
                    motor_angles=twin['motor_angles'] if 'twin.motor_angles' in given else 'auto',
                    effort_source=twin['effort_source'],
                    motor_effort_units=twin['motor_effort_units'],
-                   interfaces=interfaces, aging_factor=aging, window_s=window_s,
-                   params=params, life=life)
+                   interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
+                   max_gap_s=spec.max_gap_s, params=params,
+                   joint_params=tuple(joint_params.items()), life=life)
 
 
 MOTOR_ANGLES = ('auto', 'raw', 'output')
@@ -288,8 +305,8 @@ def plan_joints(bag, settings):
     configured ``link_topic`` is used when the bag has it, else the topic that holds
     pairs. A DynamicJointState topic counts as a JointState topic with ``<joint>`` and
     ``<joint><motor_suffix>`` entries
-    (:mod:`reducer_twin.msg_adapters.dynamic_joint_state`): alone,
-    or beside ``/joint_states`` that has no motor entries, it gives the combined form.
+    (:mod:`reducer_twin.msg_adapters.dynamic_joint_state`): alone, or beside
+    ``/joint_states`` that has no motor entries, it gives the combined form.
 
     Parameters
     ----------
@@ -595,20 +612,12 @@ class JointResult:
             not observed, else None).
 
         """
-        nan = float('nan')
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
             len(self.wear) else {}
         life = dict(zip(REMAINING_LIFE.fields, self.life[-1])) if self.life is not None and \
             len(self.life) else {}
-        out = {'wear_um': m_to_um(wear.get('wear_m', nan)),
-               'wear_std_um': m_to_um(wear.get('wear_std_m', nan)),
-               'rul_p10_h': life.get('p10_s', nan) / HOUR,
-               'rul_p50_h': life.get('p50_s', nan) / HOUR,
-               'rul_p90_h': life.get('p90_s', nan) / HOUR,
-               'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
         observed = self.observed
-        # Not observed: no number stands for the reducer (a model guess is not a finding).
-        out = {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
+        out = estimate_numbers(wear, life, observed)
         out['messages'] = int(self.messages)
         out['rejected'] = int(self.rejected)
         out['observed'] = observed
@@ -714,9 +723,9 @@ def _bag_aging_factor(bag, settings):
     return value
 
 
-def _motor_scale(settings, angles=None):
+def _motor_scale(settings, joint, angles=None):
     if (angles or settings.motor_angles) == 'output':
-        return total_ratio(settings.params.geometry)
+        return total_ratio(settings.params_of(joint).geometry)
     return 1.0
 
 
@@ -804,8 +813,8 @@ class _Run:
         self.out = _Output(writer, plan.joints, truth)
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
-        scale = _motor_scale(settings)
-        self.fronts = {j: JointFront(j, settings, aging, scale, keep) for j in plan.joints}
+        self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)
+                       for j in plan.joints}
         self.results = {j: JointResult(j) for j in plan.joints}
         self.features = {j: [] for j in plan.joints}
         self.back_out = {j: [] for j in plan.joints}
@@ -831,10 +840,10 @@ class _Run:
 
         """
         settings, plan = self.settings, self.plan
-        ratio = total_ratio(settings.params.geometry)
         for k, joint in enumerate(plan.joints):
             if joint in self.angles:
                 continue
+            ratio = self.fronts[joint].ratio
             if plan.motor_topic is None:
                 if link is None or not len(link):
                     continue
@@ -860,10 +869,10 @@ class _Run:
     def _set_angles(self, joint, angles):
         front = self.fronts[joint]
         self.angles[joint] = angles
-        front.motor_scale = _motor_scale(self.settings, angles)
+        front.motor_scale = _motor_scale(self.settings, joint, angles)
         front.pairer.motor_scale = front.motor_scale
         front.effort_scale = motor_effort_scale(self.settings.motor_effort_units, angles,
-                                                total_ratio(self.settings.params.geometry))
+                                                front.ratio)
         front.pairer.motor_effort_scale = front.effort_scale
 
     def run(self):
@@ -944,8 +953,7 @@ class _Run:
     def _windows(self, joint, windows):
         if not windows:
             return
-        params = self.settings.params
-        records = [features_record(f, params) for f in windows]
+        records = [self.fronts[joint].twin.record(f) for f in windows]
         values = np.array([record_values(TE_FEATURES, r) for r in records])
         self.features[joint].append(values)
         self.out.arrays(joint, 'te_features', TE_FEATURES,
@@ -1111,7 +1119,8 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                 backs = stage_worker
             else:  # forked only now: a bag that cannot be analysed costs no process
                 backs = WorkerBacks() if stage_worker else LocalBacks()
-            backs.configure(settings.params, settings.life, initial_states)
+            backs.configure({j: settings.params_of(j) for j in plan.joints}, settings.life,
+                            initial_states)
             topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
             chunks = _Chunks(bag, topics, CHUNK_MESSAGES)
             if reader_process:   # forked before the writer opens its file and threads

@@ -30,6 +30,7 @@ import math
 
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.units import ARCMIN, HOUR, m_to_um
 from reducer_twin.io.bag_writer import BagDirWriter
@@ -69,11 +70,6 @@ MAX_JOINTS = 12
 
 LATEST_QOS = (QosProfile(durability='transient_local'),)
 """QoS rosbag2 records for the nodes' transient-local topics (estimates, truth)."""
-
-
-def joint_topic(joint, suffix):
-    """Return ``/reducer_twin/<joint>/<suffix>`` (the nodes' ``joint_topic``, without rclpy)."""
-    return f'/reducer_twin/{joint}/{suffix}'
 
 
 @dataclass(frozen=True)
@@ -404,24 +400,15 @@ def simulate_bag(out_dir, spec, params=None, overwrite=False):
 
 def _write_joint_states(writer, link_ch, motor_ch, names, batches, stamps):
     """Write one block as the simulator node publishes it; return the messages written."""
+    from reducer_twin.core.simulator import joint_state_columns, joint_state_names
     n = stamps.size
-    if motor_ch is None:
-        k = len(batches)
-        pos = np.empty((n, 2 * k))
-        vel = np.full((n, 2 * k), np.nan)
-        eff = np.full((n, 2 * k), np.nan)
-        for j, b in enumerate(batches):
-            pos[:, 2 * j], pos[:, 2 * j + 1] = b.link_angle, b.motor_angle
-            vel[:, 2 * j], eff[:, 2 * j] = b.link_velocity, b.effort
-        both = tuple(x for name in names for x in (name, name + '_motor'))
-        writer.write_joint_states(link_ch, JointStateBatch(stamps, both, pos, vel, eff))
+    split = motor_ch is not None
+    pos, vel, eff, motor = joint_state_columns(batches, split)
+    writer.write_joint_states(link_ch, JointStateBatch(stamps, joint_state_names(names, split),
+                                                       pos, vel, eff))
+    if not split:
         return n
-    link = np.stack([b.link_angle for b in batches], axis=1)
-    vel = np.stack([b.link_velocity for b in batches], axis=1)
-    eff = np.stack([b.effort for b in batches], axis=1)
-    motor = np.stack([b.motor_angle for b in batches], axis=1)
     empty = np.full_like(motor, np.nan)
-    writer.write_joint_states(link_ch, JointStateBatch(stamps, tuple(names), link, vel, eff))
     writer.write_joint_states(motor_ch, JointStateBatch(stamps, tuple(names), motor, empty,
                                                         empty))
     return 2 * n

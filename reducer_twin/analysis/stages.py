@@ -11,31 +11,29 @@ analyses the next chunk; both give identical results, since each stage sees the 
 records in the same order.
 """
 
-from types import SimpleNamespace
-
 import numpy as np
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
-from reducer_twin.core.kinematics import total_ratio
-from reducer_twin.core.pipeline import features_from_record, TimeOffsetCalibration
-from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
-from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
 
 TE_BATCH_S = 0.1
 """Stream seconds of TE per ``te`` message (the node sends 20 ms batches)."""
 
-ANALYSIS_PERIOD_S = 0.1
-"""The ``te_monitor`` analysis period: the piece size until the time offset is learnt."""
+CALIBRATION_PIECE_S = 0.1
+"""
+Stream seconds per piece fed to the window analysis until the time offset is learnt.
+
+Live, ``te_monitor`` analyses what arrived every ``analysis_period_s`` (0.5 s by
+default); a learnt offset applies from the next piece on. Offline the pieces are
+0.1 s, so the offset applies as early as a node with a 0.1 s period would apply it.
+"""
 
 CALIBRATION_WINDOWS = 20
 """Windows fed in 0.1 s pieces at most while the time offset is not learnt yet."""
 
 PAIR_HOLD_S = 60.0
 """How long [s of link stream] a link sample of a bag waits for its motor partner."""
-
-TE_MAX_GAP_S = 0.05
-"""``te_monitor``'s ``max_gap_s``: the largest stamp gap TE extraction bridges [s]."""
 
 _ERROR = '!error'
 """Marks a failure report of the worker (no ROS name starts with '!')."""
@@ -45,63 +43,20 @@ _FLUSH = '!flush'
 """Control messages of the worker protocol."""
 
 
-def defer_filterpy_extras():
-    """
-    Keep a fresh process from importing the parts of filterpy the estimator does not use.
-
-    ``import filterpy.kalman`` runs ``filterpy/__init__.py``, which imports every
-    subpackage (``discrete_bayes`` pulls in ``scipy.ndimage``), and ``filterpy.kalman``
-    imports ``filterpy.stats`` (and ``scipy.stats``) only for ``logpdf``, which the wear
-    estimator never calls (it reads no likelihood): together 0.8 s to 2 s of the
-    command's start-up, a third of the whole analysis of a 1M-message bag. This
-    registers ``filterpy`` and ``filterpy.stats`` as their packages, not yet executed
-    (submodules still import normally), with a ``logpdf`` that loads the real one on
-    first use. The filter itself is the same code. Nothing is done once filterpy is
-    loaded, so it is a no-op in processes that already use it (tests, the nodes);
-    ``reducer-twin analyze`` calls it before the estimator is built.
-
-    Returns
-    -------
-    bool
-        True when the deferral was installed.
-
-    """
-    import importlib.util
-    import os
-    import sys
-    if any(name == 'filterpy' or name.startswith('filterpy.') for name in sys.modules):
-        return False
-    spec = importlib.util.find_spec('filterpy')
-    if spec is None or not spec.submodule_search_locations:
-        return False
-    package = importlib.util.module_from_spec(spec)
-    folder = os.path.join(list(spec.submodule_search_locations)[0], 'stats')
-    stats_spec = importlib.util.spec_from_file_location(
-        'filterpy.stats', os.path.join(folder, '__init__.py'),
-        submodule_search_locations=[folder])
-    if stats_spec is None:
-        return False
-    stats = importlib.util.module_from_spec(stats_spec)
-
-    def logpdf(*args, **kwargs):
-        from filterpy.stats.stats import logpdf as real
-        return real(*args, **kwargs)
-
-    stats.logpdf = logpdf
-    package.stats = stats
-    sys.modules['filterpy'] = package
-    sys.modules['filterpy.stats'] = stats
-    return True
-
-
 class JointFront:
     """The ``te_monitor`` part of one joint, and the spike rule of ``encoder_ingest``."""
 
     def __init__(self, joint, settings, aging_factor, motor_scale, keep_every):
-        params = settings.params
+        params = settings.params_of(joint)
         self.joint = joint
         self.params = params
-        self.ratio = total_ratio(params.geometry)
+        self.twin = TwinFront(params, TwinConfig(aging_factor=aging_factor,
+                                                 window_s=settings.window_s,
+                                                 max_gap_s=settings.max_gap_s))
+        self.ratio = self.twin.ratio
+        self.extractor = self.twin.extractor
+        self.calibration = self.twin.calibration
+        self.analyzer = self.twin.analyzer
         self.motor_scale = motor_scale
         self.effort_scale = motor_effort_scale(settings.motor_effort_units,
                                                settings.motor_angles, self.ratio)
@@ -111,13 +66,8 @@ class JointFront:
         self.pairer = Pairer(settings.ingest, motor_scale, hold_s=PAIR_HOLD_S,
                              effort=settings.effort_source,
                              motor_effort_scale=self.effort_scale)
-        self.extractor = TEExtractor(self.ratio, max_gap_s=TE_MAX_GAP_S)
-        self.calibration = TimeOffsetCalibration(self.extractor)
-        self.analyzer = WindowAnalyzer(params, window_s=settings.window_s,
-                                       aging_factor=aging_factor)
         self.unpaired = 0
         self.samples = 0
-        self.windows = 0
         self.period_ns = None
         self.keep_every = max(1, int(keep_every))
         self.report_te = []
@@ -147,10 +97,10 @@ class JointFront:
                 return self._feed_pieces(t_ns, t_s, motor, link, effort, velocity)
             # Until the offset is learnt the TE of a piece does not depend on where the
             # pieces are cut (see _cut_free): computed once, it is fed to the window
-            # analysis in the node's pieces.
+            # analysis in pieces of CALIBRATION_PIECE_S.
             piece = self._piece()
             reference = self.extractor.last_te
-            stream = self.extractor.update(t_s, motor, t_s, link)
+            stream = self.twin.te(t_s, motor, link)
             while start < n and self._calibrating():
                 windows += self._analyze(stream.part(slice(start, start + piece)),
                                          effort[start:start + piece],
@@ -171,7 +121,7 @@ class JointFront:
         else:
             stream = None
         if stream is None:
-            stream = self.extractor.update(t_s, motor, t_s, link)
+            stream = self.twin.te(t_s, motor, link)
         if start < t_ns.size:
             windows += self._analyze(stream.part(slice(start, None)), effort[start:],
                                      velocity[start:])
@@ -180,30 +130,31 @@ class JointFront:
         self._keep_for_report(rows)
         return windows, rows
 
+    @property
+    def windows(self):
+        """Windows completed so far."""
+        return self.twin.windows
+
     def _calibrating(self):
-        """Whether the stream still goes in the node's pieces (time offset not learnt)."""
+        """Whether the stream still goes in calibration pieces (time offset not learnt)."""
         return self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
             bool(self.period_ns)
 
     def _piece(self):
-        return max(1, int(round(ANALYSIS_PERIOD_S * 1e9 / max(self.period_ns, 1.0))))
+        return max(1, int(round(CALIBRATION_PIECE_S * 1e9 / max(self.period_ns, 1.0))))
 
     def _analyze(self, stream, effort, velocity):
-        found = self.analyzer.update(stream, effort, velocity)
-        for f in found:
-            self.calibration.observe(f)
-        self.windows += len(found)
-        return found
+        return self.twin.analyze(stream, effort, velocity)
 
     def _feed_pieces(self, t_ns, t_s, motor, link, effort, velocity):
-        """Feed stamps that do not increase in the node's pieces, TE piece by piece."""
+        """Feed stamps that do not increase in calibration pieces, TE piece by piece."""
         windows, te_parts = [], []
         piece, start = self._piece(), 0
         while start < t_ns.size:
             if not self._calibrating():
                 piece = t_ns.size
             sl = slice(start, start + piece)
-            stream = self.extractor.update(t_s[sl], motor[sl], t_s[sl], link[sl])
+            stream = self.twin.te(t_s[sl], motor[sl], link[sl])
             windows += self._analyze(stream, effort[sl], velocity[sl])
             te_parts.append(_te_rows(t_ns[sl], stream, effort[sl]))
             start += piece
@@ -218,9 +169,7 @@ class JointFront:
 
     def flush(self):
         """Close the last, partial window."""
-        found = self.analyzer.flush()
-        self.windows += len(found)
-        return found
+        return self.twin.flush()
 
     def te_messages(self, rows, final=False):
         """
@@ -287,7 +236,7 @@ def te_values(block):
 
 class JointBack:
     """
-    The ``wear_estimator`` and ``life_publisher`` part of one joint.
+    The ``wear_estimator`` and ``life_publisher`` part of one joint (a :class:`TwinBack`).
 
     Parameters
     ----------
@@ -304,40 +253,19 @@ class JointBack:
     """
 
     def __init__(self, joint, params, life_config, state=None):
-        from reducer_twin.core.estimator import WearEstimator
-        from reducer_twin.core.pipeline import EstimatorStage, LifeStage
         self.joint = joint
-        self.stage = EstimatorStage(params)
-        self.life = LifeStage(params, life_config)
+        self.twin = TwinBack(params, life_config)
         if state is not None:
-            self.stage.estimator = WearEstimator.from_state(params, state['estimator'])
-            obs = state.get('lost_motion_obs_rad')
-            self.stage.last_observation = float('nan') if obs is None else float(obs)
-            duty = state.get('duty')
-            self.life.duty = None if duty is None else SimpleNamespace(**duty)
+            self.twin.restore(state)
 
     def state(self):
-        """
-        Return where this reducer's stages are, to continue with its next bag.
-
-        Returns
-        -------
-        dict
-            JSON-able: ``estimator`` (``WearEstimator.state_dict``), ``duty`` (the life
-            stage's last duty summary or None) and ``lost_motion_obs_rad`` (or None).
-
-        """
-        obs = self.stage.last_observation
-        duty = self.life.duty
-        return {'estimator': self.stage.estimator.state_dict(),
-                'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
-                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None}
+        """Return where this reducer's stages are (:meth:`TwinBack.state`)."""
+        return self.twin.state()
 
     def initial(self, stamp_s):
         """Return the outputs the nodes publish when they start (no window yet)."""
-        wear = self.stage.record(stamp_s)
-        life, level, message = self.life.process(wear)
-        return self._outputs('start', wear, life, level, message, None)
+        wear, life = self.twin.start(stamp_s)
+        return self._outputs(wear, life)
 
     def process(self, record):
         """
@@ -356,36 +284,17 @@ class JointBack:
             publisher's status with its key/values).
 
         """
-        features = features_from_record(record)
-        status = self.stage.process(features)
-        wear = self.stage.record(features.t_end)
-        self.life.observe_duty(features.duty)
-        life, level, message = self.life.process(wear)
-        return self._outputs(status, wear, life, level, message, record)
+        return self._outputs(*self.twin.step(record))
 
-    def _outputs(self, status, wear, life, level, message, record):
-        # The key/values of LifePublisher.summary() and its diagnostics, in that order.
-        values = {'wear_um': m_to_um(wear['wear_m']), 'wear_std_um': m_to_um(wear['wear_std_m']),
-                  'rate_scale': wear['rate_scale'],
-                  'lost_motion_arcmin': rad_to_arcmin(wear['lost_motion_rad']),
-                  'lost_motion_obs_arcmin': rad_to_arcmin(wear['lost_motion_obs_rad']),
-                  'rul_p10_h': life['p10_s'] / HOUR, 'rul_p50_h': life['p50_s'] / HOUR,
-                  'rul_p90_h': life['p90_s'] / HOUR,
-                  'rul_p90_censored': bool(life['p90_censored']),
-                  'catalogue_life_h': life['catalogue_life_s'] / HOUR,
-                  'exposure_h': wear['exposure_s'] / HOUR, 'updates': int(wear['updates']),
-                  'rejected_updates': int(wear['rejected'])}
-        if record is not None:
-            values['te_pp_arcmin'] = rad_to_arcmin(record['te_pp_rad'])
-        values['rejected_messages'] = 0
-        values['lost_motion_limit_arcmin'] = rad_to_arcmin(self.life.limit)
+    def _outputs(self, wear, life):
+        level, message, values = self.twin.summary(wear, life).diagnostic()
         # Encoded here: in a worker process this work leaves the reading process.
-        stamp_ns = int(round(float(wear['stamp_s']) * 1e9))
+        stamp_ns = int(round(float(wear.record['stamp_s']) * 1e9))
         diagnostics = encode_diagnostic_array(stamp_ns, [Status(
-            level, f'reducer_twin: {self.joint} reducer', message, self.joint, values)])
-        return {'status': status, 'log_ns': stamp_ns, 'level': level,
-                'wear': record_values(WEAR_ESTIMATE, wear),
-                'life': record_values(REMAINING_LIFE, life), 'diagnostics': diagnostics}
+            level, reducer_status_name(self.joint), message, self.joint, values)])
+        return {'status': wear.status, 'log_ns': stamp_ns, 'level': level,
+                'wear': record_values(WEAR_ESTIMATE, wear.record),
+                'life': record_values(REMAINING_LIFE, life.record), 'diagnostics': diagnostics}
 
 
 class LocalBacks:
@@ -394,8 +303,9 @@ class LocalBacks:
 
     Parameters
     ----------
-    params : ReducerParams, optional
-        Reducer parameters (or later through :meth:`configure`).
+    params : ReducerParams or dict of str to ReducerParams, optional
+        Reducer parameters of every joint, or per joint (or later through
+        :meth:`configure`).
     life_config : LifeConfig, optional
         Limit and thresholds.
 
@@ -417,7 +327,8 @@ class LocalBacks:
         """Process ``'start'`` (a stamp [s]) or ``'windows'`` (``te_features`` records)."""
         back = self.backs.get(joint)
         if back is None:
-            back = self.backs[joint] = JointBack(joint, self.params, self.life_config,
+            params = self.params[joint] if isinstance(self.params, dict) else self.params
+            back = self.backs[joint] = JointBack(joint, params, self.life_config,
                                                  self.initial.get(joint))
         if kind == 'start':
             self._done.append((joint, [back.initial(items)]))
@@ -442,7 +353,6 @@ def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
         # Warm up while the parent imports, opens the bag and reads the first chunk.
-        from filterpy.kalman import UnscentedKalmanFilter  # noqa: F401
         from reducer_twin.core import estimator, life  # noqa: F401
         local = LocalBacks()
         while True:
@@ -469,7 +379,7 @@ class WorkerBacks:
     """
     Estimator and life stages in a forked worker process (the same results as local).
 
-    Fork it early (before the bag is opened): the worker imports filterpy while this
+    Fork it early (before the bag is opened): the worker warms up while this
     process gets ready. One worker serves bags one after the other
     (:meth:`configure` ... :meth:`finish` per bag, :meth:`close` at the end).
     """

@@ -202,11 +202,10 @@ def run(args):
     single = len(args.bags) == 1
     names = _names(args.bags)
     outs, reports = _check_outputs(args, names)
-    from reducer_twin.analysis.stages import defer_filterpy_extras, WorkerBacks
-    defer_filterpy_extras()
+    from reducer_twin.analysis.stages import WorkerBacks
     from reducer_twin.commands.common import reuse_freed_memory
     reuse_freed_memory()
-    # Forked before the rest is imported: the worker loads filterpy meanwhile.
+    # Forked before the rest is imported: the worker loads the estimator meanwhile.
     jobs = min(args.jobs, len(args.bags))
     fleet = args.store is not None or args.engine == 'ray'
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) and \

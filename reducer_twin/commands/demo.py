@@ -81,7 +81,7 @@ def run(args):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from rclpy.parameter import Parameter
-    from reducer_twin.nodes.base import make_executor, quiet_gc
+    from reducer_twin.nodes.runtime import make_executor, quiet_gc
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     aging = args.hours * HOUR / args.duration_s
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -125,7 +125,7 @@ def run(args):
 
 def _spin(executor, nodes, joints, args, history):
     """Spin until the simulator has streamed ``duration_s``; keep the history and the table."""
-    from reducer_twin.nodes.base import WORKER
+    from reducer_twin.nodes.runtime import WORKER
     sim = nodes['simulator']
     live = None
     if not args.json:

@@ -637,3 +637,47 @@ class JointSimulator:
         if self.duty_wear_rate <= 0.0:
             return math.inf if ds > 0.0 else -math.inf
         return ds / self.duty_wear_rate
+
+
+def joint_state_columns(batches, split=False):
+    """
+    Arrange per-joint sample blocks as the JointState columns a robot controller publishes.
+
+    Parameters
+    ----------
+    batches : list
+        One block per joint (``link_angle``, ``motor_angle``, ``link_velocity``,
+        ``effort`` arrays of equal length).
+    split : bool
+        Link and motor sides on two topics (else one message with ``<joint>`` and
+        ``<joint>_motor``, see :func:`joint_state_names`).
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(position, velocity, effort, motor)``: combined, columns ``link_1, motor_1,
+        link_2, ...`` with velocity and effort on the link entries only (NaN on the
+        motor ones) and ``motor`` None; split, the link side per joint and the motor
+        angles per joint.
+
+    """
+    if split:
+        return (np.stack([b.link_angle for b in batches], axis=1),
+                np.stack([b.link_velocity for b in batches], axis=1),
+                np.stack([b.effort for b in batches], axis=1),
+                np.stack([b.motor_angle for b in batches], axis=1))
+    n, k = batches[0].link_angle.size, len(batches)
+    pos = np.empty((n, 2 * k))
+    vel = np.full((n, 2 * k), np.nan)
+    eff = np.full((n, 2 * k), np.nan)
+    for j, b in enumerate(batches):
+        pos[:, 2 * j], pos[:, 2 * j + 1] = b.link_angle, b.motor_angle
+        vel[:, 2 * j], eff[:, 2 * j] = b.link_velocity, b.effort
+    return pos, vel, eff, None
+
+
+def joint_state_names(names, split=False, motor_suffix='_motor'):
+    """Return the entry names of the link-side message: ``<joint>`` and ``<joint>_motor``."""
+    if split:
+        return tuple(names)
+    return tuple(x for name in names for x in (name, name + motor_suffix))

@@ -34,8 +34,9 @@ import uuid
 
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
+from reducer_twin.core.joint_twin import estimate_numbers
 from reducer_twin.core.pipeline import features_from_record, LifeStage
-from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
+from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
 from reducer_twin.fleet.store import StoreConflict, StoreError
@@ -455,19 +456,12 @@ class LiveHistory:
     @staticmethod
     def _summary(features, wear, life):
         """Return the ``--json`` summary of the joint at the segment's end (as a bag's)."""
-        nan = float('nan')
         w = dict(zip(WEAR_ESTIMATE.fields, wear[-1])) if len(wear) else {}
         lf = dict(zip(REMAINING_LIFE.fields, life[-1])) if len(life) else {}
         # Observed: the estimate rests on at least one lost motion, in this segment or
         # before it (the live estimate carries on; a quiet minute is no new reducer).
         observed = int(w.get('updates', 0)) > 0
-        out = {'wear_um': m_to_um(w.get('wear_m', nan)),
-               'wear_std_um': m_to_um(w.get('wear_std_m', nan)),
-               'rul_p10_h': lf.get('p10_s', nan) / HOUR,
-               'rul_p50_h': lf.get('p50_s', nan) / HOUR,
-               'rul_p90_h': lf.get('p90_s', nan) / HOUR,
-               'lost_motion_arcmin': rad_to_arcmin(w.get('lost_motion_rad', nan))}
-        out = {k: (float(v) if observed and np.isfinite(v) else None) for k, v in out.items()}
+        out = estimate_numbers(w, lf, observed)
         out['observed'] = observed
         out['windows'] = int(np.sum(np.isfinite(features[:, _LOST_MOTION])))
         out['reason'] = None if observed else 'the joint never reversed under load while ' \
@@ -549,3 +543,70 @@ def _append(into, chunk):
     into.dropped += chunk.dropped
     into.dropped_exposure_s += chunk.dropped_exposure_s
     into.rejected += chunk.rejected
+
+
+def join_store(stage, store, robot, joint, params, estimator_config, life_config, name,
+               log=None, warn=None):
+    """
+    Continue a live estimator from the fleet store when it is newer, and keep its history.
+
+    Parameters
+    ----------
+    stage : EstimatorStage
+        The node's estimator stage, restored from its state file if it had one; its
+        estimator is replaced by the stored state, or by a new reducer when the store
+        says the reducer was replaced since.
+    store : str or os.PathLike
+        The fleet store.
+    robot, joint : str
+        The reducer.
+    params : ReducerParams
+        The reducer's parameters.
+    estimator_config : EstimatorConfig
+        Filter tuning.
+    life_config : LifeConfig
+        Limit and thresholds of the stored remaining life.
+    name : str
+        The node's name.
+    log, warn : callable, optional
+        Called with one line of text for notes and for store trouble.
+
+    Returns
+    -------
+    LiveHistory
+        Where the node's windows go.
+
+    Raises
+    ------
+    InvalidParameter
+        If ``robot`` is not a valid name.
+    StoreError, StateFileError
+        If the store cannot be read or its state cannot be used.
+
+    """
+    from reducer_twin.core.errors import StateFileError
+    from reducer_twin.core.estimator import WearEstimator
+    log = log or (lambda text: None)
+    check_robot(robot)
+    file_t_end = stage.estimator.t_end if stage.restored_from else None
+    try:
+        start = read_start(store, robot, joint, file_t_end)
+    except StoreError as err:
+        raise StoreError(f'parameter store: {err}') from None
+    if start.state is not None:
+        try:
+            stage.estimator = WearEstimator.from_state(params, start.state['estimator'],
+                                                       estimator_config)
+        except StateFileError as err:
+            raise StateFileError(f'parameter store: the state of {robot}/{joint} in the '
+                                 f'fleet store {store} cannot be used: {err}') from None
+        obs = start.state.get('lost_motion_obs_rad')
+        stage.last_observation = float('nan') if obs is None else float(obs)
+        stage.restored_from = f'fleet store {store} ({robot}/{joint})'
+    elif start.new_reducer:
+        stage.estimator = WearEstimator(params, estimator_config)
+        stage.restored_from = None
+    log(start.note)
+    if start.state is not None or start.new_reducer:
+        stage.save()          # the state file follows the store from now on
+    return LiveHistory(store, robot, joint, params, life_config, start, name, log=warn)

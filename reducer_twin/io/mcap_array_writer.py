@@ -94,7 +94,7 @@ class TopicBook:
     What a bag writer tells about its file: ``custom_data``, per-topic and per-file summaries.
 
     Shared by :class:`McapBagWriter` and the library-framed writer of
-    :mod:`reducer_twin.analysis.mcap_writer`; both keep ``_topics`` (objects with ``name``,
+    :mod:`reducer_twin.io.mcap_writer`; both keep ``_topics`` (objects with ``name``,
     ``msgtype``, ``qos``, ``type_hash``, ``count``, ``start``, ``end``) and ``path``.
     """
 

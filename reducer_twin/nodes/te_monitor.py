@@ -5,42 +5,38 @@ Subscribes to ``/reducer_twin/<joint>/encoder_pairs`` (clean, aligned
 motor/link samples from ``encoder_ingest``). TE is computed on arrival,
 ``theta_link - theta_motor/i`` (ingest has already unwrapped and aligned the
 streams), and published in batches on ``/reducer_twin/<joint>/te``. Every
-``analysis_period_s`` the accumulated samples go through the core's
-:func:`~reducer_twin.core.te_extraction.compute_te` and
-:class:`~reducer_twin.core.te_extraction.WindowAnalyzer`; each completed
-window is published on ``/reducer_twin/<joint>/te_features`` (paper Table 5
-figures, lost motion, order amplitudes, duty).
+``analysis_period_s`` the accumulated samples go through the joint's
+:class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the learnt
+link-encoder time offset, the window analysis); each completed window is
+published on ``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost
+motion, order amplitudes, duty). The window length, gap bridging, aging and
+analysis period are the fields of :class:`~reducer_twin.core.joint_twin.TwinConfig`.
 
 In ``twin_bringup`` the ingest node of the same process hands the pairs
 over directly (:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE
-batches are published only while something subscribes to them.
-
-The link encoder's time offset is learnt from the first windows and then
-compensated (:class:`~reducer_twin.core.pipeline.TimeOffsetCalibration`).
-The node also measures how long samples take from their stamp to their TE
+batches are published only while something subscribes to them. The node
+measures how long samples take from their stamp to their TE
 (``latency_stats()``, and the ``latency_p99_ms`` diagnostic over each report's period).
 """
 
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
-import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor
-from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.kinematics import total_ratio
+from rclpy.node import Node
+from reducer_twin.core.errors import InvalidInput
+from reducer_twin.core.joint_twin import joint_topic, TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
-# features_record lives in the ROS-free core (the bag analysis uses it too); importable from here.
-from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
-from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
-from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, diagnostic_array
-from reducer_twin.msg_adapters.ros import diagnostic_status, to_multiarray
-from reducer_twin.nodes.base import create_background_timer, create_spread_timer
-from reducer_twin.nodes.base import diagnostics_qos, encoder_qos, joint_topic
-from reducer_twin.nodes.base import LISTENERS_PERIOD_S, Node, RowBuffer
-from reducer_twin.nodes.base import RejectCounter, run_nodes, stream_qos, WINDOW_DEPTH
-from reducer_twin.nodes.base import WORKER
+from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, to_multiarray
+from reducer_twin.nodes.buffers import ArrivalBatches
+from reducer_twin.nodes.diagnostics import publish_diagnostics
+from reducer_twin.nodes.parameters import check_choice, declare_plain
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import encoder_qos, stream_qos, WINDOW_DEPTH
+from reducer_twin.nodes.rejects import RejectCounter
+from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.settings import TEMonitorSettings
+from reducer_twin.nodes.timers import create_spread_timer, LISTENERS_PERIOD_S
 from std_msgs.msg import Float64MultiArray
 
 _TE_COLUMNS = [0, 2, 5, 3]
@@ -59,7 +55,7 @@ class TEMonitor(Node):
     node_name : str
         ROS node name.
     params : ReducerParams, optional
-        Reducer parameters.
+        The joint's reducer.
     subscribe : bool, optional
         Subscribe to the joint's ``encoder_pairs`` topic (default). False
         when an ``encoder_ingest`` of the same process feeds
@@ -72,74 +68,38 @@ class TEMonitor(Node):
 
     def __init__(self, node_name='te_monitor', params=None, subscribe=True, **kwargs):
         super().__init__(node_name, **kwargs)
-        p = self._declare_plain()
+        p = declare_plain(self, {
+            'joint': ('joint_1', 'joint whose encoder pairs are monitored'),
+            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)")})
+        check_choice('window', p['window'], ('auto', 'revolution', 'duration'))
+        s = SpecParameters(self, '', TEMonitorSettings()).value
+        self.config = SpecParameters(self, '', TwinConfig()).value
         self.params = params or ReducerParams()
         self.joint = p['joint']
-        self.ratio = total_ratio(self.params.geometry)
-        self.analyzer = WindowAnalyzer(self.params, window=p['window'], window_s=p['window_s'],
-                                       aging_factor=p['aging_factor'])
-        self.extractor = TEExtractor(self.ratio, max_gap_s=p['max_gap_s'])
-        self.calibration = TimeOffsetCalibration(self.extractor)
+        self.twin = TwinFront(self.params, self.config, window=p['window'])
         self.rejects = RejectCounter(self)
         self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
                                             stream_qos())
         self.feat_pub = self.create_publisher(
             Float64MultiArray, joint_topic(self.joint, 'te_features'), stream_qos(WINDOW_DEPTH))
-        self.diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
         self._te_listened = True    # fed in process, checked: see _check_listeners
         if not subscribe:
             create_spread_timer(self, LISTENERS_PERIOD_S, self._check_listeners)
         else:
             self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'encoder_pairs'),
                                      self._on_pairs, encoder_qos())
-        create_spread_timer(self, p['analysis_period_s'], self._analyze)
-        create_background_timer(self, p['diagnostics_period_s'], self._publish_diagnostics)
-        self._pending = RowBuffer(5, 4096)   # encoder pairs waiting for the window analysis
-        self._arrived = RowBuffer(7, 256)    # encoder pair, its TE, when the TE was computed
-        self._minus_inv_ratio = -1.0 / self.ratio
-        # TE batches go out as rows arrive, once the oldest waiting row is this old (no 50 Hz
-        # timer per joint to wake the executor), and with every window analysis.
-        self._te_period_s = p['te_publish_period_s']
-        self._first_arrival = None
+        create_spread_timer(self, self.config.analysis_period_s, self._analyze)
+        publish_diagnostics(self, self._statuses)
+        self.batches = ArrivalBatches(self.twin.ratio, s.te_publish_period_s, LATENCY_KEEP)
+        self.latency = self.batches.latency
         self._te_msg = BatchPublisherMessage(TE_BATCH)
-        # Rings filled now: np.zeros would commit pages as they fill, a slow RSS growth.
-        self._stamps = np.empty(LATENCY_KEEP)     # sample stamps [s]
-        self._arrival = np.empty(LATENCY_KEEP)    # when their TE was computed [s]
-        self._stamps.fill(0.0)
-        self._arrival.fill(0.0)
-        self._latency_n = 0
-        self._diag_mark = 0     # latency samples already reported in /diagnostics
         self.samples = 0
-        self.windows = 0
         self.last_features = None
 
-    def _declare_plain(self):
-        specs = {
-            'joint': ('joint_1', 'joint whose encoder pairs are monitored'),
-            'aging_factor': (1.0, 'seconds of wear exposure per second of stream (1: real '
-                                  'robot)'),
-            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)"),
-            'window_s': (2.0, 'window length in stream time [s]'),
-            'max_gap_s': (0.05, 'largest stamp gap bridged inside a window [s]'),
-            'analysis_period_s': (0.5, 'period of the window analysis [s] (features of a '
-                                       'window come at most this late)'),
-            'te_publish_period_s': (0.02, 'longest wait of a TE row for its batch while the '
-                                          'stream flows [s] (the last rows of a stopped '
-                                          'stream go with the next analysis)'),
-            'diagnostics_period_s': (1.0, 'period of /diagnostics [s]'),
-        }
-        out = {}
-        for name, (default, doc) in specs.items():
-            out[name] = self.declare_parameter(
-                name, default, ParameterDescriptor(description=doc, read_only=True)).value
-        for name in ('window_s', 'max_gap_s', 'analysis_period_s', 'te_publish_period_s',
-                     'diagnostics_period_s'):
-            if not 0.0 < out[name] <= 3600.0:
-                raise InvalidParameter(f'{name} must be in (0, 3600] s, got {out[name]!r}')
-        if not 0.0 <= out['aging_factor'] <= 1e9:
-            raise InvalidParameter(
-                f"aging_factor must be in [0, 1e9], got {out['aging_factor']!r}")
-        return out
+    @property
+    def windows(self):
+        """Windows analysed so far."""
+        return self.twin.windows
 
     def _on_pairs(self, msg):
         try:
@@ -160,56 +120,24 @@ class TEMonitor(Node):
             angle [rad], effort [N*m], link velocity [rad/s]).
 
         """
-        n = rows.shape[0]
-        if n == 0:
-            return
-        # TE on arrival, kept with its pair; the TE batch, the latencies and the rows for the
-        # window analysis are made in bulk at the TE period, which keeps this 1 kHz call to
-        # a handful of array operations.
-        now = time.time()
-        if n == 1:      # the live case, one controller message: cheaper in plain floats
-            row = rows[0].tolist()
-            row += (row[2] + row[1] * self._minus_inv_ratio, now)
-            self._arrived.append(row)
-        else:
-            out = self._arrived.extend(n)
-            out[:, :5] = rows
-            te = out[:, 5]
-            np.multiply(rows[:, 1], self._minus_inv_ratio, out=te)
-            te += rows[:, 2]
-            out[:, 6] = now
-        self.samples += n
-        if self._first_arrival is None:
-            self._first_arrival = now
-        elif now - self._first_arrival >= self._te_period_s:
-            self._publish_te()
+        if rows.shape[0]:
+            self.samples += rows.shape[0]
+            if self.batches.add(rows, time.time()):
+                self._publish_te()
 
     def _publish_te(self):
-        if not self._arrived.n:
-            return
-        rows = self._arrived.take()
-        self._first_arrival = None
-        self._record_latency(rows[:, 0], rows[:, 6])
-        self._pending.extend(rows.shape[0])[:] = rows[:, :5]
-        if self._te_listened:
+        rows = self.batches.take()
+        if rows is not None and self._te_listened:
             self.te_pub.publish(self._te_msg.fill(rows[:, _TE_COLUMNS]))
 
     def _check_listeners(self):
         self._te_listened = self.te_pub.get_subscription_count() > 0
 
-    def _record_latency(self, stamps, arrival):
-        k = self._latency_n % LATENCY_KEEP
-        m = min(stamps.size, LATENCY_KEEP - k)
-        self._stamps[k:k + m] = stamps[:m]
-        self._arrival[k:k + m] = arrival[:m]
-        self._latency_n += stamps.size
-
     def _analyze(self):
         """Hand the accumulated samples to the worker thread (the executor must not wait)."""
         self._publish_te()
-        if not self._pending.n:
-            return
-        WORKER.submit(self._analyze_rows, self._pending.take())
+        if self.batches.pending.n:
+            WORKER.submit(self._analyze_rows, self.batches.pending.take())
 
     def analyze_now(self):
         """Analyse what has accumulated and wait for it (end of a demo, tests)."""
@@ -217,85 +145,46 @@ class TEMonitor(Node):
         WORKER.wait_idle()
 
     def _analyze_rows(self, rows):
-        """Run TE extraction and the window analysis; publish completed windows (worker)."""
-        ok, windows = self.rejects.guard('analysis', 'bad_samples', self._windows_of, rows)
+        """Run the joint's TE extraction and window analysis; publish the windows (worker)."""
+        learnt = self.twin.calibration.applied
+        ok, windows = self.rejects.guard('analysis', 'bad_samples', self.twin.update,
+                                         *rows.T)
         if not ok:
             return
+        if learnt is None and self.twin.calibration.applied is not None:
+            self.get_logger().info(f'{self.joint}: link encoder time offset '
+                                   f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
         for f in windows:
-            if self.calibration.observe(f):
-                self.get_logger().info(f'{self.joint}: link encoder time offset '
-                                       f'{self.calibration.applied * 1e6:.1f} us, compensated')
-            self.windows += 1
             self.last_features = f
-            rec = features_record(f, self.params)
+            rec = self.twin.record(f)
             self.feat_pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
 
-    def _windows_of(self, rows):
-        stream = self.extractor.update(rows[:, 0], rows[:, 1], rows[:, 0], rows[:, 2])
-        return self.analyzer.update(stream, rows[:, 3], rows[:, 4])
-
-    def reset_latency(self):
-        """Forget the latency samples so far (a benchmark's warm-up)."""
-        self._latency_n = 0
-        self._diag_mark = 0
-
-    def latency_records(self):
-        """Return ``(stamps [s], TE times [s])`` of the kept samples."""
-        n = min(self._latency_n, LATENCY_KEEP)
-        return self._stamps[:n].copy(), self._arrival[:n].copy()
-
-    def flush_latency(self):
-        """Publish the pending TE batch now so its latencies are counted."""
-        self._publish_te()
+    flush_latency = _publish_te
+    """Publish the pending TE batch now so its latencies are counted."""
 
     def latency_stats(self, last=None):
-        """
-        Return stamp-to-TE latency statistics [s].
+        """Return stamp-to-TE latency statistics [s] (see :meth:`LatencyRing.stats`)."""
+        return self.latency.stats(last)
 
-        Parameters
-        ----------
-        last : int, optional
-            Only the newest ``last`` samples; default every kept sample.
-
-        Returns
-        -------
-        dict
-            ``count``, ``p50``, ``p99``, ``max``.
-
-        """
-        kept = min(self._latency_n, LATENCY_KEEP)
-        n = kept if last is None else max(min(last, kept), 0)
-        if n == 0:
-            return {'count': 0, 'p50': float('nan'), 'p99': float('nan'), 'max': float('nan')}
-        rows = (slice(0, n) if last is None
-                else np.arange(self._latency_n - n, self._latency_n) % LATENCY_KEEP)
-        lat = self._arrival[rows] - self._stamps[rows]
-        return {'count': self._latency_n if last is None else n,
-                'p50': float(np.percentile(lat, 50)), 'p99': float(np.percentile(lat, 99)),
-                'max': float(lat.max())}
-
-    def _publish_diagnostics(self):
+    def _statuses(self):
         # The p99 of the samples since the last report (the ring holds the last 131 k).
-        lat = self.latency_stats(last=self._latency_n - self._diag_mark)
-        self._diag_mark = self._latency_n
         f = self.last_features
         values = {'samples': self.samples, 'windows': self.windows,
                   'rejected_messages': self.rejects.total,
-                  'latency_p99_ms': lat['p99'] * 1e3}
+                  'latency_p99_ms': self.latency.stats_since_report()['p99'] * 1e3}
         if f is not None:
             values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
                            'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
         level = 'OK' if self.rejects.total == 0 else 'WARN'
         message = f'{self.windows} windows analysed'
-        reason = self.analyzer.not_observed_reason(joint_topic(self.joint, 'encoder_pairs'))
-        values['observed_windows'] = self.analyzer.windows_observed
+        analyzer = self.twin.analyzer
+        reason = analyzer.not_observed_reason(joint_topic(self.joint, 'encoder_pairs'))
+        values['observed_windows'] = analyzer.windows_observed
         if reason is not None:
             # Never OK without a lost motion: say why the reducer cannot be seen.
             level, message = 'STALE', f'not observed: {reason}'
-        self.diag_pub.publish(diagnostic_array(
-            self.get_clock().now().nanoseconds,
-            [diagnostic_status(f'reducer_twin: {self.joint} transmission error', self.joint,
-                               level, message, values)]))
+        return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
+                 values)]
 
 
 def main(args=None):

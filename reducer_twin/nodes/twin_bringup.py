@@ -13,15 +13,18 @@ only while something subscribes to them. Motor encoders that ros2_control
 exports only on ``/dynamic_joint_states`` are fed through a second
 ``joint_state_broadcaster`` as ``twin.motor_topic`` (see ``encoder_ingest``).
 With ``twin.store`` (and ``twin.robot``) the estimators write the live history into
-that fleet store and continue from it (see ``wear_estimator``).
+that fleet store and continue from it (see ``wear_estimator``). Each joint's nodes
+take that joint's reducer (``reducers.<joint>`` in the YAML: a reducer file or
+overrides of ``reducer``; an RV-160E at the base, an RV-40E at the wrist).
 """
 
+from rclpy.node import Node
 from rclpy.parameter import Parameter
 # The configuration lives in a ROS-free module (the bag analysis reads it too); its
 # names stay importable from here.
 from reducer_twin.config import default_config, DEFAULTS, load_config  # noqa: F401
-from reducer_twin.core.params import ReducerParams
-from reducer_twin.nodes.base import Node, run_nodes
+from reducer_twin.config import joint_reducers, twin_config
+from reducer_twin.nodes.runtime import run_nodes
 
 
 def build_nodes(config, sim_overrides=None):
@@ -49,8 +52,7 @@ def build_nodes(config, sim_overrides=None):
     from reducer_twin.nodes.te_monitor import TEMonitor
     from reducer_twin.nodes.wear_estimator import WearEstimatorNode
     twin, life = config['twin'], config['life']
-    params = ReducerParams().with_overrides(config['reducer']) if config['reducer'] else (
-        ReducerParams())
+    params, own = joint_reducers(config)
     joints = list(twin['joints'])
     nodes = {'simulator': None, 'te': {}, 'estimator': {}, 'life': {}}
     if twin['simulate']:
@@ -61,7 +63,8 @@ def build_nodes(config, sim_overrides=None):
         if scales:
             sim.append(Parameter('wear_rate_scales', value=scales))
         sim += list(sim_overrides or [])
-        nodes['simulator'] = JointSimulatorNode(params=params, parameter_overrides=sim)
+        nodes['simulator'] = JointSimulatorNode(params=params, joint_params=own,
+                                                parameter_overrides=sim)
     local = bool(twin['intra_process'])
     nodes['ingest'] = EncoderIngest(parameter_overrides=[
         Parameter('joints', value=joints),
@@ -74,12 +77,14 @@ def build_nodes(config, sim_overrides=None):
         Parameter('effort_source', value=twin['effort_source']),
         Parameter('motor_effort_units', value=twin['motor_effort_units'])])
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
+    spec = twin_config(config)
     for joint in joints:
+        reducer = own.get(joint, params)
         nodes['te'][joint] = TEMonitor(
-            f'te_monitor_{joint}', params=params, subscribe=not local, parameter_overrides=[
+            f'te_monitor_{joint}', params=reducer, subscribe=not local, parameter_overrides=[
                 Parameter('joint', value=joint),
-                Parameter('aging_factor', value=float(twin['aging_factor'])),
-                Parameter('window_s', value=float(twin['window_s']))])
+                *(Parameter(name, value=float(getattr(spec, name)))
+                  for name in ('aging_factor', 'window_s', 'max_gap_s'))])
         if local:
             nodes['ingest'].attach(joint, nodes['te'][joint].take_pairs)
         store = [Parameter('store', value=str(twin['store'])),
@@ -87,10 +92,10 @@ def build_nodes(config, sim_overrides=None):
                  Parameter('store_period_s', value=float(twin['store_period_s'])),
                  *life_params] if twin['store'] else []
         nodes['estimator'][joint] = WearEstimatorNode(
-            f'wear_estimator_{joint}', params=params, parameter_overrides=[
+            f'wear_estimator_{joint}', params=reducer, parameter_overrides=[
                 Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir']),
                 *store])
-        nodes['life'][joint] = LifePublisher(f'life_publisher_{joint}', params=params,
+        nodes['life'][joint] = LifePublisher(f'life_publisher_{joint}', params=reducer,
                                              parameter_overrides=[Parameter('joint', value=joint),
                                                                   *life_params])
     return nodes

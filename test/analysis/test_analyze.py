@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
-from reducer_twin.analysis.stages import TE_MAX_GAP_S
 from reducer_twin.core.errors import BagError
 from reducer_twin.core.ingest import pair_columns, SpikeFilter, StreamCleaner
+from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
@@ -182,11 +182,11 @@ def test_windows_before_the_time_offset_is_learnt_equal_a_te_monitor_run(sim, an
         js = bag.read_joint_states()['/joint_states']
     cols = [js.names.index(n) for n in ('joint_2', 'joint_2_motor')]
     cleaner, spikes = StreamCleaner(), SpikeFilter(ratio)
-    extractor = TEExtractor(ratio, max_gap_s=TE_MAX_GAP_S)
+    extractor = TEExtractor(ratio, max_gap_s=TwinConfig().max_gap_s)
     calibration = TimeOffsetCalibration(extractor)
     analyzer = WindowAnalyzer(params, window_s=2.0, aging_factor=AGING)
     live = []
-    for k in range(0, len(js), 25):     # te_monitor analyses every 0.1 s (25 samples)
+    for k in range(0, len(js), 25):     # pieces of 0.1 s (25 samples) until calibrated
         part = slice(k, k + 25)
         clean = cleaner.process(js.stamps_ns[part], js.position[part][:, cols],
                                 js.velocity[part][:, cols], js.effort[part][:, cols])
@@ -228,7 +228,7 @@ def test_a_motor_step_of_more_than_half_a_turn_is_fed_in_the_nodes_pieces_until_
                                     js.effort[:, cols])
     t_ns, motor, link, effort, velocity = pair_columns(clean, 0, 1)[0]
     assert np.abs(np.diff(motor)).max() > np.pi
-    extractor = TEExtractor(ratio, max_gap_s=TE_MAX_GAP_S)
+    extractor = TEExtractor(ratio, max_gap_s=TwinConfig().max_gap_s)
     calibration = TimeOffsetCalibration(extractor)
     analyzer = WindowAnalyzer(params, window_s=2.0, aging_factor=AGING)
     live = []
@@ -279,37 +279,28 @@ def test_malformed_joint_states_are_skipped_counted_and_reported(sim, tmp_path, 
     assert '3 malformed JointState message(s) on /joint_states skipped' in warning
 
 
-ESTIMATE_IN_A_FRESH_PROCESS = """
+ANALYZE_IN_A_FRESH_PROCESS = """
 import json, sys
-from reducer_twin.analysis.stages import defer_filterpy_extras, JointBack
-from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import LifeConfig
-deferred = defer_filterpy_extras() if sys.argv[1] == 'defer' else False
-back = JointBack('j', ReducerParams(), LifeConfig())
-records = json.loads(sys.stdin.read())
-out = [back.process(r)['wear'] for r in records]
-json.dump({'deferred': deferred, 'wear': out,
-           'loaded': [m for m in ('scipy.stats', 'scipy.ndimage') if m in sys.modules]},
+from reducer_twin.cli import main
+code = main(sys.argv[1:])
+json.dump({'code': code, 'filterpy': [m for m in sys.modules if m.startswith('filterpy')]},
           sys.stdout)
 """
 
 
-def test_deferring_filterpys_unused_imports_changes_no_estimate(analysed):
+@pytest.mark.parametrize('stage_process', ['yes', 'no'])
+def test_the_analysis_imports_no_filterpy(sim, tmp_path, stage_process):
+    # Importing filterpy's package costs half a second of scipy imports; the estimator
+    # computes the scaled sigma points' weights itself (test_sigma_points: the same).
     import subprocess
     import sys
-    records = [dict(zip(TE_FEATURES.fields, row.tolist()))
-               for row in analysed.joints['joint_1'].features[:8]]
-    runs = {}
-    for mode in ('defer', 'plain'):
-        done = subprocess.run([sys.executable, '-c', ESTIMATE_IN_A_FRESH_PROCESS, mode],
-                              input=json.dumps(records), capture_output=True, text=True,
-                              timeout=120, check=True)
-        runs[mode] = json.loads(done.stdout)
-    assert runs['defer']['deferred'] and runs['defer']['loaded'] == []
-    assert runs['plain']['loaded'] == ['scipy.stats', 'scipy.ndimage']
-    assert runs['defer']['wear'] == runs['plain']['wear']
-    np.testing.assert_array_equal(np.array(runs['plain']['wear']),
-                                  analysed.joints['joint_1'].wear[1:9])
+    done = subprocess.run([sys.executable, '-c', ANALYZE_IN_A_FRESH_PROCESS, 'analyze',
+                           str(sim[0]), '--out', str(tmp_path / 'd'), '--stage-process',
+                           stage_process, '--json'], capture_output=True, text=True,
+                          timeout=300, check=True)
+    # The command's --json comes first, then what the process had imported.
+    report = json.loads(done.stdout[done.stdout.rindex('{"code"'):])
+    assert report == {'code': 0, 'filterpy': []}
 
 
 # --------------------------------------------------------------------------- inputs
@@ -444,6 +435,46 @@ def test_the_config_chooses_joints_and_overrides_the_bags_aging_factor(sim, tmp_
     meta = yaml.safe_load((tmp_path / 'd' / 'metadata.yaml').read_text())
     custom = meta['rosbag2_bagfile_information']['custom_data']
     assert float(custom['reducer_twin.aging_factor']) == 1.0
+
+
+def _records(bag_dir, topic, layout):
+    """Read a derived topic back with the mcap library; return its records."""
+    out = []
+    for path in sorted(Path(bag_dir).glob('*.mcap')):
+        with open(path, 'rb') as f:
+            reader = make_reader(f, decoder_factories=[DecoderFactory()])
+            for _, _, _, msg in reader.iter_decoded_messages(topics=[topic]):
+                out.append(dict(zip(layout.fields, msg.data)))
+    return out
+
+
+def test_the_config_gives_one_joint_its_own_reducer_and_leaves_the_other_alone(
+        sim, analysed, tmp_path, capsys):
+    # joint_2 carries a reducer rated for twice the life (a file beside the configuration):
+    # its catalogue life doubles, nothing else of either joint changes.
+    (tmp_path / 'long-life.yaml').write_text('reducer:\n  rating:\n    rated_life: 4.32e7\n')
+    config = tmp_path / 'twin.yaml'
+    config.write_text('reducers:\n  joint_2: long-life.yaml\n')
+    code, out, err = _run(['analyze', sim[0], '--out', tmp_path / 'd', '--config', config,
+                           '--json'], capsys)
+    assert code == 0, err
+    for joint in ('joint_1', 'joint_2'):
+        own = _records(tmp_path / 'd', f'/reducer_twin/{joint}/remaining_life', REMAINING_LIFE)
+        common = [dict(zip(REMAINING_LIFE.fields, row))
+                  for row in analysed.joints[joint].life.tolist()]
+        assert len(own) == len(common) > 5
+        cat = [(a['catalogue_life_s'], b['catalogue_life_s']) for a, b in zip(common, own)
+               if np.isfinite(a['catalogue_life_s'])]
+        assert len(cat) > 5
+        factor = 2.0 if joint == 'joint_2' else 1.0
+        np.testing.assert_allclose([b for _, b in cat], [factor * a for a, _ in cat],
+                                   rtol=1e-12)
+        rest = [k for k in REMAINING_LIFE.fields if k != 'catalogue_life_s']
+        np.testing.assert_array_equal([[b[k] for k in rest] for b in own],
+                                      [[a[k] for k in rest] for a in common])
+        wear = _records(tmp_path / 'd', f'/reducer_twin/{joint}/wear', WEAR_ESTIMATE)
+        np.testing.assert_array_equal([list(w.values()) for w in wear],
+                                      analysed.joints[joint].wear)
 
 
 @pytest.mark.parametrize('how', [['--jobs', '2'], ['--stage-process', 'yes']],

@@ -15,7 +15,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
 from reducer_twin.core.estimator import (

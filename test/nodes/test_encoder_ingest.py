@@ -21,10 +21,11 @@ import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
 from reducer_twin.msg_adapters.ros import batch_array, make_joint_state
-from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.encoder_ingest import EncoderIngest
+from reducer_twin.nodes.qos import encoder_qos
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

@@ -19,11 +19,12 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.state_file import decode_state
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.ros import from_multiarray
-from reducer_twin.nodes.base import joint_topic, WORKER
+from reducer_twin.nodes.runtime import WORKER
 from reducer_twin.nodes.twin_bringup import build_nodes, default_config, load_config
 from std_msgs.msg import Float64MultiArray
 

@@ -18,6 +18,7 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core import wear
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import duty_to_record, EstimatorStage, features_from_record
 from reducer_twin.core.pipeline import LifeConfig
@@ -27,8 +28,8 @@ from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
-from reducer_twin.nodes.base import joint_topic, latest_qos, stream_qos
 from reducer_twin.nodes.life_publisher import LifePublisher
+from reducer_twin.nodes.qos import latest_qos, stream_qos
 from std_msgs.msg import Float64MultiArray
 
 pytestmark = pytest.mark.timeout(60, method='thread')

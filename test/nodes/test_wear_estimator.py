@@ -18,13 +18,14 @@ from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import EstimatorConfig
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.state_file import backup_path, decode_state
 from reducer_twin.msg_adapters.layouts import record_values, TE_BATCH, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
-from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.qos import stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger

@@ -25,13 +25,14 @@ from reducer_twin.analysis.simulate import START_NS
 from reducer_twin.analysis.stages import JointBack
 from reducer_twin.cli import main
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.store import FleetStore, iso_from_ns
 from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
-from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.qos import stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -351,7 +352,7 @@ def test_a_full_disk_keeps_the_stored_state_says_error_and_recovers(
     ([Parameter('store', value='x.db'), Parameter('robot', value='two words')],
      "got 'two words'"),
     ([Parameter('store', value='x.db'), Parameter('robot', value='r1'),
-      Parameter('store_period_s', value=0.0)], 'store_period_s must be 0.01 .. 86400 s'),
+      Parameter('store_period_s', value=0.0)], r'store_period_s must be in \[0\.01, 86400\] s'),
 ], ids=['no robot', 'a robot name with a space', 'no period'])
 def test_a_store_without_a_robot_or_with_a_bad_period_is_refused_by_name(
         ros, tmp_path, overrides, fragment):

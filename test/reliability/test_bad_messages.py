@@ -26,11 +26,12 @@ import numpy as np
 import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, make_joint_state
-from reducer_twin.nodes.base import encoder_qos, joint_topic
 from reducer_twin.nodes.encoder_ingest import EncoderIngest
 from reducer_twin.nodes.life_publisher import LifePublisher
+from reducer_twin.nodes.qos import encoder_qos
 from reducer_twin.nodes.te_monitor import TEMonitor
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from sensor_msgs.msg import JointState

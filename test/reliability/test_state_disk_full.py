@@ -17,13 +17,14 @@ import pytest
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.errors import StateFileError
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
 from reducer_twin.core.units import HOUR
 from reducer_twin.io.state_file import backup_path, decode_state, encode_state, StateFile
 from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES
 from reducer_twin.msg_adapters.ros import to_multiarray
-from reducer_twin.nodes.base import joint_topic, stream_qos
+from reducer_twin.nodes.qos import stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from window_records import feature_records
@@ -81,7 +82,7 @@ def test_the_background_writer_reports_the_full_disk_and_recovers(tmp_path, monk
     assert path.read_bytes() == good
     stage.process(_windows(RECORDS[3:4])[0])
     stage.flush()
-    assert writer.error is None and writer.recoveries == 1
+    assert stage.store.writer.error is None and stage.store.writer.recoveries == 1
     assert decode_state(path.read_bytes(), path)['t_end'] == RECORDS[3]['window_end_s']
 
 

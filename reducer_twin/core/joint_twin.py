@@ -1,0 +1,475 @@
+"""
+One joint of the twin: TE -> windows -> estimate -> life, shared by the nodes and the analysis.
+
+A joint's processing is written here once. :class:`JointTwin` runs it whole
+(:class:`TwinFront`: TE extraction, the learnt encoder time offset and the
+window analysis; then :class:`TwinBack`: the Kalman wear estimate and the
+remaining-life prediction), and returns frozen results:
+:class:`~reducer_twin.core.te_extraction.WindowFeatures` per window,
+:class:`WearEstimate`, :class:`LifeEstimate` and :class:`HealthSummary`.
+
+The live ROS nodes are shells over these pieces on separate topics
+(``te_monitor`` holds a :class:`TwinFront`, ``wear_estimator`` the estimator
+stage of a :class:`TwinBack`, ``life_publisher`` its life stage and the
+:class:`HealthSummary`); the bag analysis runs a :class:`TwinFront` per joint
+in the reading process and a :class:`TwinBack` per joint in a worker. The
+defaults of how a stream is cut and aged live in :class:`TwinConfig`, from
+which the nodes' parameters, ``config/twin.yaml`` and ``analyze --config``
+are derived.
+"""
+
+from dataclasses import dataclass
+import math
+from types import MappingProxyType
+from typing import Mapping, Optional
+
+import numpy as np
+
+from .ingest import IngestConfig
+from .kinematics import total_ratio
+from .params import _Validated, spec
+from .pipeline import EstimatorStage, features_from_record, features_record, LifeConfig
+from .pipeline import LifeStage, TimeOffsetCalibration
+from .te_extraction import TEExtractor, WindowAnalyzer
+from .units import HOUR, m_to_um, rad_to_arcmin
+
+TOPIC_NAMESPACE = 'reducer_twin'
+"""Namespace of every derived topic."""
+
+
+def joint_topic(joint, suffix, namespace=TOPIC_NAMESPACE):
+    """Return the topic of a derived value of one joint, ``/reducer_twin/<joint>/<suffix>``."""
+    return f'/{namespace}/{joint}/{suffix}'
+
+
+@dataclass(frozen=True)
+class TwinConfig(_Validated):
+    """How one joint's stream is aged, cut into windows and analysed: the one source."""
+
+    _prefix = 'twin'
+    aging_factor: float = spec(1.0, '', 0.0, 1e9,
+                               'seconds of wear exposure per second of stream (1: real robot)')
+    window_s: float = spec(2.0, 's', 0.0, 3600.0, 'window length in stream time',
+                           lo_open=True)
+    max_gap_s: float = spec(IngestConfig().max_gap_s, 's', 0.0, 3600.0,
+                            'largest stamp gap bridged inside a window', lo_open=True)
+    analysis_period_s: float = spec(0.5, 's', 0.0, 3600.0,
+                                    'period of the live window analysis (features of a window '
+                                    'come at most this late)', lo_open=True)
+
+
+@dataclass(frozen=True)
+class WearEstimate:
+    """
+    The estimator's answer to one window (or its state at start).
+
+    Attributes
+    ----------
+    status : str
+        ``accepted``, ``rejected``, ``recovered``, ``skipped``, ``replay`` or ``start``.
+    record : Mapping
+        The ``wear`` record (layout field name to value, SI), read-only.
+
+    """
+
+    status: str
+    record: Mapping
+
+
+@dataclass(frozen=True)
+class LifeEstimate:
+    """
+    Remaining life of one estimate and the health level it gives.
+
+    Attributes
+    ----------
+    record : Mapping
+        The ``remaining_life`` record (SI), read-only.
+    level : str
+        ``'OK'``, ``'WARN'``, ``'ERROR'`` or ``'STALE'`` (no lost motion observed yet).
+    message : str
+        One line for ``/diagnostics``.
+
+    """
+
+    record: Mapping
+    level: str
+    message: str
+
+
+@dataclass(frozen=True)
+class HealthSummary:
+    """
+    One reducer's health in edge units: what ``/diagnostics`` and the demo show.
+
+    Attributes
+    ----------
+    wear_um, wear_std_um : float
+        Combined wear and its standard deviation [µm].
+    rate_scale : float
+        Estimated wear-rate multiplier.
+    lost_motion_arcmin, lost_motion_obs_arcmin : float
+        Estimated and last observed lost motion [arcmin].
+    rul_p10_h, rul_p50_h, rul_p90_h : float
+        Remaining operating life percentiles [h].
+    rul_p90_censored : bool
+        Whether P90 lies beyond the horizon.
+    catalogue_life_h : float
+        Catalogue (rated) life at the observed duty [h].
+    exposure_h : float
+        Wear exposure so far [h].
+    level, message : str
+        Health level and its line (:class:`LifeEstimate`).
+    updates, rejected_updates : int
+        Windows the filter took and refused.
+    te_pp_arcmin : float or None
+        Peak-to-peak TE of the last window [arcmin]; None before one.
+    lost_motion_limit_arcmin : float
+        The accuracy limit [arcmin].
+
+    """
+
+    wear_um: float
+    wear_std_um: float
+    rate_scale: float
+    lost_motion_arcmin: float
+    lost_motion_obs_arcmin: float
+    rul_p10_h: float
+    rul_p50_h: float
+    rul_p90_h: float
+    rul_p90_censored: bool
+    catalogue_life_h: float
+    exposure_h: float
+    level: str
+    message: str
+    updates: int
+    rejected_updates: int
+    te_pp_arcmin: Optional[float]
+    lost_motion_limit_arcmin: float
+
+    @classmethod
+    def of(cls, wear, life, te_pp_rad=None):
+        """
+        Summarise a ``wear`` record and its :class:`LifeEstimate`.
+
+        Parameters
+        ----------
+        wear : Mapping
+            The ``wear`` record.
+        life : LifeEstimate
+            Its remaining life.
+        te_pp_rad : float, optional
+            Peak-to-peak TE of the last window [rad].
+
+        Returns
+        -------
+        HealthSummary
+            The summary.
+
+        """
+        rec = life.record
+        return cls(
+            wear_um=m_to_um(wear['wear_m']), wear_std_um=m_to_um(wear['wear_std_m']),
+            rate_scale=wear['rate_scale'],
+            lost_motion_arcmin=rad_to_arcmin(wear['lost_motion_rad']),
+            lost_motion_obs_arcmin=rad_to_arcmin(wear['lost_motion_obs_rad']),
+            rul_p10_h=rec['p10_s'] / HOUR, rul_p50_h=rec['p50_s'] / HOUR,
+            rul_p90_h=rec['p90_s'] / HOUR, rul_p90_censored=bool(rec['p90_censored']),
+            catalogue_life_h=rec['catalogue_life_s'] / HOUR,
+            exposure_h=wear['exposure_s'] / HOUR, level=life.level, message=life.message,
+            updates=int(wear['updates']), rejected_updates=int(wear['rejected']),
+            te_pp_arcmin=None if te_pp_rad is None else rad_to_arcmin(te_pp_rad),
+            lost_motion_limit_arcmin=rad_to_arcmin(rec['lost_motion_limit_rad']))
+
+    def as_dict(self):
+        """Return the summary as a dict (``te_pp_arcmin`` only once a window was seen)."""
+        out = {'wear_um': self.wear_um, 'wear_std_um': self.wear_std_um,
+               'rate_scale': self.rate_scale, 'lost_motion_arcmin': self.lost_motion_arcmin,
+               'lost_motion_obs_arcmin': self.lost_motion_obs_arcmin,
+               'rul_p10_h': self.rul_p10_h, 'rul_p50_h': self.rul_p50_h,
+               'rul_p90_h': self.rul_p90_h, 'rul_p90_censored': self.rul_p90_censored,
+               'catalogue_life_h': self.catalogue_life_h, 'exposure_h': self.exposure_h,
+               'level': self.level, 'message': self.message, 'updates': self.updates,
+               'rejected_updates': self.rejected_updates}
+        if self.te_pp_arcmin is not None:
+            out['te_pp_arcmin'] = self.te_pp_arcmin
+        return out
+
+    def diagnostic(self, rejected_messages=0):
+        """
+        Return the reducer's ``/diagnostics`` status: level, message and key/values.
+
+        Parameters
+        ----------
+        rejected_messages : int
+            Messages the node dropped; an OK with a finite P10 becomes WARN.
+
+        Returns
+        -------
+        tuple
+            ``(level, message, values)``.
+
+        """
+        values = {k: v for k, v in self.as_dict().items() if k not in ('level', 'message')}
+        values['rejected_messages'] = int(rejected_messages)
+        values['lost_motion_limit_arcmin'] = self.lost_motion_limit_arcmin
+        level = self.level
+        if level == 'OK' and rejected_messages and math.isfinite(self.rul_p10_h):
+            level = 'WARN'
+        return level, self.message, values
+
+
+def assess(stage, wear_record):
+    """
+    Return the :class:`LifeEstimate` of a ``wear`` record by a life stage.
+
+    Parameters
+    ----------
+    stage : LifeStage
+        The reducer's life stage (limit, thresholds, the duty it observed).
+    wear_record : Mapping
+        The ``wear`` record.
+
+    """
+    record, level, message = stage.process(wear_record)
+    return LifeEstimate(MappingProxyType(record), level, message)
+
+
+def estimate_numbers(wear, life, observed):
+    """
+    Return a reducer's estimate in edge units: the numbers of ``analyze --json`` and ``fleet``.
+
+    Parameters
+    ----------
+    wear, life : Mapping
+        The last ``wear`` and ``remaining_life`` records (empty: none yet).
+    observed : bool
+        Whether the estimate rests on a lost motion; if not, no number stands for the
+        reducer (a model guess is not a finding).
+
+    Returns
+    -------
+    dict
+        ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
+        ``lost_motion_arcmin``; None where not observed or not finite.
+
+    """
+    nan = float('nan')
+    out = {'wear_um': m_to_um(wear.get('wear_m', nan)),
+           'wear_std_um': m_to_um(wear.get('wear_std_m', nan)),
+           'rul_p10_h': life.get('p10_s', nan) / HOUR,
+           'rul_p50_h': life.get('p50_s', nan) / HOUR,
+           'rul_p90_h': life.get('p90_s', nan) / HOUR,
+           'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
+    return {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
+
+
+def reducer_status_name(joint):
+    """Return the ``/diagnostics`` name of a joint's reducer status."""
+    return f'reducer_twin: {joint} reducer'
+
+
+class TwinFront:
+    """
+    TE extraction, the learnt encoder time offset and the window analysis of one joint.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        The joint's reducer.
+    config : TwinConfig, optional
+        Aging, window length and gap bridging.
+    window : str
+        ``'auto'``, ``'revolution'`` or ``'duration'`` (see ``WindowAnalyzer``).
+
+    """
+
+    def __init__(self, params, config=None, window='auto'):
+        self.params = params
+        self.config = config = config or TwinConfig()
+        self.ratio = total_ratio(params.geometry)
+        self.extractor = TEExtractor(self.ratio, max_gap_s=config.max_gap_s)
+        self.calibration = TimeOffsetCalibration(self.extractor)
+        self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
+                                       aging_factor=config.aging_factor)
+        self.windows = 0
+
+    def te(self, t_s, motor, link):
+        """Return the TE stream of paired samples (stamps [s], motor and link angles [rad])."""
+        return self.extractor.update(t_s, motor, t_s, link)
+
+    def analyze(self, stream, effort, velocity):
+        """
+        Take a TE stream into the window analysis; return the windows it completed.
+
+        Each window's fitted time offset feeds the calibration (applied once learnt).
+        """
+        found = self.analyzer.update(stream, effort, velocity)
+        for f in found:
+            self.calibration.observe(f)
+        self.windows += len(found)
+        return found
+
+    def update(self, t_s, motor, link, effort, velocity):
+        """TE and windows of paired samples; return the completed windows."""
+        return self.analyze(self.te(t_s, motor, link), effort, velocity)
+
+    def flush(self):
+        """Close the last, partial window."""
+        found = self.analyzer.flush()
+        self.windows += len(found)
+        return found
+
+    def record(self, features):
+        """Return the ``te_features`` record of a window (SI)."""
+        return features_record(features, self.params)
+
+
+class TwinBack:
+    """
+    The Kalman wear estimate and the remaining life of one reducer.
+
+    Parameters
+    ----------
+    params : ReducerParams
+        The reducer.
+    life_config : LifeConfig, optional
+        Limit, thresholds and sampling.
+    estimator : EstimatorStage, optional
+        The estimator stage (with its state file, or restored); default a new reducer.
+
+    """
+
+    def __init__(self, params, life_config=None, estimator=None):
+        self.params = params
+        self.estimator = estimator or EstimatorStage(params)
+        self.life = LifeStage(params, life_config or LifeConfig())
+        self.te_pp_rad = None
+
+    def start(self, stamp_s):
+        """Return the estimate and life before any window (what the nodes publish at start)."""
+        wear = WearEstimate('start', MappingProxyType(self.estimator.record(stamp_s)))
+        return wear, self.assess(wear.record)
+
+    def estimate(self, record):
+        """
+        Step the estimator with one ``te_features`` record; the duty goes to the life stage.
+
+        Returns
+        -------
+        WearEstimate
+            The status and the ``wear`` record stamped at the window's end.
+
+        """
+        features = features_from_record(record)
+        status = self.estimator.process(features)
+        self.life.observe_duty(features.duty)
+        self.te_pp_rad = float(record['te_pp_rad'])
+        return WearEstimate(status, MappingProxyType(self.estimator.record(features.t_end)))
+
+    def assess(self, wear_record):
+        """Return the :class:`LifeEstimate` of a ``wear`` record."""
+        return assess(self.life, wear_record)
+
+    def step(self, record):
+        """Estimate and assess one window; return ``(WearEstimate, LifeEstimate)``."""
+        wear = self.estimate(record)
+        return wear, self.assess(wear.record)
+
+    def summary(self, wear, life):
+        """Return the :class:`HealthSummary` of an estimate and its life."""
+        return HealthSummary.of(wear.record, life, self.te_pp_rad)
+
+    def state(self):
+        """
+        Return where this reducer's stages are, to continue with its next bag.
+
+        Returns
+        -------
+        dict
+            JSON-able: ``estimator`` (``WearEstimator.state_dict``), ``duty`` (the life
+            stage's last duty summary or None) and ``lost_motion_obs_rad`` (or None).
+
+        """
+        obs = self.estimator.last_observation
+        duty = self.life.duty
+        return {'estimator': self.estimator.estimator.state_dict(),
+                'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
+                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None}
+
+    def restore(self, state):
+        """Continue from :meth:`state` of an earlier analysis of the same reducer."""
+        from types import SimpleNamespace
+
+        from .estimator import WearEstimator
+        self.estimator.estimator = WearEstimator.from_state(self.params, state['estimator'])
+        obs = state.get('lost_motion_obs_rad')
+        self.estimator.last_observation = float('nan') if obs is None else float(obs)
+        duty = state.get('duty')
+        self.life.duty = None if duty is None else SimpleNamespace(**duty)
+
+
+@dataclass(frozen=True)
+class JointUpdate:
+    """What one window changed: its features, the estimate, the life and the summary."""
+
+    features: object
+    record: Mapping
+    wear: WearEstimate
+    life: LifeEstimate
+    summary: HealthSummary
+
+
+class JointTwin:
+    """
+    One joint's whole pipeline in one object: paired samples in, frozen results out.
+
+    Parameters
+    ----------
+    joint : str
+        Joint name.
+    params : ReducerParams
+        The joint's reducer.
+    config : TwinConfig, optional
+        Aging, window length and gap bridging.
+    life_config : LifeConfig, optional
+        Limit, thresholds and sampling of the remaining life.
+    estimator : EstimatorStage, optional
+        The estimator stage (a state file, a restored state); default a new reducer.
+    window : str
+        Window rule (see :class:`TwinFront`).
+
+    """
+
+    def __init__(self, joint, params, config=None, life_config=None, estimator=None,
+                 window='auto'):
+        self.joint = joint
+        self.front = TwinFront(params, config, window)
+        self.back = TwinBack(params, life_config, estimator)
+
+    def update(self, t_s, motor, link, effort, velocity):
+        """
+        Process paired samples; return a :class:`JointUpdate` per completed window.
+
+        Parameters
+        ----------
+        t_s : ndarray
+            Stamps [s].
+        motor, link : ndarray
+            Motor (raw, input side) and link angles [rad].
+        effort : ndarray
+            Output torque [N*m].
+        velocity : ndarray
+            Link velocity [rad/s].
+
+        """
+        return [self._step(f) for f in self.front.update(t_s, motor, link, effort, velocity)]
+
+    def flush(self):
+        """Close the last window; return its updates."""
+        return [self._step(f) for f in self.front.flush()]
+
+    def _step(self, features):
+        record = MappingProxyType(self.front.record(features))
+        wear, life = self.back.step(record)
+        return JointUpdate(features, record, wear, life, self.back.summary(wear, life))

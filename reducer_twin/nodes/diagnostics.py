@@ -1,0 +1,124 @@
+"""Each node's ``/diagnostics``: the period parameter, the publisher and the report timer."""
+
+from diagnostic_msgs.msg import DiagnosticArray
+from reducer_twin.core.units import m_to_um
+from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
+from reducer_twin.nodes.parameters import SpecParameters
+from reducer_twin.nodes.qos import diagnostics_qos
+from reducer_twin.nodes.settings import DiagnosticsSettings
+from reducer_twin.nodes.timers import create_background_timer
+
+
+def publish_diagnostics(node, statuses):
+    """
+    Declare ``diagnostics_period_s`` and publish ``statuses()`` on ``/diagnostics`` every period.
+
+    The report is built and published on the background worker
+    (:func:`~reducer_twin.nodes.timers.create_background_timer`).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    statuses : callable
+        Returns a list of ``(name, hardware_id, level, message, values)``.
+
+    Returns
+    -------
+    callable
+        Publishes one report now (tests, the end of a demo).
+
+    Raises
+    ------
+    InvalidParameter
+        If the period is not in (0, 3600] s.
+
+    """
+    period = SpecParameters(node, '', DiagnosticsSettings()).value.diagnostics_period_s
+    publisher = node.create_publisher(DiagnosticArray, '/diagnostics', diagnostics_qos())
+
+    def report():
+        publisher.publish(diagnostic_array(node.get_clock().now().nanoseconds,
+                                           [diagnostic_status(*s) for s in statuses()]))
+
+    report.__name__ = f'{node.get_name()} diagnostics'
+    create_background_timer(node, period, report)
+    return report
+
+
+def estimator_status(stage, rejected, live=None):
+    """
+    Return the ``wear_estimator``'s status: level, message and key/values.
+
+    Parameters
+    ----------
+    stage : EstimatorStage
+        The estimator stage (its state writer's failures count).
+    rejected : int
+        Messages the node dropped (WARN).
+    live : LiveHistory, optional
+        The fleet store's live history, whose trouble raises the level.
+
+    Returns
+    -------
+    tuple
+        ``(level, message, values)``.
+
+    """
+    est = stage.estimator
+    writer = stage.store.writer if stage.store is not None else None
+    values = {'wear_um': m_to_um(est.wear), 'wear_std_um': m_to_um(est.wear_std),
+              'rate_scale': est.rate_scale, 'updates': est.updates,
+              'rejected_updates': est.rejected, 'replayed_windows': stage.skipped_replays,
+              'rejected_messages': rejected,
+              'state_writes_failed': writer.failures if writer else 0,
+              'state_writes_recovered': writer.recoveries if writer else 0,
+              'state_file': str(stage.state_path or 'none'),
+              'restored_from': stage.restored_from or 'new reducer'}
+    level = 'OK' if rejected == 0 else 'WARN'
+    error = writer.error if writer is not None else None
+    if error is not None:   # the file on disk is the last good state
+        level = 'ERROR'
+        values['state_write_error'] = str(error)
+    message = f'wear {values["wear_um"]:.2f} +/- {values["wear_std_um"]:.2f} um'
+    if error is not None:
+        message = f'{error}; {message}'
+    if live is not None:
+        store_level, store_values = live.status()
+        values.update(store_values)
+        if store_level == 'ERROR' or (store_level == 'WARN' and level == 'OK'):
+            level = store_level
+        if store_level != 'OK':
+            message += '; fleet store: ' + (store_values.get('store_error')
+                                            or store_values['store_busy'])
+    return level, message, values
+
+
+def ingest_statuses(counts, rejected):
+    """
+    Return the ``encoder_ingest`` statuses, one per joint, from its rule counts.
+
+    Parameters
+    ----------
+    counts : dict
+        Per joint, the count of every ingestion rule and ``published``.
+    rejected : int
+        Malformed messages dropped.
+
+    Returns
+    -------
+    list of tuple
+        ``(name, hardware_id, level, message, values)`` per joint: WARN once a sample
+        was dropped or repaired (unwrapping and steps are no fault).
+
+    """
+    statuses = []
+    for joint, c in counts.items():
+        bad = sum(v for k, v in c.items()
+                  if k not in ('published', 'step') and not k.endswith('_wrap'))
+        c['rejected_messages'] = rejected
+        statuses.append((f'reducer_twin: {joint} encoder ingest', joint,
+                         'OK' if bad == 0 else 'WARN',
+                         'streams clean' if bad == 0 else f'{bad} samples dropped or repaired',
+                         c))
+    return statuses

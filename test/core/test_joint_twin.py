@@ -1,0 +1,128 @@
+"""
+One joint's pipeline in the core (``reducer_twin.core.joint_twin``).
+
+Paired samples go in, frozen results come out: window features, the wear estimate, the
+remaining life and the health summary the nodes' ``/diagnostics`` and the bag analysis
+both show. The pieces the nodes drive one per node (:class:`TwinFront`,
+:class:`TwinBack`) give what the whole :class:`JointTwin` gives, and the defaults of a
+joint's processing are one validated spec.
+"""
+
+from dataclasses import FrozenInstanceError
+
+import numpy as np
+import pytest
+from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
+from reducer_twin.core.joint_twin import TwinBack
+from reducer_twin.core.joint_twin import TwinConfig, TwinFront
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.simulator import JointSimulator, SimConfig
+
+PARAMS = ReducerParams()
+AGING = 180_000.0
+"""Seconds of wear exposure per stream second (50 h of wear per second)."""
+
+DIAGNOSTIC_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
+                   'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
+                   'rul_p90_censored', 'catalogue_life_h', 'exposure_h', 'updates',
+                   'rejected_updates', 'te_pp_arcmin', 'rejected_messages',
+                   'lost_motion_limit_arcmin']
+"""The key/values of a reducer's ``/diagnostics`` status, in order (README, nodes)."""
+
+
+@pytest.fixture(scope='module')
+def stream():
+    """Twenty seconds of one simulated joint at 250 Hz, in five pieces as a node takes it."""
+    sim = JointSimulator(PARAMS, SimConfig(rate_hz=250.0, aging_factor=AGING, seed=7,
+                                           exact_mesh=False, load_torque_nm=940.8))
+    b = sim.step(5000)
+    return [(b.t[k:k + 1000], b.motor_angle[k:k + 1000], b.link_angle[k:k + 1000],
+             b.effort[k:k + 1000], b.link_velocity[k:k + 1000]) for k in range(0, 5000, 1000)]
+
+
+@pytest.fixture(scope='module')
+def updates(stream):
+    twin = JointTwin('joint_1', PARAMS, TwinConfig(aging_factor=AGING))
+    out = [u for piece in stream for u in twin.update(*piece)]
+    return out + twin.flush()
+
+
+def test_a_joint_twin_gives_a_frozen_update_per_window(updates):
+    assert len(updates) >= 4
+    u = updates[-1]
+    assert u.wear.status in ('accepted', 'rejected', 'recovered', 'skipped')
+    assert u.wear.record['stamp_s'] == u.features.t_end == u.record['window_end_s']
+    assert u.life.level in ('OK', 'WARN', 'ERROR', 'STALE')
+    for frozen, field in ((u, 'wear'), (u.wear, 'status'), (u.life, 'level'),
+                          (u.summary, 'wear_um'), (u.features, 'te_pp')):
+        with pytest.raises(FrozenInstanceError):
+            setattr(frozen, field, None)
+    with pytest.raises(TypeError):
+        u.wear.record['wear_m'] = 0.0          # the records are read-only views too
+
+
+def test_the_pieces_one_per_node_give_what_the_whole_twin_gives(stream, updates):
+    # te_monitor holds a TwinFront; wear_estimator and life_publisher the two halves of a
+    # TwinBack; the bag analysis a TwinFront per joint and a TwinBack in a worker.
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=AGING))
+    back = TwinBack(PARAMS)
+    records = [front.record(f) for piece in stream for f in front.update(*piece)]
+    records += [front.record(f) for f in front.flush()]
+    assert [r['window_end_s'] for r in records] == [u.record['window_end_s'] for u in updates]
+    for record, u in zip(records, updates):
+        wear, life = back.step(record)
+        assert list(wear.record) == list(u.wear.record)
+        np.testing.assert_array_equal(list(wear.record.values()), list(u.wear.record.values()))
+        np.testing.assert_array_equal(list(life.record.values()), list(u.life.record.values()))
+        assert back.summary(wear, life).as_dict().keys() == u.summary.as_dict().keys()
+
+
+def test_the_health_summary_is_the_diagnostic_status_in_its_documented_order(updates):
+    summary = updates[-1].summary
+    level, message, values = summary.diagnostic()
+    assert list(values) == DIAGNOSTIC_KEYS
+    assert (level, message) == (summary.level, summary.message)
+    assert values['te_pp_arcmin'] == pytest.approx(updates[-1].record['te_pp_rad']
+                                                   * 10800.0 / np.pi, rel=1e-12)
+    assert 'te_pp_arcmin' not in HealthSummary.of(updates[0].wear.record, updates[0].life
+                                                  ).as_dict()
+
+
+def test_rejected_messages_turn_an_ok_with_a_finite_life_into_a_warning(updates):
+    ok = [u.summary for u in updates if u.summary.level == 'OK' and
+          np.isfinite(u.summary.rul_p10_h)]
+    assert ok, 'the simulated reducer is healthy'
+    assert ok[-1].diagnostic(rejected_messages=3)[0] == 'WARN'
+    assert ok[-1].diagnostic(rejected_messages=0)[0] == 'OK'
+
+
+def test_a_twin_that_saw_no_window_says_stale_never_ok():
+    wear, life = TwinBack(PARAMS).start(0.0)
+    assert wear.status == 'start' and life.level == 'STALE'
+    assert life.message.startswith('not observed')
+
+
+def test_the_topics_of_a_joint_are_named_in_one_place():
+    assert joint_topic('wrist', 'te_features') == '/reducer_twin/wrist/te_features'
+
+
+@pytest.mark.parametrize('name, value, message', [
+    ('window_s', 0.0, r'twin\.window_s must be in \(0, 3600\] s'),
+    ('max_gap_s', -0.05, r'twin\.max_gap_s must be in \(0, 3600\] s'),
+    ('aging_factor', -1.0, r'twin\.aging_factor must be in \[0, 1e\+09\]'),
+    ('analysis_period_s', float('nan'), r'twin\.analysis_period_s must be'),
+])
+def test_a_bad_joint_setting_is_refused_naming_it(name, value, message):
+    with pytest.raises(InvalidParameter, match=message):
+        TwinConfig(**{name: value})
+
+
+def test_an_unobserved_reducer_has_no_number_in_the_summaries_and_an_observed_one_has(updates):
+    # analyze --json and the fleet's live segments say the same numbers (estimate_numbers).
+    u = updates[-1]
+    seen = estimate_numbers(u.wear.record, u.life.record, observed=True)
+    assert seen['wear_um'] == pytest.approx(u.summary.wear_um, rel=1e-12)
+    assert seen['rul_p50_h'] == pytest.approx(u.summary.rul_p50_h, rel=1e-12)
+    assert set(estimate_numbers(u.wear.record, u.life.record, observed=False).values()) == {None}
+    assert set(estimate_numbers({}, {}, observed=True).values()) == {None}
