@@ -33,7 +33,7 @@ file. Once the time offset applies, the motor angle of each piece's last link sa
 extrapolated over the offset (the link encoder samples 50 µs after its stamp), so no
 sample is lost at piece boundaries, live or offline.
 
-Speed: the estimator and life stages (filterpy and 2000-sample life predictions per
+Speed: the estimator and life stages (the Kalman step and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
 next chunk (``stage_worker=True``), and the bag can be read and decoded a few chunks
 ahead by a second forked process (``reader_process=True``); results are identical.

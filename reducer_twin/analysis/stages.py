@@ -43,31 +43,6 @@ _FLUSH = '!flush'
 """Control messages of the worker protocol."""
 
 
-def warm_up_estimator():
-    """
-    Import the estimator's libraries (filterpy, a second of imports) on a background thread.
-
-    For a process that runs the estimator stages itself (no stage worker): the imports
-    proceed while the bag is opened and its first chunk read and analysed, instead of
-    when the first window reaches the estimator.
-
-    Returns
-    -------
-    threading.Thread
-        The importing thread (a daemon).
-
-    """
-    import threading
-
-    def load():
-        from reducer_twin.core import estimator, life  # noqa: F401
-        from filterpy.kalman import MerweScaledSigmaPoints  # noqa: F401
-
-    thread = threading.Thread(target=load, name='estimator-import', daemon=True)
-    thread.start()
-    return thread
-
-
 class JointFront:
     """The ``te_monitor`` part of one joint, and the spike rule of ``encoder_ingest``."""
 
@@ -378,7 +353,6 @@ def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
         # Warm up while the parent imports, opens the bag and reads the first chunk.
-        from filterpy.kalman import MerweScaledSigmaPoints  # noqa: F401
         from reducer_twin.core import estimator, life  # noqa: F401
         local = LocalBacks()
         while True:
@@ -405,7 +379,7 @@ class WorkerBacks:
     """
     Estimator and life stages in a forked worker process (the same results as local).
 
-    Fork it early (before the bag is opened): the worker imports filterpy while this
+    Fork it early (before the bag is opened): the worker warms up while this
     process gets ready. One worker serves bags one after the other
     (:meth:`configure` ... :meth:`finish` per bag, :meth:`close` at the end).
     """

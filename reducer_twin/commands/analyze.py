@@ -202,16 +202,14 @@ def run(args):
     single = len(args.bags) == 1
     names = _names(args.bags)
     outs, reports = _check_outputs(args, names)
-    from reducer_twin.analysis.stages import warm_up_estimator, WorkerBacks
+    from reducer_twin.analysis.stages import WorkerBacks
     from reducer_twin.commands.common import reuse_freed_memory
     reuse_freed_memory()
-    # Forked before the rest is imported: the worker loads filterpy meanwhile.
+    # Forked before the rest is imported: the worker loads the estimator meanwhile.
     jobs = min(args.jobs, len(args.bags))
     fleet = args.store is not None or args.engine == 'ray'
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) and \
         args.engine == 'local' else None
-    if worker is None and jobs == 1 and args.engine == 'local':
-        warm_up_estimator()     # the estimator runs here: its imports overlap the reading
     workers = {}
     try:
         settings = _settings(args)

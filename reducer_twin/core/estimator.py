@@ -77,7 +77,7 @@ sum of Gaussian components (Alspach & Sorenson 1972), 0.5 apart over
 2). Each component is an unscented filter on the full state (Julier &
 Uhlmann 1997; scaled points of Wan & van der Merwe 2000,
 ``α = 1, β = 2, κ = 0``: all mean weights positive, points at ±2σ, the
-weights from filterpy's ``MerweScaledSigmaPoints``) whose weight follows its
+weights of :func:`~.sigma_points.merwe_weights`, filterpy's numbers) whose weight follows its
 predictive likelihood. Components whose weight falls below ``exp(-23)`` of
 the best are dropped and components whose means come within a third of a
 standard deviation are merged (moment matching), so a few filters run once
@@ -136,6 +136,7 @@ import numpy as np
 from .errors import InvalidInput, StateFileError
 from .growth import GrowthTrend
 from .params import _Validated, spec
+from .sigma_points import merwe_weights
 from .transmission_error import model_tables
 from .units import ARCMIN, HOUR, UM
 from .wear import _run_in_map, run_in_factor
@@ -596,15 +597,11 @@ class WearEstimator:
     """
 
     def __init__(self, params, config=None):
-        # filterpy's scaled sigma points give the weights (imported here: filterpy pulls in
-        # scipy.stats, about a second, which life.py does not need).
-        from filterpy.kalman import MerweScaledSigmaPoints
         self.params = params
         self.config = config or EstimatorConfig()
         self._h = lost_motion_curve(params)
-        points = MerweScaledSigmaPoints(N_FILTER, alpha=SIGMA_ALPHA, beta=SIGMA_BETA,
-                                        kappa=SIGMA_KAPPA)
-        self._wm, self._wc = np.asarray(points.Wm), np.asarray(points.Wc)
+        # The scaled sigma points' weights (filterpy's MerweScaledSigmaPoints, same numbers).
+        self._wm, self._wc = merwe_weights(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         self._spread = math.sqrt(SIGMA_ALPHA ** 2 * (N_FILTER + SIGMA_KAPPA))
         self._lw, self._m, self._P = prior_components(self.config)
         self._growth = GrowthTrend()

@@ -94,9 +94,7 @@ def stop(temp_dir=None):
 def _task(item, chain, settings, overwrite):
     """Body of a bag's Ray task: analyse it, continuing its robot's chain."""
     import ray
-    from reducer_twin.analysis.stages import warm_up_estimator
     from reducer_twin.fleet.history import analyse_in_chain
-    warm_up_estimator()
     node = ray.get_runtime_context().get_node_id()
     return analyse_in_chain(item, chain, settings, overwrite, node=node)
 
