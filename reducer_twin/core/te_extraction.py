@@ -696,11 +696,11 @@ class WindowAnalyzer:
     the harmonics from the hysteresis, and windows that cover part of a
     revolution still separate them from the torque dependence. They are
     fitted only on samples whose load surely exceeds the catalogue's
-    lost-motion test torque (noise band
-    and viscous friction counted against it): below it the play is still
-    being taken up, the flank's level follows the load, and an unloaded
-    joint's load follows its position in the move, which the harmonics
-    would then absorb at the cost of the hysteresis.
+    lost-motion test torque (noise band and viscous friction counted
+    against it): below it the play is still being taken up, the flank's
+    level follows the load, and an unloaded joint's load follows its
+    position in the move, which the harmonics would then absorb at the cost
+    of the hysteresis.
 
     Parameters
     ----------
@@ -1087,26 +1087,22 @@ class WindowAnalyzer:
                                                  ends)
         torque, band = self._smooth_torque(torque, t, win, starts, ends)
         if model is not None:
-            torque, band = self._toward_model(torque, band, model, starts, ends)
-        if drag is not None:
-            # Viscous friction of the motor side and drag of the link both follow the
-            # speed; the effort cannot tell them apart: the torque lies between the two
-            # readings (all of it subtracted, or none).
-            low = np.minimum(np.abs(torque), np.abs(torque + drag))
-            low = np.where(torque * (torque + drag) > 0.0, low, 0.0) - band
-        else:
-            low = np.abs(torque) - band
-        # Where the load may be inside the band, the noise or the friction picks the flank.
-        ambiguous = low <= 0.0
-        if drag is not None:
-            # Nor is the level known where the drag decides whether the load is beyond the
-            # lost-motion test torque (the play taken up) or below it.
-            high = np.maximum(np.abs(torque), np.abs(torque + drag))
-            ambiguous |= (high - np.abs(drag) < self.takeup_torque) & (high > self.takeup_torque)
+            torque, band = self._toward_model(torque, band, model, win, starts)
+        # Viscous friction of the motor side and drag of the link both follow the speed;
+        # the effort cannot tell them apart: the torque lies between the two readings
+        # (all of it subtracted, or none; the same without friction taken out).
+        kept = torque + drag if drag is not None else torque
+        low = np.where(torque * kept > 0.0, np.minimum(np.abs(torque), np.abs(kept)), 0.0) - band
+        # Where the load may be inside the band, the noise or the friction picks the flank;
+        # nor is the level known where the drag decides whether the load is beyond the
+        # lost-motion test torque (the play taken up) or below it.
+        high = np.maximum(np.abs(torque), np.abs(kept))
+        ambiguous = (low <= 0.0) | ((high - np.abs(kept - torque) < self.takeup_torque)
+                                    & (high > self.takeup_torque))
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
         x = z[:-1]
-        stats = self._group_stats(z, torque, win, starts, ends, ambiguous)
+        stats = self._group_stats(z, torque, win, starts, ends, ambiguous, normal=False)
         # The harmonics and the time offset come from samples whose load surely takes the
         # play up (beyond the lost-motion test torque): below it the flank's level still
         # follows the load, which an unloaded joint's position in the move mirrors.
@@ -1253,7 +1249,7 @@ class WindowAnalyzer:
                 model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
         return out, drag, model
 
-    def _toward_model(self, torque, band, model, starts, ends):
+    def _toward_model(self, torque, band, model, win, starts):
         """
         Combine the smoothed torque with the rigid-body load model, weighted by their errors.
 
@@ -1282,7 +1278,6 @@ class WindowAnalyzer:
                     / np.maximum(n_ok, 1))
         miss = np.maximum(miss, 1e-6 * self.rated_torque ** 2)
         miss = np.where(n_ok > 0, miss, np.inf)
-        win = np.repeat(np.arange(starts.size), ends - starts)
         with np.errstate(invalid='ignore'):
             gain = np.where(ok, miss[win] / (miss[win] + sigma2), 1.0)
         gain = np.where(np.isfinite(gain), gain, 1.0)
@@ -1337,14 +1332,15 @@ class WindowAnalyzer:
         period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
         return int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
 
-    def _group_stats(self, z, torque, win, starts, ends, exclude=None):
+    def _group_stats(self, z, torque, win, starts, ends, exclude=None, normal=True):
         """
         Sum the regressors per group ``(window, |T| bin, torque sign)`` and per window.
 
         Each group gets a straight line in ``u = |T| - bin centre``; its
         projection is eliminated from the normal equations algebraically
         (``Z^T Z - Σ_g S_g^T M_g^-1 S_g``), so no residual array is formed.
-        Samples outside the bins take no part.
+        Samples outside the bins take no part. With ``normal=False`` only the
+        group sums are formed (the hysteresis needs no normal equations).
         """
         n_win = starts.size
         n_groups = n_win * 2 * self.torque_bins
@@ -1369,11 +1365,17 @@ class WindowAnalyzer:
         count = np.bincount(g_run, np.diff(np.append(first, gid.size)), n_groups + 1)[:-1]
         s0 = group_sums(z)
         s1 = group_sums(u * z)
+        su, suu = group_sums(u), group_sums(u * u)
         with np.errstate(invalid='ignore', divide='ignore'):
-            u_mean = np.where(count > 0, group_sums(u) / count, 0.0)
-            s_uu = group_sums(u * u) - count * u_mean ** 2
+            u_mean = np.where(count > 0, su / count, 0.0)
+            s_uu = suu - count * u_mean ** 2
             sloped = (count >= 3) & (s_uu > 1e-12 * count * self.centres.max() ** 2)
             s1c = s1 - u_mean[:, None] * s0
+        groups = {'count': count, 'u_mean': u_mean, 's_uu': s_uu, 'sloped': sloped,
+                  's0': s0, 's1c': s1c, 'su': su, 'suu': suu, 's1': s1}
+        if not normal:
+            return groups
+        with np.errstate(invalid='ignore', divide='ignore'):
             proj0 = np.where(count[:, None] > 0, s0 / np.sqrt(count)[:, None], 0.0)
             proj1 = np.where(sloped[:, None], s1c / np.sqrt(np.where(sloped, s_uu, 1.0))[:, None],
                              0.0)
@@ -1396,12 +1398,11 @@ class WindowAnalyzer:
         group_params = (count > 0).astype(float) + sloped
         inside = (ends - starts) - np.diff(out_bounds)
         return {
+            **groups,
             'moments': moments,
             'reduced': moments - correction,
             'energy': np.einsum('wii->wi', moments)[:, :-1],
             'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
-            'count': count, 'u_mean': u_mean, 's_uu': s_uu, 'sloped': sloped,
-            's0': s0, 's1c': s1c,
         }
 
     def _fit_harmonics(self, stats, n_win, te_mean, exposure):
@@ -1426,12 +1427,9 @@ class WindowAnalyzer:
         n_par = energy.shape[1]
         normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
         shape = (n_win, 2 * self.torque_bins)
-        count = stats['count'].reshape(shape)
-        u_mean = stats['u_mean'].reshape(shape)
-        s0 = stats['s0'].reshape(shape + (-1,))
-        raw = {'moments': stats['moments'], 'count': count, 'su': count * u_mean,
-               'suu': stats['s_uu'].reshape(shape) + count * u_mean ** 2, 's0': s0,
-               's1': stats['s1c'].reshape(shape + (-1,)) + u_mean[..., None] * s0}
+        raw = {'moments': stats['moments'], 'count': stats['count'].reshape(shape),
+               'su': stats['su'].reshape(shape), 'suu': stats['suu'].reshape(shape),
+               's0': stats['s0'].reshape(shape + (-1,)), 's1': stats['s1'].reshape(shape + (-1,))}
         pool_n = np.empty((n_win, n_par, n_par))
         pool_r = np.empty((n_win, n_par))
         pool_raw = np.empty((n_win, n_par))
