@@ -3,7 +3,6 @@
 import json
 from pathlib import Path
 import shutil
-import sqlite3
 
 from cli_runs import run_cli as _run
 from mcap.reader import make_reader
@@ -29,6 +28,7 @@ from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 from reducer_twin.msg_adapters.multiarray_cdr import decode_layout_batch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
+from sqlite3_bags import humble_qos, write_joint_states_db3
 import yaml
 
 REAL_BAGS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'rosbag2-jazzy'
@@ -353,21 +353,8 @@ def test_a_sqlite3_bag_with_integer_qos_becomes_an_mcap_bag(sim, analysed, tmp_p
                                           js.effort)
     root = tmp_path / 'humble'
     root.mkdir()
-    qos = ('- history: 3\n  depth: 0\n  reliability: 1\n  durability: 2\n  deadline:\n'
-           '    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n'
-           '    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n'
-           '    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false')
-    with sqlite3.connect(root / 'humble_0.db3') as db:
-        db.execute('CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT '
-                   'NOT NULL, serialization_format TEXT NOT NULL, offered_qos_profiles TEXT '
-                   'NOT NULL)')
-        db.execute('CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, '
-                   'timestamp INTEGER NOT NULL, data BLOB NOT NULL)')
-        db.execute('INSERT INTO topics VALUES (1, ?, ?, ?, ?)',
-                   ('/joint_states', JOINT_STATE, 'cdr', qos))
-        db.executemany('INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?, ?)',
-                       [(int(js.stamps_ns[i]), buffer[offsets[i]:offsets[i + 1]].tobytes())
-                        for i in range(len(js))])
+    write_joint_states_db3(root / 'humble_0.db3', js.stamps_ns, buffer, offsets,
+                           humble_qos(reliability=1))
     # A bag of an older distribution has no aging factor: a real robot's, 1 (the default).
     config = tmp_path / 'twin.yaml'
     config.write_text(f'twin:\n  aging_factor: {AGING}\n')

@@ -2,7 +2,6 @@
 
 from pathlib import Path
 import shutil
-import sqlite3
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -15,6 +14,7 @@ from reducer_twin.io.rosbag2_metadata import bag_metadata, dump_yaml
 from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import get_typestore, Stores
+from sqlite3_bags import humble_qos, write_joint_states_db3
 import yaml
 
 REAL_BAGS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'rosbag2-jazzy'
@@ -344,21 +344,9 @@ def test_a_sqlite3_jointstate_bag_of_an_older_distribution_reads_like_mcap(tmp_p
     buffer, offsets = encode_joint_states(batch.stamps_ns, batch.names, batch.position)
     root = tmp_path / 'humble'
     root.mkdir()
-    qos = ('- history: 3\n  depth: 0\n  reliability: 2\n  durability: 2\n  deadline:\n'
-           '    sec: 9223372036\n    nsec: 854775807\n  lifespan:\n    sec: 9223372036\n'
-           '    nsec: 854775807\n  liveliness: 1\n  liveliness_lease_duration:\n'
-           '    sec: 9223372036\n    nsec: 854775807\n  avoid_ros_namespace_conventions: false')
-    with sqlite3.connect(root / 'humble_0.db3') as db:
-        db.execute('CREATE TABLE topics(id INTEGER PRIMARY KEY, name TEXT NOT NULL, type TEXT '
-                   'NOT NULL, serialization_format TEXT NOT NULL, offered_qos_profiles TEXT '
-                   'NOT NULL)')
-        db.execute('CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, '
-                   'timestamp INTEGER NOT NULL, data BLOB NOT NULL)')
-        db.execute('INSERT INTO topics VALUES (1, ?, ?, ?, ?)',
-                   ('/joint_states', JOINT_STATE, 'cdr', qos))
-        db.executemany('INSERT INTO messages(topic_id, timestamp, data) VALUES (1, ?, ?)',
-                       [(int(batch.stamps_ns[i]), buffer[offsets[i]:offsets[i + 1]].tobytes())
-                        for i in range(499, -1, -1)])
+    qos = humble_qos(reliability=2)
+    write_joint_states_db3(root / 'humble_0.db3', batch.stamps_ns, buffer, offsets, qos,
+                           order=range(499, -1, -1))
     info = {'version': 5, 'storage_identifier': 'sqlite3', 'relative_file_paths':
             ['humble/humble_0.db3'], 'duration': {'nanoseconds': 499_000_000},
             'starting_time': {'nanoseconds_since_epoch': T0}, 'message_count': 500,
