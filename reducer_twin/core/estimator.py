@@ -85,13 +85,8 @@ the rate is known.
 The estimate is the moment-matched mixture.
 
 A wide prior (a reducer of unknown history) makes the first update strongly
-nonlinear: the first update after the prior (or after a re-spread) is
-iterated by posterior linearisation (García-Fernández et al. 2015) while
-the prior sd of ``w + b`` exceeds 1 µm. Later updates are not: once the
-lost motion is seen, ``h(w + b) + c`` is pinned while the fit's bias ``c``
-still leaves ``w + b`` about 1 µm wide, and iterating there once walked a
-used unit's wear onto the new-unit bound in one window (14.5 µm to 0, with
-``b`` 11 µm and ``c`` 0.27 arcmin, a lost motion read 10 % low after).
+nonlinear: the update is iterated by posterior linearisation
+(García-Fernández et al. 2015) while the prior sd of ``w + b`` exceeds 1 µm.
 
 Persistent disagreement is never gated out. When the normalised
 innovations keep one sign (their exponential average beyond ±1.5 for two
@@ -627,7 +622,6 @@ class WearEstimator:
         self._wm, self._wc = merwe_weights(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         self._spread = math.sqrt(SIGMA_ALPHA ** 2 * (N_FILTER + SIGMA_KAPPA))
         self._lw, self._m, self._P = prior_components(self.config)
-        self._linearise = True
         self._growth = GrowthTrend()
         self._archard = 0.0
         self._observed_at = None
@@ -865,7 +859,6 @@ class WearEstimator:
         R_eff = (R + smear) * np.maximum(1.0, (nu + d2) / (nu + 1.0))
         self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)))
         self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz)
-        self._linearise = False
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
         self._project()
@@ -916,7 +909,7 @@ class WearEstimator:
         m = m0 + K * (z - zc)[:, None]
         P = P0 - np.einsum('ci,cj->cij', K, K) * S[:, None, None]
         wide = (P0[:, 0, 0] + P0[:, 2, 2] + 2.0 * P0[:, 0, 2]) > UM ** 2
-        if not (self._linearise and wide.any()):
+        if not wide.any():
             return m, P
         for _ in range(8):
             X = self._sigma(m[wide], P[wide])
@@ -973,7 +966,6 @@ class WearEstimator:
         self._lw -= _logsumexp(self._lw)
         self._trend = 0.0
         self._trend_count = 0
-        self._linearise = True
         self._counters['recoveries'] += 1
         self._counters['consecutive_rejected'] = 0
 
@@ -1078,7 +1070,6 @@ class WearEstimator:
         if not isinstance(reason, str) or not reason.strip():
             raise InvalidInput(f'reset reason must be a non-empty string, got {reason!r}')
         self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
-        self._linearise = True
         self._growth = GrowthTrend()
         self._archard = 0.0
         self._score = 0.0
@@ -1305,7 +1296,6 @@ class WearEstimator:
             'archard_exposure': float(self._archard),
             'trend_score': [float(self._score), int(self._scored)],
             'trend': [float(self._trend), int(self._trend_count)],
-            'linearise': bool(self._linearise),
             'exposure_s': self._exposure_s,
             'exposure_since_reset_s': self._exposure_since_reset_s,
             'duty_increment': self._duty['increment'],
@@ -1414,7 +1404,6 @@ class WearEstimator:
         est._score, est._scored = score
         est._noise = noise
         est._trend, est._trend_count = trend
-        est._linearise = bool(d.get('linearise', version == 1))
         est._exposure_s = scalars['exposure_s']
         est._exposure_since_reset_s = scalars['exposure_since_reset_s']
         est._duty = {'increment': scalars['duty_increment'],
