@@ -305,11 +305,10 @@ def run_in_free_wear(wear, wear_params):
         S(w) [m], strictly increasing.
 
     """
-    grid_w, grid_s = _run_in_map(wear_params)
+    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
     w = np.asarray(wear, dtype=float)
     s = np.interp(w, grid_w, grid_s)
     s = np.where(w < 0.0, w, s)
-    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
     return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
 
 
@@ -330,12 +329,24 @@ def wear_from_run_in_free(free_wear, wear_params):
         Combined wear w [m].
 
     """
-    grid_w, grid_s = _run_in_map(wear_params)
+    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
     s = np.asarray(free_wear, dtype=float)
     w = np.interp(s, grid_s, grid_w)
     w = np.where(s < 0.0, s, w)
-    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
     return np.where(s > grid_s[-1], grid_w[-1] + (s - grid_s[-1]) * g_end, w)
+
+
+@lru_cache(maxsize=16)
+def _run_in_free_map(wear_params):
+    """
+    Return the run-in map's grids ``(w, S)`` [m] and the settled rate factor beyond them.
+
+    ``g_end = g(w_max)``, the rate factor where the table ends (the slope of ``W(S)``
+    beyond it), with the grids of :func:`.wear._run_in_map`.
+    """
+    grid_w, grid_s = _run_in_map(wear_params)
+    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
+    return grid_w, grid_s, g_end
 
 
 class LostMotionCurve:
