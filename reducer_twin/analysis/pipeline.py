@@ -36,8 +36,8 @@ sample is lost at piece boundaries, live or offline.
 Speed: the estimator and life stages (the Kalman step and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
 next chunk (``stage_worker=True``); the worker then also runs the TE extraction and window
-analysis of every other joint (their paired samples go to it, their TE batches and window
-records come back to be written here). The bag can be read and decoded a few chunks
+analysis of every third joint (:data:`WORKER_FRONT_EVERY`; their paired samples go to it,
+their TE batches and window records come back to be written here). The bag can be read and decoded a few chunks
 ahead by a second forked process (``reader_process=True``); results are identical.
 """
 
@@ -77,6 +77,15 @@ CHUNK_MESSAGES = 1 << 17
 
 REPORT_TE_POINTS = 20_000
 """TE samples per joint kept for the report plots (evenly thinned)."""
+
+WORKER_FRONT_EVERY = 3
+"""
+With a stage worker, the front of every third joint (the 2nd, the 5th, ...) runs in it.
+
+The worker also runs every joint's estimator and life stages; on a 6-joint robot at
+1 kHz two fronts there balance the CPU of the two processes (measured: three put
+the worker behind).
+"""
 
 DERIVED_BYTES_PER_SAMPLE = 36
 """Bytes of derived bag per joint and JointState message, uncompressed (measured: 34.7)."""
@@ -814,10 +823,11 @@ class _Run:
         keep = max(1, count // REPORT_TE_POINTS)
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)
                        for j in plan.joints}
-        # With a worker, every other joint's front runs there (its paired samples go
-        # through the pipe): the two processes share the window analysis.
-        self.remote = set(plan.joints[1::2]) if isinstance(backs, WorkerBacks) else set()
-        for joint in plan.joints[1::2] if self.remote else ():
+        # With a worker, some joints' fronts run there (their paired samples go through
+        # the pipe): the two processes share the window analysis.
+        remote = plan.joints[1::WORKER_FRONT_EVERY] if isinstance(backs, WorkerBacks) else ()
+        self.remote = set(remote)
+        for joint in remote:
             backs.add_front(joint, settings, aging, _motor_scale(settings, joint), keep)
         self.results = {j: JointResult(j) for j in plan.joints}
         self.features = {j: [] for j in plan.joints}
