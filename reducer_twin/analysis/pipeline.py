@@ -37,8 +37,9 @@ Speed: the estimator and life stages (the Kalman step and 2000-sample life predi
 window) can run in a forked worker process while this process cleans and analyses the
 next chunk (``stage_worker=True``); the worker then also runs the TE extraction and window
 analysis of every third joint (:data:`WORKER_FRONT_EVERY`; their paired samples go to it,
-their TE batches and window records come back to be written here). The bag can be read and decoded a few chunks
-ahead by a second forked process (``reader_process=True``); results are identical.
+their TE batches and window records come back to be written here). The bag can be read
+and decoded a few chunks ahead by a second forked process (``reader_process=True``);
+results are identical.
 """
 
 from dataclasses import dataclass, field
