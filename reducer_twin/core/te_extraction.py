@@ -1354,14 +1354,22 @@ class WindowAnalyzer:
         """
         n_win = starts.size
         n_groups = n_win * 2 * self.torque_bins
-        size = np.abs(torque)
-        b = np.searchsorted(self.edges, size, side='right') - 1
-        outside = (b < 0) | (b >= self.torque_bins)
-        if exclude is not None:
-            outside |= exclude
-        b = np.clip(b, 0, self.torque_bins - 1)
+        # The bins, u and u·z do not depend on ``exclude``: the window analysis asks twice
+        # for the same samples (the hysteresis' groups, then the harmonics'), once they do.
+        binned = getattr(self, '_binned', None)
+        if binned is not None and binned[0] is z and binned[1] is torque:
+            b, beyond, u, uz = binned[2:]
+            self._binned = None
+        else:
+            size = np.abs(torque)
+            b = np.searchsorted(self.edges, size, side='right') - 1
+            beyond = (b < 0) | (b >= self.torque_bins)
+            b = np.clip(b, 0, self.torque_bins - 1)
+            u = size - self.centres[b]
+            uz = u * z
+            self._binned = (z, torque, b, beyond, u, uz)
+        outside = beyond | exclude if exclude is not None else beyond
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
-        u = size - self.centres[b]
         # The smoothed torque stays in one bin for tens of samples: sum over those runs of
         # one group first (contiguous), then add the runs of each group.
         first = np.flatnonzero(np.concatenate([[True], gid[1:] != gid[:-1]]))
@@ -1374,7 +1382,7 @@ class WindowAnalyzer:
             return np.stack([np.bincount(g_run, r, n_groups + 1)[:-1] for r in runs], axis=1)
         count = np.bincount(g_run, np.diff(np.append(first, gid.size)), n_groups + 1)[:-1]
         s0 = group_sums(z)
-        s1 = group_sums(u * z)
+        s1 = group_sums(uz)
         su, suu = group_sums(u), group_sums(u * u)
         with np.errstate(invalid='ignore', divide='ignore'):
             u_mean = np.where(count > 0, su / count, 0.0)
