@@ -1126,13 +1126,18 @@ class WearEstimator:
         """Estimated lost motion of this unit when new, ``h(b)`` [rad]."""
         return float(self._h(self._x[2]))
 
-    def lost_motion(self):
+    def lost_motion(self, trend=None):
         """
         Return the estimated lost motion of the unit now and its sd [rad].
 
         The wear model's ``h(w + b)`` over the mixture, mixed with the observed
         growth law's ``β + k`` with the probability that the law holds
         (:attr:`trend_probability`).
+
+        Parameters
+        ----------
+        trend : tuple, optional
+            :meth:`growth_trend`, when asked for already (the same numbers).
 
         Returns
         -------
@@ -1149,7 +1154,7 @@ class WearEstimator:
         var = max(float(w @ (szz + (zc - mean) ** 2)), 0.0)
         p = self.trend_probability
         if p > 0.0:
-            m, cov = self._growth.summary()
+            m, cov = self._growth.summary() if trend is None else trend[1:3]
             t_mean, t_var = m[0] + m[1], cov[0, 0] + cov[1, 1] + 2.0 * cov[0, 1]
             mixed = p * t_mean + (1.0 - p) * mean
             var = p * (t_var + (t_mean - mixed) ** 2) + (1.0 - p) * (var + (mean - mixed) ** 2)

@@ -291,7 +291,8 @@ class EstimatorStage:
         """
         est = self.estimator
         x, P = est.x, est.P
-        lm, lm_std = est.lost_motion()
+        trend = est.growth_trend()
+        lm, lm_std = est.lost_motion(trend)
         rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
             'rate_scale': est.rate_scale, 'rate_scale_std': est.rate_scale_std,
@@ -304,7 +305,7 @@ class EstimatorStage:
             'log_rate_drift_per_s': est.config.log_rate_scale_noise_density}
         for (i, j), key in _COVARIANCE_KEYS.items():
             rec[key] = float(P[i, j])
-        probability, mean, cov, exposure = est.growth_trend()
+        probability, mean, cov, exposure = trend
         rec['archard_exposure_m'] = exposure
         rec['trend_probability'] = probability
         for i, key in enumerate(_TREND_KEYS):
