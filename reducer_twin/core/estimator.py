@@ -835,7 +835,8 @@ class WearEstimator:
         c = self.config
         nu = c.robust_dof
         smear = self._smear()
-        R = self.noise_scale * sigma2 + smear
+        rho = self.noise_scale
+        R = rho * sigma2 + smear
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
         _, _, zc, szz, cxz = self._moments(X, self._hx(X))
@@ -845,7 +846,7 @@ class WearEstimator:
         w /= w.sum()
         z_mix = float(w @ zc)
         v_mix = float(w @ (szz + smear + (zc - z_mix) ** 2))
-        R = self.noise_scale * sigma2
+        R = rho * sigma2
         y = z - z_mix
         nis = y * y / (v_mix + R)
         loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
@@ -955,13 +956,26 @@ class WearEstimator:
         if self._lw.size > 1:
             order = np.argsort(self._m[:, 1], kind='stable')
             lw, m, P = self._lw[order], self._m[order], self._P[order]
+            # Each neighbour's pair, solved at once (the same LAPACK solve per pair); a
+            # pair after a merge is solved on its own.
+            gaps = m[1:] - m[:-1]
+            try:
+                solved = np.linalg.solve(P[:-1] + P[1:], gaps[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                solved = None
             out = [[lw[0], m[0], P[0]]]
+            merged = False
             for k in range(1, lw.size):
                 a = out[-1]
-                d = m[k] - a[1]
+                if merged or solved is None:
+                    d = m[k] - a[1]
+                    x = np.linalg.solve(a[2] + P[k], d)
+                else:
+                    d, x = gaps[k - 1], solved[k - 1]
                 # Means within a third of a standard deviation of each other (Mahalanobis
                 # distance under the summed covariance): one component does.
-                if d @ np.linalg.solve(a[2] + P[k], d) <= MERGE_DISTANCE ** 2:
+                merged = d @ x <= MERGE_DISTANCE ** 2
+                if merged:
                     both = np.array([a[0], lw[k]])
                     mm, pp = mixture_moments(both, np.array([a[1], m[k]]), np.array([a[2], P[k]]))
                     out[-1] = [_logsumexp(both), mm, pp]
