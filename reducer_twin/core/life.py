@@ -322,10 +322,17 @@ class LifeDraws:
         return self.pick.shape[0]
 
 
-def _trend_times(trend, limit, duty_rate, normal):
-    """Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``."""
+def _trend_times(trend, limit, duty_rate, normal, rows=None):
+    """
+    Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``.
+
+    With ``rows``, only those samples' times (``duty_rate`` given for them alone); the
+    draws are made for all, so each sample's time is the one of the whole set.
+    """
     draws = np.asarray(trend.mean, dtype=float) + normal @ _covariance_root(
         np.asarray(trend.cov, dtype=float)).T
+    if rows is not None:
+        draws = draws[rows]
     beta, k = draws[:, 0], draws[:, 1]
     g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
@@ -442,8 +449,9 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
             drift = np.sqrt(rate_drift * np.minimum(t, 10.0 * horizon_s) / 3.0)
             t = t * np.exp(-drift * draws.drift)
         if p_trend > 0.0:
-            t_trend = _trend_times(trend, limit, duty * duty_rate, draws.trend)
-            t = np.where(draws.pick < p_trend, t_trend, t)
+            # The samples that follow the growth law (a share p_trend) get its times.
+            rows = np.flatnonzero(draws.pick < p_trend)
+            t[rows] = _trend_times(trend, limit, duty[rows] * duty_rate, draws.trend, rows)
     capped = np.minimum(t, horizon_s)
     p10, p50, p90 = (float(v) for v in np.quantile(capped, [0.1, 0.5, 0.9]))
     return LifePrediction(
