@@ -36,7 +36,7 @@ sample is lost at piece boundaries, live or offline.
 Speed: the estimator and life stages (the Kalman step and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
 next chunk (``stage_worker=True``); the worker then also runs the TE extraction and window
-analysis of every third joint (:data:`WORKER_FRONT_EVERY`; their paired samples go to it,
+analysis of every sixth joint (:data:`WORKER_FRONT_EVERY`; their paired samples go to it,
 their TE batches and window records come back to be written here). The bag can be read
 and decoded a few chunks ahead by a second forked process (``reader_process=True``);
 results are identical.
@@ -79,13 +79,14 @@ CHUNK_MESSAGES = 1 << 17
 REPORT_TE_POINTS = 20_000
 """TE samples per joint kept for the report plots (evenly thinned)."""
 
-WORKER_FRONT_EVERY = 3
+WORKER_FRONT_EVERY = 6
 """
-With a stage worker, the front of every third joint (the 2nd, the 5th, ...) runs in it.
+With a stage worker, the front of every sixth joint (the 2nd, the 8th, ...) runs in it.
 
-The worker also runs every joint's estimator and life stages; on a 6-joint robot at
-1 kHz two fronts there balance the CPU of the two processes (measured: three put
-the worker behind).
+The worker also runs every joint's estimator and life stages (about as much CPU per
+joint as a front), and it starts only once the first chunk is read and paired: on a
+6-joint robot at 1 kHz one front there lets both processes end together (measured:
+with two, this process waited 0.3-0.4 s for the worker at the end).
 """
 
 DERIVED_BYTES_PER_SAMPLE = 36
@@ -830,6 +831,9 @@ class _Run:
         self.remote = set(remote)
         for joint in remote:
             backs.add_front(joint, settings, aging, _motor_scale(settings, joint), keep)
+        # (column index, joint), the worker's first: it starts on a chunk while this
+        # process analyses its own joints.
+        self.order = sorted(enumerate(plan.joints), key=lambda kj: kj[1] not in self.remote)
         self.results = {j: JointResult(j) for j in plan.joints}
         self.features = {j: [] for j in plan.joints}
         self.back_out = {j: [] for j in plan.joints}
@@ -909,7 +913,8 @@ class _Run:
             else:
                 self._split(link_clean, motor_clean, link, chunk[plan.motor_topic])
             self._drain(self.backs.poll())
-        for joint, front in self.fronts.items():
+        for _, joint in self.order:
+            front = self.fronts[joint]
             if plan.motor_topic is not None:
                 pairs = front.pairer.pop(final=True)
                 self._feed(joint, pairs.t_ns, pairs.motor_angle, pairs.link_angle, pairs.effort,
@@ -933,7 +938,7 @@ class _Run:
             return
         pos, vel, eff = _columns(link, names)
         clean = cleaner.process(link.stamps_ns, pos, vel, eff)
-        for k, joint in enumerate(self.plan.joints):
+        for k, joint in self.order:
             front = self.fronts[joint]
             cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale,
                                           self.settings.effort_source, front.effort_scale)
@@ -947,7 +952,7 @@ class _Run:
         if motor is not None and len(motor):
             clean_motor = motor_clean.process(motor.stamps_ns,
                                               *_columns(motor, self.plan.motor_names))
-        for k, joint in enumerate(self.plan.joints):
+        for k, joint in self.order:
             front = self.fronts[joint]
             if clean_link is not None:
                 front.pairer.add_link(clean_link.column(k))

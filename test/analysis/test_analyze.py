@@ -249,7 +249,7 @@ def test_a_motor_step_of_more_than_half_a_turn_is_fed_in_the_nodes_pieces_until_
 
 
 def test_the_worker_and_reader_processes_give_identical_results(sim, analysed, tmp_path):
-    # With a worker, joint_2's front runs there too (every third joint's does).
+    # With a worker, joint_2's front runs there too (every sixth joint's does).
     _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
     _same_results(analyze_bag(sim[0], tmp_path / 'r', stage_worker=True, reader_process=True),
                   analysed)
