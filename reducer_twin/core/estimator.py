@@ -988,8 +988,22 @@ class WearEstimator:
         self._refresh()
 
     def _refresh(self):
-        """Recompute the moment-matched estimate (the read-only views)."""
-        self._x, self._Px = mixture_moments(self._lw, self._m, self._P)
+        """Mark the moment-matched estimate (the read-only views) stale after a change."""
+        self._mixture = None
+
+    @property
+    def _x(self):
+        return self._estimate()[0]
+
+    @property
+    def _Px(self):
+        return self._estimate()[1]
+
+    def _estimate(self):
+        """Return the moment-matched ``(x, P)``, computed when first read after a change."""
+        if self._mixture is None:
+            self._mixture = mixture_moments(self._lw, self._m, self._P)
+        return self._mixture
 
     def step(self, features):
         """
