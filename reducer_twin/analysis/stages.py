@@ -50,7 +50,7 @@ _ADD_FRONT = '!add_front'
 """Control messages of the worker protocol."""
 
 FRONT_OUTPUT = '!front'
-"""Marks what a joint's front in the worker produced: ``(FRONT_OUTPUT, joint, JointOutput)``."""
+"""Marks what a joint's front in the worker produced (see :meth:`LocalBacks.submit`)."""
 
 
 class JointFront:
