@@ -35,8 +35,11 @@ sample is lost at piece boundaries, live or offline.
 
 Speed: the estimator and life stages (the Kalman step and 2000-sample life predictions per
 window) can run in a forked worker process while this process cleans and analyses the
-next chunk (``stage_worker=True``), and the bag can be read and decoded a few chunks
-ahead by a second forked process (``reader_process=True``); results are identical.
+next chunk (``stage_worker=True``); the worker then also runs the TE extraction and window
+analysis of every sixth joint (:data:`WORKER_FRONT_EVERY`; their paired samples go to it,
+their TE batches and window records come back to be written here). The bag can be read
+and decoded a few chunks ahead by a second forked process (``reader_process=True``);
+results are identical.
 """
 
 from dataclasses import dataclass, field
@@ -46,7 +49,8 @@ import time
 
 import numpy as np
 from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
-from reducer_twin.analysis.stages import JointFront, LocalBacks, te_values, WorkerBacks
+from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, stamp_ns
+from reducer_twin.analysis.stages import te_values, WorkerBacks
 from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
@@ -64,7 +68,7 @@ from reducer_twin.msg_adapters.diagnostic_cdr import (
 from reducer_twin.msg_adapters.diagnostic_cdr import Status
 from reducer_twin.msg_adapters.dynamic_joint_state import InterfaceMap
 from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, MSGTYPE as JOINT_STATE
-from reducer_twin.msg_adapters.layouts import GROUND_TRUTH, record_values, REMAINING_LIFE, TE_BATCH
+from reducer_twin.msg_adapters.layouts import GROUND_TRUTH, REMAINING_LIFE, TE_BATCH
 from reducer_twin.msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
 from reducer_twin.msg_adapters.multiarray_cdr import MSGTYPE as MULTIARRAY
@@ -74,6 +78,16 @@ CHUNK_MESSAGES = 1 << 17
 
 REPORT_TE_POINTS = 20_000
 """TE samples per joint kept for the report plots (evenly thinned)."""
+
+WORKER_FRONT_EVERY = 6
+"""
+With a stage worker, the front of every sixth joint (the 2nd, the 8th, ...) runs in it.
+
+The worker also runs every joint's estimator and life stages (about as much CPU per
+joint as a front), and it starts only once the first chunk is read and paired: on a
+6-joint robot at 1 kHz one front there lets both processes end together (measured:
+with two, this process waited 0.3-0.4 s for the worker at the end).
+"""
 
 DERIVED_BYTES_PER_SAMPLE = 36
 """Bytes of derived bag per joint and JointState message, uncompressed (measured: 34.7)."""
@@ -790,10 +804,6 @@ class _Output:
                                 bounds)
 
 
-def _stamp_ns(t_s):
-    return int(round(float(t_s) * 1e9))
-
-
 class _Run:
     """The analysis of one opened bag."""
 
@@ -815,6 +825,15 @@ class _Run:
         keep = max(1, count // REPORT_TE_POINTS)
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)
                        for j in plan.joints}
+        # With a worker, some joints' fronts run there (their paired samples go through
+        # the pipe): the two processes share the window analysis.
+        remote = plan.joints[1::WORKER_FRONT_EVERY] if isinstance(backs, WorkerBacks) else ()
+        self.remote = set(remote)
+        for joint in remote:
+            backs.add_front(joint, settings, aging, _motor_scale(settings, joint), keep)
+        # (column index, joint), the worker's first: it starts on a chunk while this
+        # process analyses its own joints.
+        self.order = sorted(enumerate(plan.joints), key=lambda kj: kj[1] not in self.remote)
         self.results = {j: JointResult(j) for j in plan.joints}
         self.features = {j: [] for j in plan.joints}
         self.back_out = {j: [] for j in plan.joints}
@@ -894,14 +913,16 @@ class _Run:
             else:
                 self._split(link_clean, motor_clean, link, chunk[plan.motor_topic])
             self._drain(self.backs.poll())
-        for joint, front in self.fronts.items():
+        for _, joint in self.order:
+            front = self.fronts[joint]
             if plan.motor_topic is not None:
                 pairs = front.pairer.pop(final=True)
                 self._feed(joint, pairs.t_ns, pairs.motor_angle, pairs.link_angle, pairs.effort,
                            pairs.link_velocity)
-            self._windows(joint, front.flush())
-            for log_ns, values in front.te_messages(None, final=True):
-                self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+            if joint in self.remote:
+                self.backs.submit(joint, 'flush', None)
+            else:
+                self._front_output(joint, front.outputs(front.flush(), None, final=True))
         self._copy_truth()     # while the estimator worker finishes
         self._drain(self.backs.finish())
         self._finish(chunks, link_clean, motor_clean)
@@ -917,7 +938,7 @@ class _Run:
             return
         pos, vel, eff = _columns(link, names)
         clean = cleaner.process(link.stamps_ns, pos, vel, eff)
-        for k, joint in enumerate(self.plan.joints):
+        for k, joint in self.order:
             front = self.fronts[joint]
             cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale,
                                           self.settings.effort_source, front.effort_scale)
@@ -931,7 +952,7 @@ class _Run:
         if motor is not None and len(motor):
             clean_motor = motor_clean.process(motor.stamps_ns,
                                               *_columns(motor, self.plan.motor_names))
-        for k, joint in enumerate(self.plan.joints):
+        for k, joint in self.order:
             front = self.fronts[joint]
             if clean_link is not None:
                 front.pairer.add_link(clean_link.column(k))
@@ -944,24 +965,33 @@ class _Run:
     def _feed(self, joint, t_ns, motor, link, effort, velocity):
         if t_ns.size == 0:
             return
-        front = self.fronts[joint]
-        windows, rows = front.feed(np.asarray(t_ns, np.int64), motor, link, effort, velocity)
-        for log_ns, values in front.te_messages(rows):
-            self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
-        self._windows(joint, windows)
-
-    def _windows(self, joint, windows):
-        if not windows:
+        samples = (np.asarray(t_ns, np.int64), motor, link, effort, velocity)
+        if joint in self.remote:
+            self.backs.submit(joint, 'feed', samples)
             return
-        records = [self.fronts[joint].twin.record(f) for f in windows]
-        values = np.array([record_values(TE_FEATURES, r) for r in records])
-        self.features[joint].append(values)
-        self.out.arrays(joint, 'te_features', TE_FEATURES,
-                        [_stamp_ns(f.t_end) for f in windows], values)
-        self.backs.submit(joint, 'windows', records)
+        front = self.fronts[joint]
+        self._front_output(joint, front.outputs(*front.feed(*samples)))
+
+    def _front_output(self, joint, out):
+        """Write a front's TE batches and window records; its windows go to the back."""
+        for log_ns, values in out.te:
+            self.out.arrays(joint, 'te', TE_BATCH, log_ns, values)
+        if not out.records:
+            return
+        self.features[joint].append(out.values)
+        self.out.arrays(joint, 'te_features', TE_FEATURES, out.stamps_ns, out.values)
+        if joint not in self.remote:   # a front in the worker hands them over there
+            self.backs.submit(joint, 'windows', out.records)
 
     def _drain(self, done):
-        for joint, outputs in done:
+        for item in done:
+            if item[0] == FRONT_OUTPUT:
+                _, joint, out, state = item
+                self._front_output(joint, out)
+                if state is not None:   # its last feed: the counts and windows come home
+                    self.fronts[joint].take_feed_side(state)
+                continue
+            joint, outputs = item
             self.back_out[joint] += outputs
             log_ns = [o['log_ns'] for o in outputs]
             self.out.arrays(joint, 'wear', WEAR_ESTIMATE, log_ns, [o['wear'] for o in outputs])
@@ -1053,7 +1083,7 @@ class _Run:
             res.te = te_values(np.concatenate(front.report_te)[None])[0] \
                 if front.report_te else np.zeros((0, 4))
             if len(res.wear):
-                last_ns = max(last_ns, _stamp_ns(res.wear[-1][0]))
+                last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
             bad = sum(v for k, v in counts.items()

@@ -7,15 +7,21 @@ joint (TE extraction with the learnt encoder time offset, window analysis, TE ba
 2000-sample remaining-life prediction per window, with the life publisher's diagnostic
 key/values). The back stages run in this process (:class:`LocalBacks`) or in a forked
 worker (:class:`WorkerBacks`) that takes window records while this process reads and
-analyses the next chunk; both give identical results, since each stage sees the same
-records in the same order.
+analyses the next chunk; the worker can also run the front of some joints
+(:meth:`WorkerBacks.add_front`: it takes their paired samples and sends back their TE
+batches and window records). Both give identical results, since each stage sees the same
+samples and records in the same order.
 """
 
+from typing import NamedTuple
+
 import numpy as np
+from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
-from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, WEAR_ESTIMATE
+from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
+from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
 TE_BATCH_S = 0.1
 """Stream seconds of TE per ``te`` message (the node sends 20 ms batches)."""
@@ -40,7 +46,11 @@ _ERROR = '!error'
 
 _CONFIG = '!config'
 _FLUSH = '!flush'
+_ADD_FRONT = '!add_front'
 """Control messages of the worker protocol."""
+
+FRONT_OUTPUT = '!front'
+"""Marks what a joint's front in the worker produced (see :meth:`LocalBacks.submit`)."""
 
 
 class JointFront:
@@ -135,6 +145,44 @@ class JointFront:
         """Windows completed so far."""
         return self.twin.windows
 
+    _FEED_SIDE = ('twin', 'extractor', 'calibration', 'analyzer', 'spikes', 'samples',
+                  'period_ns', 'report_te', '_te', '_te_n', '_kept')
+    """What :meth:`feed`, :meth:`flush` and :meth:`te_messages` change (not the pairing)."""
+
+    def feed_side(self):
+        """Return the state that feeding changed (for :meth:`take_feed_side`)."""
+        return {name: getattr(self, name) for name in self._FEED_SIDE}
+
+    def take_feed_side(self, state):
+        """Continue from the :meth:`feed_side` of a copy of this front fed elsewhere."""
+        for name, value in state.items():
+            setattr(self, name, value)
+
+    def outputs(self, windows, te_rows, final=False):
+        """
+        Return what windows and TE rows give for the derived bag and the back stages.
+
+        Parameters
+        ----------
+        windows : list of WindowFeatures
+            Completed windows.
+        te_rows : ndarray or None
+            TE rows of :meth:`feed`.
+        final : bool
+            Send the last, partial TE batch too.
+
+        Returns
+        -------
+        JointOutput
+            TE batches, ``te_features`` records, their stamps and values.
+
+        """
+        records = [self.twin.record(f) for f in windows]
+        values = np.array([record_values(TE_FEATURES, r) for r in records]) if records \
+            else np.zeros((0, len(TE_FEATURES.fields)))
+        return JointOutput(self.te_messages(te_rows, final), records,
+                           [stamp_ns(f.t_end) for f in windows], values)
+
     def _calibrating(self):
         """Whether the stream still goes in calibration pieces (time offset not learnt)."""
         return self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
@@ -202,6 +250,34 @@ class JointFront:
         self._te = [rest] if rest.shape[0] else []
         self._te_n = rest.shape[0]
         return out
+
+
+class JointOutput(NamedTuple):
+    """
+    What a joint's front gave for one feed: TE batches and window records.
+
+    Attributes
+    ----------
+    te : list of tuple
+        ``(log_times_ns, values[M, K, 4])`` of ``te`` messages (:meth:`JointFront.te_messages`).
+    records : list of dict
+        ``te_features`` records of the completed windows.
+    stamps_ns : list of int
+        Their log times (the windows' ends).
+    values : ndarray
+        The records in layout order, (windows, fields).
+
+    """
+
+    te: list
+    records: list
+    stamps_ns: list
+    values: np.ndarray
+
+
+def stamp_ns(t_s):
+    """Return a stamp [s] as integer nanoseconds (the log time of a derived message)."""
+    return int(round(float(t_s) * 1e9))
 
 
 def _cut_free(t_ns, motor, link):
@@ -289,10 +365,10 @@ class JointBack:
     def _outputs(self, wear, life):
         level, message, values = self.twin.summary(wear, life).diagnostic()
         # Encoded here: in a worker process this work leaves the reading process.
-        stamp_ns = int(round(float(wear.record['stamp_s']) * 1e9))
-        diagnostics = encode_diagnostic_array(stamp_ns, [Status(
+        log_ns = stamp_ns(wear.record['stamp_s'])
+        diagnostics = encode_diagnostic_array(log_ns, [Status(
             level, reducer_status_name(self.joint), message, self.joint, values)])
-        return {'status': wear.status, 'log_ns': stamp_ns, 'level': level,
+        return {'status': wear.status, 'log_ns': log_ns, 'level': level,
                 'wear': record_values(WEAR_ESTIMATE, wear.record),
                 'life': record_values(REMAINING_LIFE, life.record), 'diagnostics': diagnostics}
 
@@ -321,10 +397,35 @@ class LocalBacks:
         self.initial = dict(states or {})
         self.states = {}
         self.backs = {}
+        self.fronts = {}
         self._done = []
 
+    def add_front(self, joint, front):
+        """Run the front of ``joint`` here (a :class:`JointFront`; see :meth:`submit`)."""
+        self.fronts[joint] = front
+
     def submit(self, joint, kind, items):
-        """Process ``'start'`` (a stamp [s]) or ``'windows'`` (``te_features`` records)."""
+        """
+        Process work of one joint.
+
+        ``'start'``: a stamp [s]; ``'windows'``: ``te_features`` records. For a joint
+        whose front runs here (:meth:`add_front`): ``'feed'``, its paired samples
+        ``(t_ns, motor, link, effort, velocity)``, and ``'flush'`` (None), closing
+        its last window; each gives ``(FRONT_OUTPUT, joint, JointOutput, state)``
+        (``state`` the front's :meth:`JointFront.feed_side` after the flush, else
+        None) and the back stages' outputs of its windows.
+        """
+        if kind in ('feed', 'flush'):
+            front = self.fronts[joint]
+            if kind == 'feed':
+                out = front.outputs(*front.feed(*items))
+            else:
+                out = front.outputs(front.flush(), None, final=True)
+            self._done.append((FRONT_OUTPUT, joint, out,
+                               front.feed_side() if kind == 'flush' else None))
+            if out.records:
+                self.submit(joint, 'windows', out.records)
+            return
         back = self.backs.get(joint)
         if back is None:
             params = self.params[joint] if isinstance(self.params, dict) else self.params
@@ -361,6 +462,8 @@ def _back_worker(inbox, outbox):
                 break
             if item[0] == _CONFIG:
                 local.configure(item[1], item[2], item[3])
+            elif item[0] == _ADD_FRONT:
+                local.add_front(item[1], JointFront(*item[1:]))
             elif item[0] == _FLUSH:
                 done = local.finish()
                 for joint_done in done:
@@ -370,6 +473,8 @@ def _back_worker(inbox, outbox):
                 local.submit(*item)
                 for done in local.poll():
                     outbox.put(done)
+    except ReducerTwinError as err:   # a joint's data refused: the parent raises it as is
+        outbox.put((_ERROR, err))
     except BaseException as err:  # noqa: B902 - reported to the parent, which raises
         import traceback
         outbox.put((_ERROR, f'{type(err).__name__}: {err}\n{traceback.format_exc()}'))
@@ -380,8 +485,9 @@ class WorkerBacks:
     Estimator and life stages in a forked worker process (the same results as local).
 
     Fork it early (before the bag is opened): the worker warms up while this
-    process gets ready. One worker serves bags one after the other
-    (:meth:`configure` ... :meth:`finish` per bag, :meth:`close` at the end).
+    process gets ready. It can run joints' fronts too (:meth:`add_front`). One worker
+    serves bags one after the other (:meth:`configure` ... :meth:`finish` per bag,
+    :meth:`close` at the end).
     """
 
     def __init__(self):
@@ -404,6 +510,15 @@ class WorkerBacks:
         self.states = {}
         self._inbox.put((_CONFIG, params, life_config, states))
 
+    def add_front(self, joint, settings, aging_factor, motor_scale, keep_every):
+        """
+        Run the front of ``joint`` in the worker (a :class:`JointFront` of these arguments).
+
+        Its paired samples then go to :meth:`submit` as ``'feed'`` work, and its
+        windows to the worker's back stages directly (see :meth:`LocalBacks.submit`).
+        """
+        self._inbox.put((_ADD_FRONT, joint, settings, aging_factor, motor_scale, keep_every))
+
     def submit(self, joint, kind, items):
         """Send work (see :meth:`LocalBacks.submit`)."""
         self._inbox.put((joint, kind, items))
@@ -411,6 +526,8 @@ class WorkerBacks:
     @staticmethod
     def _take(item):
         if item[0] == _ERROR:
+            if isinstance(item[1], ReducerTwinError):
+                raise item[1]
             raise RuntimeError(f'the estimator worker failed: {item[1]}')
         return item
 

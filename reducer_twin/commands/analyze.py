@@ -202,10 +202,12 @@ def run(args):
     single = len(args.bags) == 1
     names = _names(args.bags)
     outs, reports = _check_outputs(args, names)
+    # Forked once the analysis is imported: the worker then has every class it is sent
+    # (the settings of the joints whose fronts it runs) instead of importing them again.
+    import reducer_twin.analysis.pipeline  # noqa: F401
     from reducer_twin.analysis.stages import WorkerBacks
     from reducer_twin.commands.common import reuse_freed_memory
     reuse_freed_memory()
-    # Forked before the rest is imported: the worker loads the estimator meanwhile.
     jobs = min(args.jobs, len(args.bags))
     fleet = args.store is not None or args.engine == 'ray'
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) and \

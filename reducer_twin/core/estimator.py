@@ -323,11 +323,10 @@ def run_in_free_wear(wear, wear_params):
         S(w) [m], strictly increasing.
 
     """
-    grid_w, grid_s = _run_in_map(wear_params)
+    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
     w = np.asarray(wear, dtype=float)
     s = np.interp(w, grid_w, grid_s)
     s = np.where(w < 0.0, w, s)
-    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
     return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
 
 
@@ -348,12 +347,24 @@ def wear_from_run_in_free(free_wear, wear_params):
         Combined wear w [m].
 
     """
-    grid_w, grid_s = _run_in_map(wear_params)
+    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
     s = np.asarray(free_wear, dtype=float)
     w = np.interp(s, grid_s, grid_w)
     w = np.where(s < 0.0, s, w)
-    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
     return np.where(s > grid_s[-1], grid_w[-1] + (s - grid_s[-1]) * g_end, w)
+
+
+@lru_cache(maxsize=16)
+def _run_in_free_map(wear_params):
+    """
+    Return the run-in map's grids ``(w, S)`` [m] and the settled rate factor beyond them.
+
+    ``g_end = g(w_max)``, the rate factor where the table ends (the slope of ``W(S)``
+    beyond it), with the grids of :func:`.wear._run_in_map`.
+    """
+    grid_w, grid_s = _run_in_map(wear_params)
+    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
+    return grid_w, grid_s, g_end
 
 
 class LostMotionCurve:
@@ -842,7 +853,8 @@ class WearEstimator:
         c = self.config
         nu = c.robust_dof
         smear = self._smear()
-        R = self.noise_scale * sigma2 + smear
+        rho = self.noise_scale
+        R = rho * sigma2 + smear
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
         _, _, zc, szz, cxz = self._moments(X, self._hx(X))
@@ -852,7 +864,7 @@ class WearEstimator:
         w /= w.sum()
         z_mix = float(w @ zc)
         v_mix = float(w @ (szz + smear + (zc - z_mix) ** 2))
-        R = self.noise_scale * sigma2
+        R = rho * sigma2
         y = z - z_mix
         nis = y * y / (v_mix + R)
         loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
@@ -994,13 +1006,26 @@ class WearEstimator:
         if self._lw.size > 1:
             order = np.argsort(self._m[:, 1], kind='stable')
             lw, m, P = self._lw[order], self._m[order], self._P[order]
+            # Each neighbour's pair, solved at once (the same LAPACK solve per pair); a
+            # pair after a merge is solved on its own.
+            gaps = m[1:] - m[:-1]
+            try:
+                solved = np.linalg.solve(P[:-1] + P[1:], gaps[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                solved = None
             out = [[lw[0], m[0], P[0]]]
+            merged = False
             for k in range(1, lw.size):
                 a = out[-1]
-                d = m[k] - a[1]
+                if merged or solved is None:
+                    d = m[k] - a[1]
+                    x = np.linalg.solve(a[2] + P[k], d)
+                else:
+                    d, x = gaps[k - 1], solved[k - 1]
                 # Means within a third of a standard deviation of each other (Mahalanobis
                 # distance under the summed covariance): one component does.
-                if d @ np.linalg.solve(a[2] + P[k], d) <= MERGE_DISTANCE ** 2:
+                merged = d @ x <= MERGE_DISTANCE ** 2
+                if merged:
                     both = np.array([a[0], lw[k]])
                     mm, pp = mixture_moments(both, np.array([a[1], m[k]]), np.array([a[2], P[k]]))
                     out[-1] = [_logsumexp(both), mm, pp]
@@ -1013,8 +1038,22 @@ class WearEstimator:
         self._refresh()
 
     def _refresh(self):
-        """Recompute the moment-matched estimate (the read-only views)."""
-        self._x, self._Px = mixture_moments(self._lw, self._m, self._P)
+        """Mark the moment-matched estimate (the read-only views) stale after a change."""
+        self._mixture = None
+
+    @property
+    def _x(self):
+        return self._estimate()[0]
+
+    @property
+    def _Px(self):
+        return self._estimate()[1]
+
+    def _estimate(self):
+        """Return the moment-matched ``(x, P)``, computed when first read after a change."""
+        if self._mixture is None:
+            self._mixture = mixture_moments(self._lw, self._m, self._P)
+        return self._mixture
 
     def step(self, features):
         """
@@ -1165,13 +1204,18 @@ class WearEstimator:
         """Estimated lost motion of this unit when new, ``h(b)`` [rad]."""
         return float(self._h(self._x[2]))
 
-    def lost_motion(self):
+    def lost_motion(self, trend=None):
         """
         Return the estimated lost motion of the unit now and its sd [rad].
 
         The wear model's ``h(w + b)`` over the mixture, mixed with the observed
         growth law's ``β + k`` with the probability that the law holds
         (:attr:`trend_probability`).
+
+        Parameters
+        ----------
+        trend : tuple, optional
+            :meth:`growth_trend`, when asked for already (the same numbers).
 
         Returns
         -------
@@ -1188,7 +1232,7 @@ class WearEstimator:
         var = max(float(w @ (szz + (zc - mean) ** 2)), 0.0)
         p = self.trend_probability
         if p > 0.0:
-            m, cov = self._growth.summary()
+            m, cov = self._growth.summary() if trend is None else trend[1:3]
             t_mean, t_var = m[0] + m[1], cov[0, 0] + cov[1, 1] + 2.0 * cov[0, 1]
             mixed = p * t_mean + (1.0 - p) * mean
             var = p * (t_var + (t_mean - mixed) ** 2) + (1.0 - p) * (var + (mean - mixed) ** 2)

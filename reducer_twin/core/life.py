@@ -42,7 +42,6 @@ import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .estimator import lost_motion_curve, N_STATE, run_in_free_wear, unit_lost_motion
-from .estimator import wear_at_lost_motion
 from .growth import EXPONENTS
 from .transmission_error import model_tables
 from .units import ARCMIN, HOUR
@@ -169,11 +168,15 @@ def limit_wear(params, limit=LOST_MOTION_LIMIT):
         the table.
 
     """
-    curve = lost_motion_curve(params)
+    _check_limit(lost_motion_curve(params), limit)
+    return float(model_tables(params).wear_for_lost_motion(limit))
+
+
+def _check_limit(curve, limit):
+    """Refuse a limit [rad] outside the tabulated lost motion of ``curve``."""
     lo, hi = float(curve.lost_motion[0]), float(curve.lost_motion[-1])
     if not (math.isfinite(limit) and lo < limit <= hi):
         raise InvalidParameter(out_of_range('limit', limit, 'rad', f'in ({lo:.6g}, {hi:.6g}]'))
-    return float(model_tables(params).wear_for_lost_motion(limit))
 
 
 def event_state(wear, params, limit=LOST_MOTION_LIMIT, baseline=0.0):
@@ -201,9 +204,13 @@ def event_state(wear, params, limit=LOST_MOTION_LIMIT, baseline=0.0):
 
     """
     curve = lost_motion_curve(params)
+    return _event_state(curve, unit_lost_motion(wear, baseline, curve), limit, baseline)
+
+
+def _event_state(curve, lost_motion, limit, baseline):
+    """Event state of a unit of offset ``baseline`` [m] at ``lost_motion`` [rad]."""
     lm_new = float(curve(baseline))
-    lm = unit_lost_motion(wear, baseline, curve)
-    es = np.clip(1.0 - (lm - lm_new) / max(limit - lm_new, 1e-12), 0.0, 1.0)
+    es = np.clip(1.0 - (lost_motion - lm_new) / max(limit - lm_new, 1e-12), 0.0, 1.0)
     return float(es) if np.ndim(es) == 0 else es
 
 
@@ -256,10 +263,76 @@ class GrowthTrendState:
     exposure: float
 
 
-def _trend_times(trend, limit, duty_rate, normal):
-    """Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``."""
+@dataclass(frozen=True)
+class LifeDraws:
+    """
+    The random numbers of one remaining-life prediction, drawn once and reused.
+
+    Reusing the same draws for successive predictions gives common random numbers
+    (successive predictions differ by the state only) without drawing them again.
+
+    Attributes
+    ----------
+    state : ndarray, shape (n, 3)
+        Standard normals of the state ``[w, ln s, b]``.
+    duty, drift : ndarray, shape (n,)
+        Standard normals of the future duty rate and of the drift of ``ln s``.
+    trend : ndarray, shape (n, 3)
+        Standard normals of the observed growth law ``[β, k, g]``.
+    pick : ndarray, shape (n,)
+        Uniforms in [0, 1) choosing the growth law over the wear model.
+
+    """
+
+    state: np.ndarray
+    duty: np.ndarray
+    drift: np.ndarray
+    trend: np.ndarray
+    pick: np.ndarray
+
+    @classmethod
+    def draw(cls, n_samples, rng=None):
+        """
+        Draw the numbers of ``n_samples`` samples.
+
+        Parameters
+        ----------
+        n_samples : int
+            Number of samples (>= 1).
+        rng : numpy.random.Generator or int, optional
+            Random source or seed; default the fixed seed of :func:`remaining_life`.
+
+        Returns
+        -------
+        LifeDraws
+            The draws, as :func:`remaining_life` takes them from ``rng``.
+
+        """
+        if not isinstance(rng, np.random.Generator):
+            rng = np.random.default_rng(0 if rng is None else rng)
+        normal = rng.standard_normal((n_samples, N_STATE + 5))
+        pick = rng.random(n_samples)
+        columns = (normal[:, :N_STATE], normal[:, N_STATE], normal[:, N_STATE + 1],
+                   normal[:, N_STATE + 2:], pick)
+        return cls(*(np.ascontiguousarray(c) for c in columns))
+
+    @property
+    def n_samples(self):
+        """Return the number of samples."""
+        return self.pick.shape[0]
+
+
+def _trend_times(trend, limit, duty_rate, normal, rows=None):
+    """
+    Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``.
+
+    With ``rows``, only those samples' times (``duty_rate`` given for them alone); the
+    draws are made for all, so each sample's time is the one of the whole set.
+    """
     draws = np.asarray(trend.mean, dtype=float) + normal @ _covariance_root(
         np.asarray(trend.cov, dtype=float)).T
+    if rows is not None:
+        draws = draws[rows]
     beta, k = draws[:, 0], draws[:, 1]
     g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
@@ -271,7 +344,7 @@ def _trend_times(trend, limit, duty_rate, normal):
 
 def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_HORIZON_S,
                    n_samples=2000, rng=None, duty_rate_rel_std=0.0, keep_samples=False,
-                   rate_drift=0.0, trend=None):
+                   rate_drift=0.0, trend=None, draws=None):
     """
     Sample the remaining useful life under the recent duty.
 
@@ -313,6 +386,9 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         (``EstimatorConfig.log_rate_scale_noise_density``; 0: none).
     trend : GrowthTrendState, optional
         The observed growth law and its probability (None: the wear model alone).
+    draws : LifeDraws, optional
+        The random numbers, drawn before (``rng`` is then not used); the same
+        prediction as drawing them from the same source here.
 
     Returns
     -------
@@ -325,7 +401,7 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         If the state or trend is malformed or ``duty_rate`` negative or not finite.
     InvalidParameter
         If ``limit``, ``horizon_s``, ``n_samples``, ``duty_rate_rel_std`` or
-        ``rate_drift`` is out of range.
+        ``rate_drift`` is out of range, or ``draws`` hold another number of samples.
 
     """
     x, P = _state_arrays(state)
@@ -336,50 +412,54 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
     if isinstance(n_samples, bool) or int(n_samples) != n_samples or n_samples < 1:
         raise InvalidParameter(out_of_range('n_samples', n_samples, '', 'a whole number >= 1'))
     n_samples = int(n_samples)
+    if draws is not None and draws.n_samples != n_samples:
+        raise InvalidParameter(f'draws hold {draws.n_samples} samples, expected n_samples = '
+                               f'{n_samples}')
     if not (math.isfinite(duty_rate_rel_std) and duty_rate_rel_std >= 0.0):
         raise InvalidParameter(out_of_range('duty_rate_rel_std', duty_rate_rel_std, '', '>= 0'))
     if not (math.isfinite(rate_drift) and rate_drift >= 0.0):
         raise InvalidParameter(out_of_range('rate_drift', rate_drift, '1/s', '>= 0'))
     p_trend = _trend_probability(trend)
-    limit_wear(params, limit)  # the limit must lie inside the model's table
     curve = lost_motion_curve(params)
+    _check_limit(curve, limit)  # the limit must lie inside the model's table
     wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
-    w_lim = float(wear_at_lost_motion(limit, baseline, curve))
-    es = event_state(wear_mean, params, limit, baseline)
-    met = threshold_met(wear_mean, params, limit, baseline)
+    limit_curve_wear = curve.inverse(limit)   # h⁻¹(limit): w_lim = h⁻¹(limit) - b
+    w_lim = float(limit_curve_wear - baseline)
+    lm = unit_lost_motion(wear_mean, baseline, curve)
+    es = _event_state(curve, lm, limit, baseline)
+    met = bool(lm >= limit)
     if wear_mean >= w_lim or met:
         zeros = np.zeros(n_samples) if keep_samples else None
         return LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
                               float(horizon_s), w_lim, n_samples, zeros)
-    if not isinstance(rng, np.random.Generator):
-        rng = np.random.default_rng(0 if rng is None else rng)
-    normal = rng.standard_normal((n_samples, N_STATE + 5))
-    pick = rng.random(n_samples)
-    draws = x + normal[:, :N_STATE] @ _covariance_root(P).T
-    wear = np.maximum(draws[:, 0], 0.0)
-    lim = wear_at_lost_motion(limit, draws[:, 2], curve)
-    duty = np.exp(duty_rate_rel_std * normal[:, N_STATE])
+    if draws is None:
+        draws = LifeDraws.draw(n_samples, rng)
+    states = x + draws.state @ _covariance_root(P).T
+    wear = np.maximum(states[:, 0], 0.0)
+    lim = limit_curve_wear - states[:, 2]
+    duty = np.exp(duty_rate_rel_std * draws.duty)
     wp = params.wear
     remaining = run_in_free_wear(lim, wp) - run_in_free_wear(wear, wp)
-    speed = np.exp(draws[:, 1]) * duty * duty_rate
+    speed = np.exp(states[:, 1]) * duty * duty_rate
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = np.where(remaining <= 0.0, 0.0, remaining / speed)
-        t = np.where(np.isnan(t), np.inf, t)
+        t[np.isnan(t)] = np.inf
         if rate_drift > 0.0:
             # The mean of the drifting ln s over the time to the event.
             drift = np.sqrt(rate_drift * np.minimum(t, 10.0 * horizon_s) / 3.0)
-            t = t * np.exp(-drift * normal[:, N_STATE + 1])
+            t = t * np.exp(-drift * draws.drift)
         if p_trend > 0.0:
-            t_trend = _trend_times(trend, limit, duty * duty_rate, normal[:, N_STATE + 2:])
-            t = np.where(pick < p_trend, t_trend, t)
-    censored = t > horizon_s
+            # The samples that follow the growth law (a share p_trend) get its times.
+            rows = np.flatnonzero(draws.pick < p_trend)
+            t[rows] = _trend_times(trend, limit, duty[rows] * duty_rate, draws.trend, rows)
     capped = np.minimum(t, horizon_s)
     p10, p50, p90 = (float(v) for v in np.quantile(capped, [0.1, 0.5, 0.9]))
     return LifePrediction(
         p10=p10, p50=p50, p90=p90,
         p10_censored=p10 >= horizon_s, p50_censored=p50 >= horizon_s,
         p90_censored=p90 >= horizon_s,
-        mean=float(capped.mean()), fraction_censored=float(censored.mean()),
+        mean=float(capped.mean()),
+        fraction_censored=float(np.count_nonzero(t > horizon_s) / n_samples),
         limit_reached=False, event_state=es, threshold_met=met, horizon_s=float(horizon_s),
         wear_limit=w_lim, n_samples=n_samples, samples=capped if keep_samples else None)
 

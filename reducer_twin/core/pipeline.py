@@ -17,8 +17,8 @@ from types import SimpleNamespace
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter
-from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LOST_MOTION_LIMIT
-from .life import remaining_life
+from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
+from .life import LOST_MOTION_LIMIT, remaining_life
 from .params import _Validated, spec
 from .units import HOUR
 
@@ -291,7 +291,8 @@ class EstimatorStage:
         """
         est = self.estimator
         x, P = est.x, est.P
-        lm, lm_std = est.lost_motion()
+        trend = est.growth_trend()
+        lm, lm_std = est.lost_motion(trend)
         rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
             'rate_scale': est.rate_scale, 'rate_scale_std': est.rate_scale_std,
@@ -304,7 +305,7 @@ class EstimatorStage:
             'log_rate_drift_per_s': est.config.log_rate_scale_noise_density}
         for (i, j), key in _COVARIANCE_KEYS.items():
             rec[key] = float(P[i, j])
-        probability, mean, cov, exposure = est.growth_trend()
+        probability, mean, cov, exposure = trend
         rec['archard_exposure_m'] = exposure
         rec['trend_probability'] = probability
         for i, key in enumerate(_TREND_KEYS):
@@ -417,6 +418,7 @@ class LifeStage:
         self.n_samples = config.n_samples
         self.duty_rate_rel_std = config.duty_rate_rel_std
         self.duty = None
+        self._draws = None   # the same draws every prediction: drawn at the first
 
     def observe_duty(self, duty):
         """
@@ -463,9 +465,11 @@ class LifeStage:
                 and drift >= 0.0):
             raise InvalidInput(f'wear record holds a bad duty_rate_rel_std ({measured!r}) or '
                                f'log_rate_drift_per_s ({drift!r}): both must be finite and >= 0')
+        if self._draws is None:
+            self._draws = LifeDraws.draw(self.n_samples, np.random.default_rng(0))
         return remaining_life((x, P), rate, self.params, limit=self.limit,
                               horizon_s=self.horizon_s, n_samples=self.n_samples,
-                              rng=np.random.default_rng(0),
+                              draws=self._draws,
                               duty_rate_rel_std=float(np.hypot(measured, self.duty_rate_rel_std)),
                               keep_samples=keep_samples, rate_drift=drift,
                               trend=trend_from_record(wear_record))

@@ -1207,20 +1207,28 @@ class WindowAnalyzer:
         drag = np.zeros(n)
         model = np.full(n, np.nan)
         half = max(1, self._smoothing_half(t))
-        idx = np.arange(n)
         speed_s, count = _window_mean(speed, half, win, starts, ends)
         effort_s, _ = _window_mean(torque, half, win, starts, ends)
         # The acceleration from the smoothed speed over the averaging length (a two-sample
         # difference would add the speed's noise, amplified, to the load model), where the
         # averages at both ends are whole and in the same window.
         whole = count == 2 * half + 1
-        lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half, n - 1)
-        inner = whole[lo] & whole[hi] & (win[lo] == win[hi])
-        accel = np.where(inner, (speed_s[hi] - speed_s[lo])
-                         / np.maximum(t[hi] - t[lo], 1e-12), 0.0)
-        coulomb_shape = np.tanh(speed / _FRICTION_SPEED)
-        x = np.stack([np.ones(n), np.cos(theta), np.sin(theta), np.cos(2.0 * theta),
-                      np.sin(2.0 * theta), accel, coulomb_shape, speed])
+        inner = (_shifted(whole, -half) & _shifted(whole, half)
+                 & (_shifted(win, -half) == _shifted(win, half)))
+        accel = np.where(inner, (_shifted(speed_s, half) - _shifted(speed_s, -half))
+                         / np.maximum(_shifted(t, half) - _shifted(t, -half), 1e-12), 0.0)
+        # The regressors written in place: [1, cos, sin, cos 2theta, sin 2theta, accel,
+        # Coulomb shape, speed].
+        x = np.empty((_FRICTION_TERMS, n))
+        x[0] = 1.0
+        np.cos(theta, out=x[1])
+        np.sin(theta, out=x[2])
+        double = 2.0 * theta
+        np.cos(double, out=x[3])
+        np.sin(double, out=x[4])
+        x[5] = accel
+        coulomb_shape = np.tanh(np.divide(speed, _FRICTION_SPEED, out=x[6]), out=x[6])
+        x[7] = speed
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
@@ -1242,6 +1250,8 @@ class WindowAnalyzer:
             # The effort as the fit explains it, where its acceleration is whole (the
             # window's edges keep NaN); less the friction taken out, as the torque is.
             model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
+            if not (fc or fv):
+                continue    # nothing significant to take out
             typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
             if typical >= _FRICTION_FLOOR * self.rated_torque:
                 out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
@@ -1344,14 +1354,22 @@ class WindowAnalyzer:
         """
         n_win = starts.size
         n_groups = n_win * 2 * self.torque_bins
-        size = np.abs(torque)
-        b = np.searchsorted(self.edges, size, side='right') - 1
-        outside = (b < 0) | (b >= self.torque_bins)
-        if exclude is not None:
-            outside |= exclude
-        b = np.clip(b, 0, self.torque_bins - 1)
+        # The bins, u and u·z do not depend on ``exclude``: the window analysis asks twice
+        # for the same samples (the hysteresis' groups, then the harmonics'), once they do.
+        binned = getattr(self, '_binned', None)
+        if binned is not None and binned[0] is z and binned[1] is torque:
+            b, beyond, u, uz = binned[2:]
+            self._binned = None
+        else:
+            size = np.abs(torque)
+            b = np.searchsorted(self.edges, size, side='right') - 1
+            beyond = (b < 0) | (b >= self.torque_bins)
+            b = np.clip(b, 0, self.torque_bins - 1)
+            u = size - self.centres[b]
+            uz = u * z
+            self._binned = (z, torque, b, beyond, u, uz)
+        outside = beyond | exclude if exclude is not None else beyond
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
-        u = size - self.centres[b]
         # The smoothed torque stays in one bin for tens of samples: sum over those runs of
         # one group first (contiguous), then add the runs of each group.
         first = np.flatnonzero(np.concatenate([[True], gid[1:] != gid[:-1]]))
@@ -1364,7 +1382,7 @@ class WindowAnalyzer:
             return np.stack([np.bincount(g_run, r, n_groups + 1)[:-1] for r in runs], axis=1)
         count = np.bincount(g_run, np.diff(np.append(first, gid.size)), n_groups + 1)[:-1]
         s0 = group_sums(z)
-        s1 = group_sums(u * z)
+        s1 = group_sums(uz)
         su, suu = group_sums(u), group_sums(u * u)
         with np.errstate(invalid='ignore', divide='ignore'):
             u_mean = np.where(count > 0, su / count, 0.0)
@@ -1713,6 +1731,22 @@ def _window_mean(values, half, win, starts, ends):
     mean[edge] = (acc[hi] - acc[lo]) / (hi - lo)
     count[edge] = hi - lo
     return mean, count
+
+
+def _shifted(values, shift):
+    """Return ``values[clip(i + shift, 0, n - 1)]`` for every index ``i`` (slices, no gather)."""
+    n = values.size
+    out = np.empty_like(values)
+    if n == 0:
+        return out
+    k = min(abs(shift), n)
+    if shift >= 0:
+        out[:n - k] = values[k:]
+        out[n - k:] = values[-1]
+    else:
+        out[k:] = values[:n - k]
+        out[:k] = values[0]
+    return out
 
 
 def _window_edges(starts, ends, half):

@@ -72,6 +72,8 @@ def _same_results(a, b):
         np.testing.assert_array_equal(x.features, y.features)
         np.testing.assert_array_equal(x.wear, y.wear)
         np.testing.assert_array_equal(x.life, y.life)
+        np.testing.assert_array_equal(x.te, y.te)
+        assert x.levels == y.levels and x.counts == y.counts
         assert x.summary() == y.summary()
 
 
@@ -247,9 +249,17 @@ def test_a_motor_step_of_more_than_half_a_turn_is_fed_in_the_nodes_pieces_until_
 
 
 def test_the_worker_and_reader_processes_give_identical_results(sim, analysed, tmp_path):
+    # With a worker, joint_2's front runs there too (every sixth joint's does).
     _same_results(analyze_bag(sim[0], tmp_path / 'w', stage_worker=True), analysed)
     _same_results(analyze_bag(sim[0], tmp_path / 'r', stage_worker=True, reader_process=True),
                   analysed)
+
+
+def test_a_front_in_the_worker_pairs_split_topics_like_one_here(tmp_path):
+    spec = SimulationSpec(**{**SPEC.__dict__, 'layout': 'split', 'hours': 1000.0})
+    simulate_bag(tmp_path / 'split', spec)
+    here = analyze_bag(tmp_path / 'split', tmp_path / 'here')
+    _same_results(analyze_bag(tmp_path / 'split', tmp_path / 'worker', stage_worker=True), here)
 
 
 @pytest.mark.parametrize('reader_process', [False, True], ids=['one process', 'reader process'])

@@ -11,8 +11,8 @@ import pytest
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig, run_in_free_wear, WearEstimator
-from reducer_twin.core.life import (catalogue_life, event_state, GrowthTrendState, limit_wear,
-                                    LOST_MOTION_LIMIT, remaining_life, threshold_met)
+from reducer_twin.core.life import (catalogue_life, event_state, GrowthTrendState, LifeDraws,
+                                    limit_wear, LOST_MOTION_LIMIT, remaining_life, threshold_met)
 from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accuracy,
                                        interval_coverage, prognostic_horizon, relative_accuracy)
 from reducer_twin.core.params import ReducerParams
@@ -138,6 +138,26 @@ def test_the_default_rng_gives_the_same_answer_twice(params, rated_rate):
     a = remaining_life(state(5e-6, log_scale_sd=0.3), rated_rate, params)
     b = remaining_life(state(5e-6, log_scale_sd=0.3), rated_rate, params)
     assert a == b
+
+
+@pytest.mark.parametrize('seed', [None, 7])
+def test_draws_made_before_give_the_prediction_of_drawing_from_the_same_source(
+        params, rated_rate, seed):
+    # Every random number the prediction uses: duty, drift and the growth law included.
+    x, P = state(5e-6, wear_sd=1e-6, log_scale_sd=0.3)
+    args = {'duty_rate_rel_std': 0.2, 'rate_drift': 1e-9, 'trend': trend_state(0.4, 1.0),
+            'keep_samples': True}
+    drawn_here = remaining_life((x, P), rated_rate, params, rng=seed, **args)
+    draws = LifeDraws.draw(2000, seed)
+    for _ in range(2):   # reused: the draws are only read
+        drawn_before = remaining_life((x, P), rated_rate, params, draws=draws, **args)
+        assert drawn_before == drawn_here
+        np.testing.assert_array_equal(drawn_before.samples, drawn_here.samples)
+
+
+def test_draws_of_another_sample_count_are_refused(params, rated_rate):
+    with pytest.raises(InvalidParameter, match='draws hold 1000 samples'):
+        remaining_life(state(5e-6), rated_rate, params, draws=LifeDraws.draw(1000))
 
 
 def test_duty_uncertainty_widens_the_interval(params, rated_rate):

@@ -220,6 +220,15 @@ def test_predictions_are_repeatable_for_the_same_record(windows, worn_record):
     assert stage.process(worn_record) == stage.process(worn_record)
 
 
+def test_a_prediction_does_not_depend_on_the_records_predicted_before(worn_record):
+    # The stage draws its random numbers once and reuses them: a record gets the answer of
+    # a new stage, whatever the stage predicted before.
+    busy = LifeStage(PARAMS)
+    for wear_m in (1e-6, 3e-6, 200e-6):
+        busy.prediction({**worn_record, 'wear_m': wear_m})
+    assert busy.prediction(worn_record) == LifeStage(PARAMS).prediction(worn_record)
+
+
 def test_a_record_of_the_twin_before_per_unit_states_is_still_assessed(worn_record):
     # A derived bag of an older twin carries [w, ln s] only: a nominal unit, no trend.
     old = {k: worn_record[k] for k in (
