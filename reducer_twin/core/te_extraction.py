@@ -1578,7 +1578,10 @@ class WindowAnalyzer:
         ``compliance_prior/k_s``. ``c`` absorbs a stiffness that differs from
         the catalogue and the part of an unidentified 1x harmonic that is odd
         in torque (under gravity ``cos(theta)`` follows ``T``); wear is
-        measured by the level of ``H``, not its slope. The table is bilinear,
+        measured by the level of ``H``, not its slope. Each bin's standard
+        error includes a shape error that grows with its distance from the
+        test torque (:data:`_SHAPE_ERROR`): the level is read where the curve
+        is observed nearest the test torque. The table is bilinear,
         so the model is linear in ``(w, c)`` between wear nodes: the weighted
         sum of squares is minimised exactly on every interval at once. The
         standard error is scaled by the reduced chi-square when above 1.
@@ -1615,6 +1618,10 @@ class WindowAnalyzer:
         grid = self.tables.wear
         step = np.diff(grid)
         torque_b = np.where(usable, torque_b, self.centres)
+        # A bin far from the test torque says less about the lost motion there: its share of
+        # the curve's shape between the two is the model's, and a reducer may differ.
+        reach = 2.0 * np.abs(torque_b - self.takeup_torque) / self.tables.series_stiffness
+        sig_b = np.hypot(sig_b, _SHAPE_ERROR * reach)
         weight = np.where(usable, 1.0 / np.where(usable, sig_b, 1.0) ** 2, 0.0)[..., None]
         h_b = np.where(usable, h_b, 0.0)[..., None]
         model = self._hysteresis_table(torque_b.ravel()).reshape(torque_b.shape + grid.shape)
@@ -1649,6 +1656,20 @@ class WindowAnalyzer:
         return (wear, wear_std, self.tables.lost_motion(wear), np.abs(dlm) * wear_std,
                 comp[pick, best])
 
+
+_SHAPE_ERROR = 0.02
+"""
+Shape error of the hysteresis model: a fraction of the windup between a bin and the test torque.
+
+The wear fit extrapolates the observed widths to the catalogue's test torque along the
+model's curve ``H(|T|, w) + 2·|T|·c``. A reducer whose curve has another shape (a spring
+straighter or stiffer than the model's, a play taken up at another torque) is read wrong
+in proportion to how far the bins lie from the test torque: each bin's standard error gets
+``_SHAPE_ERROR · 2·| |T|_b - T_test |/k_s`` added in quadrature, so bins near the test
+torque decide the level where the window has them, and the reported standard error grows
+with the reach of the extrapolation where it has not. 0.02 from bench/bench_lost_motion.py
+(0.01-0.03 read alike; from 0.05 on, the noisier low bins near the takeup decide too much).
+"""
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
 
