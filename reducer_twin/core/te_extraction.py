@@ -816,6 +816,8 @@ class WindowAnalyzer:
         self._memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
         n_groups = 2 * self.torque_bins
         self._te_ref = None
+        self._pool_friction = np.zeros(2)
+        self._friction_taken = None
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
                       'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
@@ -1223,6 +1225,7 @@ class WindowAnalyzer:
                       np.sin(2.0 * theta), accel, coulomb_shape, speed])
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
+        self._friction_taken = np.zeros((starts.size, 3))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
             sel = use[a:b]
             xk = x[:, a:b][:, sel]
@@ -1242,11 +1245,15 @@ class WindowAnalyzer:
             # The effort as the fit explains it, where its acceleration is whole (the
             # window's edges keep NaN); less the friction taken out, as the torque is.
             model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
-            typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
+            rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
+            typical = fc + fv * rms_speed
+            self._friction_taken[k] = (fc, fv, rms_speed)
             if typical >= _FRICTION_FLOOR * self.rated_torque:
                 out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
                 drag[a:b] = fv * speed[a:b]
                 model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
+            else:
+                self._friction_taken[k, :2] = 0.0
         return out, drag, model
 
     def _toward_model(self, torque, band, model, win, starts):
@@ -1437,8 +1444,17 @@ class WindowAnalyzer:
         for k in range(n_win):
             # The windows' TE is centred on each one's mean: refer it to one level for the
             # pool (a jump of the TE's constant, where a turn count was lost, starts afresh).
-            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP:
+            # The torque that placed the samples in their flank groups is the effort less the
+            # friction taken out: where that changed by more than the flanks can absorb (the
+            # friction identified, a window after the first ones that carried all of it), the
+            # pooled groups mix two torques and start afresh too.
+            friction = self._friction_taken[k] if self.friction else np.zeros(3)
+            moved = (abs(friction[0] - self._pool_friction[0])
+                     + abs(friction[1] - self._pool_friction[1]) * friction[2])
+            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
+                    moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref = te_mean[k]
+                self._pool_friction = friction[:2].copy()
                 for value in pool.values():
                     value[...] = 0.0
             d = te_mean[k] - self._te_ref
@@ -1675,6 +1691,12 @@ _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
 
 _POOL_EXPOSURE_S = 100.0 * 3600.0
 """Operation [s] over which the pooled flank levels fade (the lost motion moves little)."""
+
+_POOL_FRICTION_JUMP = 0.01
+"""
+Change of the friction taken out of the effort [fraction of rated torque, at the window's
+RMS speed] for which the pooled fit restarts: its flank groups were formed with another torque.
+"""
 
 _POOL_JUMP = 0.01
 """Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
