@@ -818,6 +818,7 @@ class WindowAnalyzer:
         self._te_ref = None
         self._pool_friction = np.zeros(2)
         self._friction_taken = None
+        self._pooled_groups = None
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
                       'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
@@ -1441,6 +1442,9 @@ class WindowAnalyzer:
         pool_r = np.empty((n_win, n_par))
         pool_raw = np.empty((n_win, n_par))
         pool = self._pool
+        groups = {key: np.empty((n_win,) + pool[key].shape)
+                  for key in ('count', 'su', 'suu', 's0', 's1')}
+        groups['shift'] = np.empty(n_win)
         for k in range(n_win):
             # The windows' TE is centred on each one's mean: refer it to one level for the
             # pool (a jump of the TE's constant, where a turn count was lost, starts afresh).
@@ -1478,10 +1482,15 @@ class WindowAnalyzer:
             pool['stz'] -= pool['s0']
             for key, value in add.items():
                 pool[key] += value
+            for key, value in groups.items():
+                if key != 'shift':
+                    value[k] = pool[key]
+            groups['shift'][k] = d
             red = pool['moments'] - self._level_correction(pool)
             pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
             pool_raw[k] = np.diagonal(pool['moments'])[:-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
+        self._pooled_groups = groups
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
         for k in np.flatnonzero(free > 0).tolist():
@@ -1544,7 +1553,10 @@ class WindowAnalyzer:
         shape = (n_win, self.torque_bins, 2)
         count, u_mean, s_uu, sloped, level, slope = (
             a.reshape(shape) for a in (count, u_mean, s_uu, sloped, level, slope))
-        usable = (count >= self.min_bin_samples).all(axis=2)
+        own = count >= self.min_bin_samples
+        count, u_mean, s_uu, sloped, level, slope = self._borrow_flanks(
+            own, beta, (count, u_mean, s_uu, sloped, level, slope))
+        usable = (count >= self.min_bin_samples).all(axis=2) & own.any(axis=2)
         with np.errstate(invalid='ignore', divide='ignore'):
             u_eval = (count * u_mean).sum(axis=2) / count.sum(axis=2)
             lever = u_eval[..., None] - u_mean
@@ -1555,6 +1567,62 @@ class WindowAnalyzer:
         std = np.sqrt(var + _MODEL_SIGMA ** 2)
         usable &= np.isfinite(width) & np.isfinite(std)
         return u_eval + self.centres, width, std, usable
+
+    def _borrow_flanks(self, own, beta, flanks):
+        """
+        Flank lines from the pool for a window without a hysteresis of its own.
+
+        A window that met its loads under one sign only (the reversal fell into the
+        window before or after, as a 2 s window of a slow cycle often does) has too
+        few bins for a lost motion. The pool holds every ``(|T| bin, torque sign)``
+        flank of the recent windows (this one included) beyond the lost-motion test
+        torque, referred to one TE level: in such a window, a bin that the window met
+        under one sign and the pool under both takes both flank lines from the pool,
+        with this window's harmonics removed and moved to this window's TE level.
+        Both flanks then come from the same samples, so harmonics left in them
+        cancel as in a window's own bins; the pooled samples are older (the pool's
+        memory), over which the lost motion holds still as the pooled harmonic fit
+        already assumes. A window with enough bins of its own keeps them.
+
+        Parameters
+        ----------
+        own : ndarray of bool, shape (W, bins, 2)
+            Flanks with enough samples in the window itself.
+        beta : ndarray, shape (W, P)
+            Harmonic and time-offset coefficients per window.
+        flanks : tuple of ndarray, shape (W, bins, 2)
+            ``count, u_mean, s_uu, sloped, level, slope`` of the window's flanks.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``flanks`` with the pooled ones where they are taken.
+
+        """
+        groups = self._pooled_groups
+        if groups is None or groups['count'].shape[0] != own.shape[0]:
+            return flanks
+        shape = own.shape
+        n = groups['count'].reshape(shape)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            s0 = groups['s0'].reshape(shape + (-1,))
+            s1 = groups['s1'].reshape(shape + (-1,))
+            u_mean = groups['su'].reshape(shape) / n
+            s_uu = groups['suu'].reshape(shape) - n * u_mean ** 2
+            s1c = s1 - u_mean[..., None] * s0
+            b = beta[:, None, None, :]
+            level = ((s0[..., -1] - (s0[..., :-1] * b).sum(axis=-1)) / n
+                     - groups['shift'][:, None, None])
+            sloped = (n >= 3) & (s_uu > 1e-12 * n * self.centres.max() ** 2)
+            slope = np.where(sloped, (s1c[..., -1] - (s1c[..., :-1] * b).sum(axis=-1))
+                             / np.where(sloped, s_uu, 1.0), 0.0)
+        pooled = ((n >= self.min_bin_samples) & np.isfinite(level)).all(axis=2)
+        blind = own.all(axis=2).sum(axis=1) < self.min_bins
+        take = (pooled & own.any(axis=2) & blind[:, None])[..., None]
+        if not take.any():
+            return flanks
+        return tuple(np.where(take, p, f)
+                     for p, f in zip((n, u_mean, s_uu, sloped, level, slope), flanks))
 
     def _duty(self, torque, speed, dt, starts):
         """Duty summaries per window."""

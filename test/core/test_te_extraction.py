@@ -216,6 +216,16 @@ def test_lost_motion_is_recovered_within_2_percent_on_the_robot_profile(wear):
     assert wear_fit == pytest.approx(wear, abs=0.3 * UM)
 
 
+def test_a_window_whose_reversal_fell_into_its_neighbour_reads_the_pooled_flanks():
+    # Windows of 2 s cut a slow cycle so that some meet their loads under one sign only:
+    # 4 of 15 windows had no lost motion. The pool's flank lines (recent windows, this one
+    # included) complete their bins, both flanks from the same samples.
+    _, b = simulated(wear=10e-6, samples=30000)
+    lm = np.array([f.lost_motion for f in analyse(b)])
+    assert np.isfinite(lm).all() and lm.size == 15
+    np.testing.assert_allclose(lm, lost_motion(10e-6, PARAMS), rtol=0.03)
+
+
 def test_hysteresis_widths_follow_the_model_at_the_true_wear():
     _, b = simulated(wear=15e-6, samples=20000)
     tables = model_tables(PARAMS)
