@@ -816,6 +816,9 @@ class WindowAnalyzer:
         self._memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
         n_groups = 2 * self.torque_bins
         self._te_ref = None
+        self._pool_friction = np.zeros(2)
+        self._friction_taken = None
+        self._pooled_groups = None
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
                       'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
@@ -1231,6 +1234,7 @@ class WindowAnalyzer:
         x[7] = speed
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
+        self._friction_taken = np.zeros((starts.size, 3))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
             sel = use[a:b]
             xk = x[:, a:b][:, sel]
@@ -1250,13 +1254,17 @@ class WindowAnalyzer:
             # The effort as the fit explains it, where its acceleration is whole (the
             # window's edges keep NaN); less the friction taken out, as the torque is.
             model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
+            rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
+            self._friction_taken[k] = (fc, fv, rms_speed)
             if not (fc or fv):
                 continue    # nothing significant to take out
-            typical = fc + fv * float(np.sqrt(np.mean(speed[a:b] ** 2)))
+            typical = fc + fv * rms_speed
             if typical >= _FRICTION_FLOOR * self.rated_torque:
                 out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
                 drag[a:b] = fv * speed[a:b]
                 model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
+            else:
+                self._friction_taken[k, :2] = 0.0
         return out, drag, model
 
     def _toward_model(self, torque, band, model, win, starts):
@@ -1452,11 +1460,23 @@ class WindowAnalyzer:
         pool_r = np.empty((n_win, n_par))
         pool_raw = np.empty((n_win, n_par))
         pool = self._pool
+        groups = {key: np.empty((n_win,) + pool[key].shape)
+                  for key in ('count', 'su', 'suu', 's0', 's1')}
+        groups['shift'] = np.empty(n_win)
         for k in range(n_win):
             # The windows' TE is centred on each one's mean: refer it to one level for the
             # pool (a jump of the TE's constant, where a turn count was lost, starts afresh).
-            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP:
+            # The torque that placed the samples in their flank groups is the effort less the
+            # friction taken out: where that changed by more than the flanks can absorb (the
+            # friction identified, a window after the first ones that carried all of it), the
+            # pooled groups mix two torques and start afresh too.
+            friction = self._friction_taken[k] if self.friction else np.zeros(3)
+            moved = (abs(friction[0] - self._pool_friction[0])
+                     + abs(friction[1] - self._pool_friction[1]) * friction[2])
+            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
+                    moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref = te_mean[k]
+                self._pool_friction = friction[:2].copy()
                 for value in pool.values():
                     value[...] = 0.0
             d = te_mean[k] - self._te_ref
@@ -1480,10 +1500,15 @@ class WindowAnalyzer:
             pool['stz'] -= pool['s0']
             for key, value in add.items():
                 pool[key] += value
+            for key, value in groups.items():
+                if key != 'shift':
+                    value[k] = pool[key]
+            groups['shift'][k] = d
             red = pool['moments'] - self._level_correction(pool)
             pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
             pool_raw[k] = np.diagonal(pool['moments'])[:-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
+        self._pooled_groups = groups
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
         for k in np.flatnonzero(free > 0).tolist():
@@ -1546,7 +1571,10 @@ class WindowAnalyzer:
         shape = (n_win, self.torque_bins, 2)
         count, u_mean, s_uu, sloped, level, slope = (
             a.reshape(shape) for a in (count, u_mean, s_uu, sloped, level, slope))
-        usable = (count >= self.min_bin_samples).all(axis=2)
+        own = count >= self.min_bin_samples
+        count, u_mean, s_uu, sloped, level, slope = self._borrow_flanks(
+            own, beta, (count, u_mean, s_uu, sloped, level, slope))
+        usable = (count >= self.min_bin_samples).all(axis=2) & own.any(axis=2)
         with np.errstate(invalid='ignore', divide='ignore'):
             u_eval = (count * u_mean).sum(axis=2) / count.sum(axis=2)
             lever = u_eval[..., None] - u_mean
@@ -1557,6 +1585,62 @@ class WindowAnalyzer:
         std = np.sqrt(var + _MODEL_SIGMA ** 2)
         usable &= np.isfinite(width) & np.isfinite(std)
         return u_eval + self.centres, width, std, usable
+
+    def _borrow_flanks(self, own, beta, flanks):
+        """
+        Flank lines from the pool for a window without a hysteresis of its own.
+
+        A window that met its loads under one sign only (the reversal fell into the
+        window before or after, as a 2 s window of a slow cycle often does) has too
+        few bins for a lost motion. The pool holds every ``(|T| bin, torque sign)``
+        flank of the recent windows (this one included) beyond the lost-motion test
+        torque, referred to one TE level: in such a window, a bin that the window met
+        under one sign and the pool under both takes both flank lines from the pool,
+        with this window's harmonics removed and moved to this window's TE level.
+        Both flanks then come from the same samples, so harmonics left in them
+        cancel as in a window's own bins; the pooled samples are older (the pool's
+        memory), over which the lost motion holds still as the pooled harmonic fit
+        already assumes. A window with enough bins of its own keeps them.
+
+        Parameters
+        ----------
+        own : ndarray of bool, shape (W, bins, 2)
+            Flanks with enough samples in the window itself.
+        beta : ndarray, shape (W, P)
+            Harmonic and time-offset coefficients per window.
+        flanks : tuple of ndarray, shape (W, bins, 2)
+            ``count, u_mean, s_uu, sloped, level, slope`` of the window's flanks.
+
+        Returns
+        -------
+        tuple of ndarray
+            ``flanks`` with the pooled ones where they are taken.
+
+        """
+        groups = self._pooled_groups
+        if groups is None or groups['count'].shape[0] != own.shape[0]:
+            return flanks
+        shape = own.shape
+        n = groups['count'].reshape(shape)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            s0 = groups['s0'].reshape(shape + (-1,))
+            s1 = groups['s1'].reshape(shape + (-1,))
+            u_mean = groups['su'].reshape(shape) / n
+            s_uu = groups['suu'].reshape(shape) - n * u_mean ** 2
+            s1c = s1 - u_mean[..., None] * s0
+            b = beta[:, None, None, :]
+            level = ((s0[..., -1] - (s0[..., :-1] * b).sum(axis=-1)) / n
+                     - groups['shift'][:, None, None])
+            sloped = (n >= 3) & (s_uu > 1e-12 * n * self.centres.max() ** 2)
+            slope = np.where(sloped, (s1c[..., -1] - (s1c[..., :-1] * b).sum(axis=-1))
+                             / np.where(sloped, s_uu, 1.0), 0.0)
+        pooled = ((n >= self.min_bin_samples) & np.isfinite(level)).all(axis=2)
+        blind = own.all(axis=2).sum(axis=1) < self.min_bins
+        take = (pooled & own.any(axis=2) & blind[:, None])[..., None]
+        if not take.any():
+            return flanks
+        return tuple(np.where(take, p, f)
+                     for p, f in zip((n, u_mean, s_uu, sloped, level, slope), flanks))
 
     def _duty(self, torque, speed, dt, starts):
         """Duty summaries per window."""
@@ -1596,7 +1680,10 @@ class WindowAnalyzer:
         ``compliance_prior/k_s``. ``c`` absorbs a stiffness that differs from
         the catalogue and the part of an unidentified 1x harmonic that is odd
         in torque (under gravity ``cos(theta)`` follows ``T``); wear is
-        measured by the level of ``H``, not its slope. The table is bilinear,
+        measured by the level of ``H``, not its slope. Each bin's standard
+        error includes a shape error that grows with its distance from the
+        test torque (:data:`_SHAPE_ERROR`): the level is read where the curve
+        is observed nearest the test torque. The table is bilinear,
         so the model is linear in ``(w, c)`` between wear nodes: the weighted
         sum of squares is minimised exactly on every interval at once. The
         standard error is scaled by the reduced chi-square when above 1.
@@ -1633,6 +1720,10 @@ class WindowAnalyzer:
         grid = self.tables.wear
         step = np.diff(grid)
         torque_b = np.where(usable, torque_b, self.centres)
+        # A bin far from the test torque says less about the lost motion there: its share of
+        # the curve's shape between the two is the model's, and a reducer may differ.
+        reach = 2.0 * np.abs(torque_b - self.takeup_torque) / self.tables.series_stiffness
+        sig_b = np.hypot(sig_b, _SHAPE_ERROR * reach)
         weight = np.where(usable, 1.0 / np.where(usable, sig_b, 1.0) ** 2, 0.0)[..., None]
         h_b = np.where(usable, h_b, 0.0)[..., None]
         model = self._hysteresis_table(torque_b.ravel()).reshape(torque_b.shape + grid.shape)
@@ -1668,10 +1759,30 @@ class WindowAnalyzer:
                 comp[pick, best])
 
 
+_SHAPE_ERROR = 0.02
+"""
+Shape error of the hysteresis model: a fraction of the windup between a bin and the test torque.
+
+The wear fit extrapolates the observed widths to the catalogue's test torque along the
+model's curve ``H(|T|, w) + 2·|T|·c``. A reducer whose curve has another shape (a spring
+straighter or stiffer than the model's, a play taken up at another torque) is read wrong
+in proportion to how far the bins lie from the test torque: each bin's standard error gets
+``_SHAPE_ERROR · 2·| |T|_b - T_test |/k_s`` added in quadrature, so bins near the test
+torque decide the level where the window has them, and the reported standard error grows
+with the reach of the extrapolation where it has not. 0.02 from bench/bench_lost_motion.py
+(0.01-0.03 read alike; from 0.05 on, the noisier low bins near the takeup decide too much).
+"""
+
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
 
 _POOL_EXPOSURE_S = 100.0 * 3600.0
 """Operation [s] over which the pooled flank levels fade (the lost motion moves little)."""
+
+_POOL_FRICTION_JUMP = 0.01
+"""
+Change of the friction taken out of the effort [fraction of rated torque, at the window's
+RMS speed] for which the pooled fit restarts: its flank groups were formed with another torque.
+"""
 
 _POOL_JUMP = 0.01
 """Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
