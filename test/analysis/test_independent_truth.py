@@ -67,6 +67,28 @@ def test_link_drag_the_reducer_carries_does_not_bias_an_unloaded_joints_lost_mot
     assert observed == pytest.approx(stream.lost_motion[-1, 0], rel=0.03)
 
 
+def bench_recording(seed, joint):
+    """
+    One joint of a bench_lost_motion robot (2 % effort noise, 150 s) through the window analysis.
+
+    Returns
+    -------
+    tuple
+        ``(stream, analyzer, windows)``.
+
+    """
+    start = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
+    stream = gen.generate(gen.Spec(seed=seed, kinds=('base', 'shoulder', 'forearm'),
+                                   hours=150.0 / 3600.0, start_fraction=start,
+                                   effort_noise_pct=2.0))
+    te = compute_te(stream.motor_stamp_ns * 1e-9, stream.motor[:, joint],
+                    stream.link_stamp_ns * 1e-9, stream.link[:, joint], gen.RATIO)
+    analyzer = WindowAnalyzer(ReducerParams())
+    windows = (analyzer.update(te, stream.effort[:, joint], stream.velocity[:, joint])
+               + analyzer.flush())
+    return stream, analyzer, windows
+
+
 @pytest.mark.parametrize('seed', (1009, 2000))
 def test_the_pooled_fit_restarts_once_the_friction_of_an_unloaded_joint_is_known(seed):
     # A base rotation whose motor friction (Coulomb 3-4 % of rated torque) is most of its
@@ -75,14 +97,7 @@ def test_the_pooled_fit_restarts_once_the_friction_of_an_unloaded_joint_is_known
     # pooled harmonic fit kept them: its 1x harmonic took half the lost motion (43 arcsec
     # where the unit has 2) and the windows read 28 % high (1009) and 19 % low (2000). The
     # pool now starts afresh when the friction taken out changes by 1 % of rated torque.
-    start = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
-    stream = gen.generate(gen.Spec(seed=seed, kinds=('base', 'shoulder', 'forearm'),
-                                   hours=150.0 / 3600.0, start_fraction=start,
-                                   effort_noise_pct=2.0))
-    te = compute_te(stream.motor_stamp_ns * 1e-9, stream.motor[:, 0],
-                    stream.link_stamp_ns * 1e-9, stream.link[:, 0], gen.RATIO)
-    analyzer = WindowAnalyzer(ReducerParams())
-    windows = analyzer.update(te, stream.effort[:, 0], stream.velocity[:, 0]) + analyzer.flush()
+    stream, analyzer, windows = bench_recording(seed, 0)
     assert analyzer.coulomb_friction > 0.02 * gen.RATED_TORQUE_NM
     observed = np.nanmedian([w.lost_motion for w in windows])
     assert observed == pytest.approx(stream.lost_motion[-1, 0], rel=0.07)
@@ -93,15 +108,7 @@ def test_a_joint_whose_windows_rarely_hold_both_signs_of_a_load_is_read_in_most_
     # windows meet a load under one sign only. 2 of 60 windows gave a lost motion and the
     # reported value leaned on the estimator's prior (+10 to +15 %); the pooled flanks of
     # the recent windows now complete the bins of such windows.
-    seed = 2005
-    start = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
-    stream = gen.generate(gen.Spec(seed=seed, kinds=('base', 'shoulder', 'forearm'),
-                                   hours=150.0 / 3600.0, start_fraction=start,
-                                   effort_noise_pct=2.0))
-    te = compute_te(stream.motor_stamp_ns * 1e-9, stream.motor[:, 2],
-                    stream.link_stamp_ns * 1e-9, stream.link[:, 2], gen.RATIO)
-    analyzer = WindowAnalyzer(ReducerParams())
-    windows = analyzer.update(te, stream.effort[:, 2], stream.velocity[:, 2]) + analyzer.flush()
+    stream, _, windows = bench_recording(2005, 2)
     lm = np.array([w.lost_motion for w in windows])
     assert np.isfinite(lm).sum() >= 0.8 * lm.size
     assert np.nanmedian(lm) == pytest.approx(stream.lost_motion[-1, 2], rel=0.04)
