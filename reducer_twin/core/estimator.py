@@ -121,12 +121,12 @@ history, whose exposure since new is unknown). The remaining life is the
 mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
-Measured (``bench/bench_accuracy.py``, README Figures): on the project's own
-simulator NEES 1.2, P10-P90 coverage 76 % with its tails 4 % / 20 %: the
-windows read the lost motion 0.02-0.07 arcmin high there and ``c`` cannot be
-told from ``b`` within a life, so the remaining life comes out a few per cent
-short; with the lost motion read right the intervals are wide (NEES 0.1),
-the price of not knowing ``c``.
+Measured (``bench/bench_accuracy.py``, README Figures): ``c`` cannot be told
+from ``b`` within a life, so its prior (``fit_bias_std``, 0.05 arcmin) sets
+the width left in the wear. On the project's own simulator, whose windows
+are now unbiased to 0.011 arcmin RMS, that makes the intervals too wide
+(NEES 0.10, P10-P90 coverage 100 %); on the independent generator (bias
+0.04 arcmin RMS at 1-5 % effort noise) they are too narrow (coverage 68 %).
 """
 
 from dataclasses import asdict, dataclass, fields

@@ -42,6 +42,7 @@ import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .estimator import lost_motion_curve, N_STATE, run_in_free_wear, unit_lost_motion
+from .estimator import wear_at_lost_motion
 from .growth import EXPONENTS
 from .transmission_error import model_tables
 from .units import ARCMIN, HOUR
@@ -423,8 +424,7 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
     curve = lost_motion_curve(params)
     _check_limit(curve, limit)  # the limit must lie inside the model's table
     wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
-    limit_curve_wear = curve.inverse(limit)   # h⁻¹(limit): w_lim = h⁻¹(limit) - b
-    w_lim = float(limit_curve_wear - baseline)
+    w_lim = float(wear_at_lost_motion(limit, baseline, curve))
     lm = unit_lost_motion(wear_mean, baseline, curve)
     es = _event_state(curve, lm, limit, baseline)
     met = bool(lm >= limit)
@@ -436,7 +436,7 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         draws = LifeDraws.draw(n_samples, rng)
     states = x + draws.state @ _covariance_root(P).T
     wear = np.maximum(states[:, 0], 0.0)
-    lim = limit_curve_wear - states[:, 2]
+    lim = wear_at_lost_motion(limit, states[:, 2], curve)
     duty = np.exp(duty_rate_rel_std * draws.duty)
     wp = params.wear
     remaining = run_in_free_wear(lim, wp) - run_in_free_wear(wear, wp)

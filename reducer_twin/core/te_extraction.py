@@ -817,8 +817,6 @@ class WindowAnalyzer:
         n_groups = 2 * self.torque_bins
         self._te_ref = None
         self._pool_friction = np.zeros(2)
-        self._friction_taken = None
-        self._pooled_groups = None
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
                       'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
@@ -1084,10 +1082,10 @@ class WindowAnalyzer:
         n_win = starts.size
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
-        drag = model = None
+        drag = model = taken = None
         if self.friction:
-            torque, drag, model = self._friction(torque, t, buf['theta'], speed, win, starts,
-                                                 ends)
+            torque, drag, model, taken = self._friction(torque, t, buf['theta'], speed, win,
+                                                        starts, ends)
         torque, band = self._smooth_torque(torque, t, win, starts, ends)
         if model is not None:
             torque, band = self._toward_model(torque, band, model, win, starts)
@@ -1105,15 +1103,17 @@ class WindowAnalyzer:
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
         z = self._regressors(buf['theta'], speed, y - te_mean[win])
         x = z[:-1]
-        stats = self._group_stats(z, torque, win, starts, ends, ambiguous, normal=False)
+        bins = self._bins(z, torque)
+        stats = self._group_stats(z, torque, bins, win, starts, ends, ambiguous, normal=False)
         # The harmonics and the time offset come from samples whose load surely takes the
         # play up (beyond the lost-motion test torque): below it the flank's level still
         # follows the load, which an unloaded joint's position in the move mirrors.
         taken_up = low > self.takeup_torque
-        fit_stats = self._group_stats(z, torque, win, starts, ends, ~taken_up)
+        fit_stats = self._group_stats(z, torque, bins, win, starts, ends, ~taken_up)
         exposure = np.add.reduceat(dt, starts) * self.aging_factor
-        beta, ident, noise = self._fit_harmonics(fit_stats, n_win, te_mean, exposure)
-        torque_h, width, std, usable = self._hysteresis(stats, beta, noise)
+        beta, ident, noise, pooled = self._fit_harmonics(fit_stats, n_win, te_mean, exposure,
+                                                         taken)
+        torque_h, width, std, usable = self._hysteresis(stats, beta, noise, pooled)
         fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
@@ -1234,7 +1234,7 @@ class WindowAnalyzer:
         x[7] = speed
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
-        self._friction_taken = np.zeros((starts.size, 3))
+        taken = np.zeros((starts.size, 3))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
             sel = use[a:b]
             xk = x[:, a:b][:, sel]
@@ -1255,7 +1255,7 @@ class WindowAnalyzer:
             # window's edges keep NaN); less the friction taken out, as the torque is.
             model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
             rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
-            self._friction_taken[k] = (fc, fv, rms_speed)
+            taken[k] = (fc, fv, rms_speed)
             if not (fc or fv):
                 continue    # nothing significant to take out
             typical = fc + fv * rms_speed
@@ -1264,8 +1264,8 @@ class WindowAnalyzer:
                 drag[a:b] = fv * speed[a:b]
                 model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
             else:
-                self._friction_taken[k, :2] = 0.0
-        return out, drag, model
+                taken[k, :2] = 0.0
+        return out, drag, model, taken
 
     def _toward_model(self, torque, band, model, win, starts):
         """
@@ -1350,7 +1350,25 @@ class WindowAnalyzer:
         period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
         return int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
 
-    def _group_stats(self, z, torque, win, starts, ends, exclude=None, normal=True):
+    def _bins(self, z, torque):
+        """
+        Place the samples in the ``|T|`` bins: what the group sums share whatever they exclude.
+
+        Returns
+        -------
+        tuple of ndarray
+            Bin index (clipped), outside-the-bins mask, ``u = |T| - bin centre`` and
+            ``u·z`` per sample.
+
+        """
+        size = np.abs(torque)
+        b = np.searchsorted(self.edges, size, side='right') - 1
+        beyond = (b < 0) | (b >= self.torque_bins)
+        b = np.clip(b, 0, self.torque_bins - 1)
+        u = size - self.centres[b]
+        return b, beyond, u, u * z
+
+    def _group_stats(self, z, torque, bins, win, starts, ends, exclude=None, normal=True):
         """
         Sum the regressors per group ``(window, |T| bin, torque sign)`` and per window.
 
@@ -1362,20 +1380,7 @@ class WindowAnalyzer:
         """
         n_win = starts.size
         n_groups = n_win * 2 * self.torque_bins
-        # The bins, u and u·z do not depend on ``exclude``: the window analysis asks twice
-        # for the same samples (the hysteresis' groups, then the harmonics'), once they do.
-        binned = getattr(self, '_binned', None)
-        if binned is not None and binned[0] is z and binned[1] is torque:
-            b, beyond, u, uz = binned[2:]
-            self._binned = None
-        else:
-            size = np.abs(torque)
-            b = np.searchsorted(self.edges, size, side='right') - 1
-            beyond = (b < 0) | (b >= self.torque_bins)
-            b = np.clip(b, 0, self.torque_bins - 1)
-            u = size - self.centres[b]
-            uz = u * z
-            self._binned = (z, torque, b, beyond, u, uz)
+        b, beyond, u, uz = bins
         outside = beyond | exclude if exclude is not None else beyond
         gid = np.where(outside, n_groups, (win * self.torque_bins + b) * 2 + (torque < 0.0))
         # The smoothed torque stays in one bin for tens of samples: sum over those runs of
@@ -1431,7 +1436,7 @@ class WindowAnalyzer:
             'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
         }
 
-    def _fit_harmonics(self, stats, n_win, te_mean, exposure):
+    def _fit_harmonics(self, stats, n_win, te_mean, exposure, friction_taken):
         """
         Pooled least squares of the harmonics and time offset.
 
@@ -1440,13 +1445,18 @@ class WindowAnalyzer:
         the windows' means ``te_mean`` [rad]; ``exposure`` [s] of operation per
         window shortens the pool where the lost motion moves (time-compressed
         recordings). The residual variance is each window's own, under its
-        own flank lines.
+        own flank lines. ``friction_taken`` (per window ``(Coulomb, viscous,
+        RMS speed)`` of what :meth:`_friction` took out of the effort, or
+        None) restarts the pool where it changed.
 
         Returns
         -------
-        tuple of ndarray
+        tuple
             Coefficients per window (0 where not identifiable), the
-            identifiable mask, and the residual TE variance per window [rad²].
+            identifiable mask, the residual TE variance per window [rad²], and
+            the pool's flank groups after each window (``count``, ``su``,
+            ``suu``, ``s0``, ``s1``, and the TE ``shift`` to each window's
+            level) for :meth:`_borrow_flanks`.
 
         """
         reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
@@ -1470,7 +1480,7 @@ class WindowAnalyzer:
             # friction taken out: where that changed by more than the flanks can absorb (the
             # friction identified, a window after the first ones that carried all of it), the
             # pooled groups mix two torques and start afresh too.
-            friction = self._friction_taken[k] if self.friction else np.zeros(3)
+            friction = friction_taken[k] if friction_taken is not None else np.zeros(3)
             moved = (abs(friction[0] - self._pool_friction[0])
                      + abs(friction[1] - self._pool_friction[1]) * friction[2])
             if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
@@ -1508,14 +1518,13 @@ class WindowAnalyzer:
             pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
             pool_raw[k] = np.diagonal(pool['moments'])[:-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
-        self._pooled_groups = groups
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
         for k in np.flatnonzero(free > 0).tolist():
             b = beta[k]
             rss = reduced[k, -1, -1] - 2.0 * b @ rhs[k] + b @ normal[k] @ b
             noise[k] = max(rss, 0.0) / free[k]
-        return beta, ident, noise
+        return beta, ident, noise, groups
 
     def _level_correction(self, pool):
         """
@@ -1558,7 +1567,7 @@ class WindowAnalyzer:
                 + (b_u * i_uu[:, None]).T @ b_u + (b_t * i_tt[:, None]).T @ b_t
                 + (b_u * i_ut[:, None]).T @ b_t + (b_t * i_ut[:, None]).T @ b_u)
 
-    def _hysteresis(self, stats, beta, noise):
+    def _hysteresis(self, stats, beta, noise, pooled):
         """Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins)."""
         n_win, n_par = beta.shape
         b_group = np.repeat(beta, 2 * self.torque_bins, axis=0)
@@ -1573,7 +1582,7 @@ class WindowAnalyzer:
             a.reshape(shape) for a in (count, u_mean, s_uu, sloped, level, slope))
         own = count >= self.min_bin_samples
         count, u_mean, s_uu, sloped, level, slope = self._borrow_flanks(
-            own, beta, (count, u_mean, s_uu, sloped, level, slope))
+            own, beta, (count, u_mean, s_uu, sloped, level, slope), pooled)
         usable = (count >= self.min_bin_samples).all(axis=2) & own.any(axis=2)
         with np.errstate(invalid='ignore', divide='ignore'):
             u_eval = (count * u_mean).sum(axis=2) / count.sum(axis=2)
@@ -1586,7 +1595,7 @@ class WindowAnalyzer:
         usable &= np.isfinite(width) & np.isfinite(std)
         return u_eval + self.centres, width, std, usable
 
-    def _borrow_flanks(self, own, beta, flanks):
+    def _borrow_flanks(self, own, beta, flanks, groups):
         """
         Flank lines from the pool for a window without a hysteresis of its own.
 
@@ -1610,6 +1619,8 @@ class WindowAnalyzer:
             Harmonic and time-offset coefficients per window.
         flanks : tuple of ndarray, shape (W, bins, 2)
             ``count, u_mean, s_uu, sloped, level, slope`` of the window's flanks.
+        groups : dict of ndarray
+            The pool's flank groups after each window (:meth:`_fit_harmonics`).
 
         Returns
         -------
@@ -1617,9 +1628,6 @@ class WindowAnalyzer:
             ``flanks`` with the pooled ones where they are taken.
 
         """
-        groups = self._pooled_groups
-        if groups is None or groups['count'].shape[0] != own.shape[0]:
-            return flanks
         shape = own.shape
         n = groups['count'].reshape(shape)
         with np.errstate(invalid='ignore', divide='ignore'):

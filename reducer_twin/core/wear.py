@@ -547,17 +547,10 @@ def calibrate_to_paper(params):
         Copy with ``wear.rate_multiplier`` fitted.
 
     """
-    from scipy.optimize import least_squares
-    target = np.log(np.asarray(PAPER_TABLE2_WEAR))
-
     def trial(x):
         return params.with_overrides({'wear.rate_multiplier': math.exp(x[0])})
 
-    def residual(x):
-        return np.log(paper_wear_table(PAPER_TABLE2_HOURS, trial(x))) - target
-
-    fit = least_squares(residual, [math.log(params.wear.rate_multiplier)], xtol=1e-14)
-    return trial(fit.x)
+    return _fit_table2(trial, [math.log(params.wear.rate_multiplier)], xtol=1e-14)
 
 
 def fit_run_in_to_paper(params):
@@ -581,18 +574,39 @@ def fit_run_in_to_paper(params):
         ``wear.run_in_depth`` fitted (least squares on ``ln h``).
 
     """
-    from scipy.optimize import least_squares
-    target = np.log(np.asarray(PAPER_TABLE2_WEAR))
-
     def trial(x):
         return params.with_overrides({'wear.rate_multiplier': math.exp(x[0]),
                                       'wear.run_in_fraction': x[1],
                                       'wear.run_in_depth': math.exp(x[2]) * 1e-6})
 
+    w = params.wear
+    x0 = [math.log(w.rate_multiplier), w.run_in_fraction, math.log(w.run_in_depth * 1e6)]
+    return _fit_table2(trial, x0, bounds=([-20, 0.0, -3], [20, 0.9, 8]), xtol=1e-12)
+
+
+def _fit_table2(trial, x0, **options):
+    """
+    Least squares on ``ln h`` against Table 2 of the parameters ``trial(x)`` makes.
+
+    Parameters
+    ----------
+    trial : callable
+        ``x -> ReducerParams``.
+    x0 : list of float
+        Start.
+    **options
+        For ``scipy.optimize.least_squares`` (bounds, tolerances).
+
+    Returns
+    -------
+    ReducerParams
+        ``trial`` of the fitted ``x``.
+
+    """
+    from scipy.optimize import least_squares
+    target = np.log(np.asarray(PAPER_TABLE2_WEAR))
+
     def residual(x):
         return np.log(paper_wear_table(PAPER_TABLE2_HOURS, trial(x))) - target
 
-    w = params.wear
-    x0 = [math.log(w.rate_multiplier), w.run_in_fraction, math.log(w.run_in_depth * 1e6)]
-    fit = least_squares(residual, x0, bounds=([-20, 0.0, -3], [20, 0.9, 8]), xtol=1e-12)
-    return trial(fit.x)
+    return trial(least_squares(residual, x0, **options).x)
