@@ -314,6 +314,27 @@ def generate(truth, params, cache=None):
     return run
 
 
+def window_truth(run, params):
+    """Return the true lost motion at each window's middle [rad]."""
+    if run.truth.generator == 'model':
+        return model_tables(_model_params(run.truth, params)).lost_motion(run.wear_mid)
+    ends = run.lost_motion
+    return 0.5 * (ends + np.concatenate([ends[:1], ends[:-1]]))
+
+
+def window_bias(run, params):
+    """
+    Return the window analysis's bias on one unit: its lost motion's median error [rad].
+
+    Over the usable windows at 25-75 % of life (NaN where there are none): what the
+    estimator's ``c`` (``fit_bias_std``) stands for.
+    """
+    z = run.records[:, TE_FEATURES.fields.index('lost_motion_rad')]
+    frac = run.t_end / run.eol
+    sel = np.isfinite(z) & (frac >= EVAL_RANGE[0]) & (frac <= EVAL_RANGE[1])
+    return float(np.median((z - window_truth(run, params))[sel])) if sel.any() else math.nan
+
+
 def with_true_lost_motion(run, params, noise=0.02 * ARCMIN, seed=0):
     """
     Return the run with each usable window's lost motion replaced by the truth.
@@ -326,11 +347,7 @@ def with_true_lost_motion(run, params, noise=0.02 * ARCMIN, seed=0):
     records = run.records.copy()
     z = records[:, fields.index('lost_motion_rad')]
     usable = np.isfinite(z)
-    if run.truth.generator == 'model':
-        truth = model_tables(_model_params(run.truth, params)).lost_motion(run.wear_mid)
-    else:
-        ends = run.lost_motion
-        truth = 0.5 * (ends + np.concatenate([ends[:1], ends[:-1]]))
+    truth = window_truth(run, params)
     rng = np.random.default_rng([seed, run.truth.seed])
     records[usable, fields.index('lost_motion_rad')] = (
         truth[usable] + rng.normal(0.0, noise, usable.sum()))
@@ -480,6 +497,12 @@ def report_case(name, results, unit_name):
           f'{_pct(np.quantile(abs_rel, 0.9))}; mean {np.mean(cat["err"]) * scale:+.3f} {unit}, '
           f'{_pct(np.mean(cat["err"] < 0))} below truth; inside +-2 sd '
           f'{_pct(np.mean(cat["nees"] <= 4.0))}')
+    bias = np.array([r['bias'] for r in results if 'bias' in r])
+    bias = bias[np.isfinite(bias)]
+    if bias.size:
+        print(f'  window lost-motion bias per unit (median error at 25-75 % of life): RMS '
+              f'{np.sqrt(np.mean(bias ** 2)) / ARCMIN:.3f} arcmin, 90th pct |.| '
+              f'{np.quantile(np.abs(bias), 0.9) / ARCMIN:.3f} arcmin (fit_bias_std 0.05)')
     print(f'  NEES mean {np.mean(cat["nees"]):.2f} (median {np.median(cat["nees"]):.2f}) '
           f'[0.5, 2]; NIS mean {np.mean(cat["nis"]):.2f} (median {np.median(cat["nis"]):.2f}, '
           f'{cat["nis"].size} updates)')
@@ -555,6 +578,7 @@ def main(argv=None):
         for truth in truths:
             run = generate(truth, params, args.cache)
             results.append(evaluate(run, estimate(run, params, config)))
+            results[-1]['bias'] = window_bias(run, params)
             if args.oracle:
                 exact = with_true_lost_motion(run, params)
                 oracle.append(evaluate(exact, estimate(exact, params, config)))
