@@ -121,6 +121,12 @@ history, whose exposure since new is unknown). The remaining life is the
 mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
+Only the curvature of ``h`` over the wear the windows span tells ``c`` from
+``b``: for a window across which the lost motion grows by less than
+:data:`BIAS_SEPARATION` of its sd, ``c`` is a consider state (Schmidt 1966:
+its mean and variance stay, its covariances are updated), so a long
+recording at one wear cannot walk the pair along their ridge.
+
 Measured (``bench/bench_accuracy.py``, README Figures): ``c`` cannot be told
 from ``b`` within a life, so its prior (``fit_bias_std``, 0.05 arcmin) sets
 the width left in the wear. On the project's own simulator, whose windows
@@ -183,6 +189,9 @@ TREND_LIMIT = 1.5
 
 PRIOR_REACH = 4.0
 """Sds of their priors beyond which the as-built offset and the fit's bias are not taken."""
+
+BIAS_SEPARATION = 0.01
+"""Lost-motion growth across a window, in the window's sd, below which ``c`` is not updated."""
 
 RATE_RELEASE_SD = 0.3
 """
@@ -559,6 +568,35 @@ def _new_duty():
             'sums': [0.0, 0.0, 0.0, 0.0]}
 
 
+def _consider_bias(m, P, m0, P0, which):
+    """
+    Hold the fit's bias ``c`` at its prior moments: a consider state (Schmidt 1966).
+
+    ``c`` and the as-built offset ``b`` are seen only as ``h(w + b) + c``;
+    only the curvature of ``h`` over the wear the windows span tells them
+    apart. A window across which the lost motion does not grow carries none
+    of it, yet the unscented update, whose slope changes as ``b`` moves,
+    lends the pair a spurious separate identity, and a long recording at one
+    wear walked them along their ridge (measured: ``c`` from 0 to 4 prior sd
+    and the lost motion 30 % low under steady windows). For such a window
+    ``c`` keeps its mean and variance; its covariance with the other states
+    is updated, so the reported uncertainty still carries the bias the data
+    cannot remove.
+
+    Parameters
+    ----------
+    m, P : ndarray, shapes (C, 4), (C, 4, 4)
+        Updated moments, changed in place.
+    m0, P0 : ndarray
+        Prior moments.
+    which : ndarray of bool, shape (C,)
+        The components to which it applies.
+
+    """
+    m[which, 3] = m0[which, 3]
+    P[which, 3, 3] = P0[which, 3, 3]
+
+
 def _logsumexp(a):
     top = float(np.max(a))
     return top + math.log(float(np.sum(np.exp(a - top))))
@@ -869,8 +907,11 @@ class WearEstimator:
         nis = y * y / (v_mix + R)
         loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
         R_eff = (R + smear) * np.maximum(1.0, (nu + d2) / (nu + 1.0))
+        # A window across which the lost motion does not grow adds nothing that tells the
+        # fit's bias from the as-built offset: the bias is a consider state for it.
+        consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
         self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)))
-        self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz)
+        self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz, consider)
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
         self._project()
@@ -909,17 +950,20 @@ class WearEstimator:
             self._scored += 1
         self._growth.add(exposure, z, R)
 
-    def _posterior(self, m0, P0, z, R, zc, szz, cxz):
+    def _posterior(self, m0, P0, z, R, zc, szz, cxz, consider):
         """
         Unscented update of every component, iterated by posterior linearisation if wide.
 
         Parameters are the prior moments, the observation, the effective noise
-        per component and the prior's observed moments (the first iterate).
+        per component, the prior's observed moments (the first iterate) and
+        the components for which the fit's bias is a consider state
+        (:func:`_consider_bias`).
         """
         S = szz + R
         K = cxz / S[:, None]
         m = m0 + K * (z - zc)[:, None]
         P = P0 - np.einsum('ci,cj->cij', K, K) * S[:, None, None]
+        _consider_bias(m, P, m0, P0, consider)
         wide = (P0[:, 0, 0] + P0[:, 2, 2] + 2.0 * P0[:, 0, 2]) > UM ** 2
         if not wide.any():
             return m, P
@@ -933,9 +977,11 @@ class WearEstimator:
             Kw = np.einsum('cij,cj->ci', P0w, H) / Sw[:, None]
             resid = z - (zi - np.einsum('ci,ci->c', H, mi)) - np.einsum('ci,ci->c', H, m0w)
             new_m = m0w + Kw * resid[:, None]
+            new_P = P0w - np.einsum('ci,cj->cij', Kw, Kw) * Sw[:, None, None]
+            _consider_bias(new_m, new_P, m0w, P0w, consider[wide])
             moved = np.abs(new_m - m[wide]) / np.sqrt(np.einsum('cii->ci', P[wide]))
             m[wide] = new_m
-            P[wide] = P0w - np.einsum('ci,cj->cij', Kw, Kw) * Sw[:, None, None]
+            P[wide] = new_P
             if np.all(moved < 1e-3):
                 break
         return m, P

@@ -14,7 +14,11 @@ This module learns the growth law from the observations instead::
 the exposure of the latest window), ``g`` the exponent (``g = 1``: linear in
 the exposure). The physics is the prior: ``g ~ N(0.7, 0.3²)`` (the model's
 lost motion grows close to ``A^0.65-0.7`` once run in), ``β`` from the
-as-built range (0.3-1.0 arcmin), ``k ~ N(0, (3 arcmin)²)``.
+as-built range (0.3-1.0 arcmin), ``k ~ N(0, (3 arcmin)²)`` cut to ``k >= 0``
+(wear never takes lost motion away) once the windows place ``k`` within
+:data:`TRUNCATE_BELOW` of its prior sd. Without the cut, windows that read
+lower as a recording went on (a fit's bias settling, not wear) were taken for
+negative growth, and the law, following them down, won over the wear model.
 
 Given ``g`` the model is linear in ``(β, k)``, so the posterior is exact:
 the weighted sums ``Σ w·x xᵀ``, ``Σ w·z·x``, ``Σ w·z²`` with
@@ -33,6 +37,7 @@ score, Dawid 1984) to weigh the two models.
 import math
 
 import numpy as np
+from scipy import special
 
 from .units import ARCMIN, UM
 
@@ -47,6 +52,12 @@ NEW_PRIOR = (0.65 * ARCMIN, 0.25 * ARCMIN)
 
 GROWTH_PRIOR_SD = 3.0 * ARCMIN
 """Sd of the zero-mean prior on ``k``, the growth to date [rad]."""
+
+TRUNCATE_BELOW = 0.05
+"""Posterior sd of ``k``, in prior sds, below which ``k >= 0`` is imposed.
+
+While the windows hardly place ``k`` the cut would only move the prior's half-normal mean
+(2.4 arcmin) into the law."""
 
 EXPOSURE_UNIT = UM
 """Unit of the exposure inside the sums [m] (keeps ``A^g`` and its square in range)."""
@@ -135,6 +146,8 @@ class GrowthTrend:
         _, logdet = np.linalg.slogdet(L)
         g0, g_sd = EXPONENT_PRIOR
         lw = -0.5 * quad - 0.5 * logdet - 0.5 * ((EXPONENTS - g0) / g_sd) ** 2
+        if np.median(cov[:, 1, 1]) < (TRUNCATE_BELOW * GROWTH_PRIOR_SD) ** 2:
+            lw += _truncate_growth(mean, cov)
         lw -= lw.max()
         lw -= math.log(np.exp(lw).sum())
         return lw, mean, cov, a_ref
@@ -218,3 +231,42 @@ class GrowthTrend:
                 and math.isfinite(out.szz) and math.isfinite(out.exposure)):
             raise ValueError('growth sums must be finite')
         return out
+
+
+def _truncate_growth(mean, cov):
+    """
+    Restrict the growth ``k`` to ``k >= 0``: wear never takes lost motion away.
+
+    The prior on ``k`` is the half-normal of :data:`GROWTH_PRIOR_SD`, so the
+    posterior of ``(β, k)`` given ``g`` is its Gaussian truncated to
+    ``k >= 0``. Its moments replace ``mean`` and ``cov`` in place (``β``
+    follows ``k`` through their regression), and the log of the posterior
+    mass kept, ``ln Φ(m_k/s_k)``, is returned to weigh the exponents.
+
+    Parameters
+    ----------
+    mean : ndarray, shape (G, 2)
+        Untruncated posterior means of ``(β, k)``, changed in place.
+    cov : ndarray, shape (G, 2, 2)
+        Their covariances, changed in place.
+
+    Returns
+    -------
+    ndarray, shape (G,)
+        ``ln Φ(m_k/s_k)`` per exponent.
+
+    """
+    s = np.sqrt(cov[:, 1, 1])
+    a = -mean[:, 1] / s
+    log_mass = special.log_ndtr(-a)
+    lam = np.exp(-0.5 * a * a - 0.5 * math.log(2.0 * math.pi) - log_mass)
+    shift = s * lam
+    shrink = 1.0 + a * lam - lam * lam
+    gain = cov[:, 0, 1] / cov[:, 1, 1]
+    mean[:, 1] += shift
+    mean[:, 0] += gain * shift
+    var_k = cov[:, 1, 1] * shrink
+    cov[:, 0, 0] += gain * gain * (var_k - cov[:, 1, 1])
+    cov[:, 0, 1] = cov[:, 1, 0] = gain * var_k
+    cov[:, 1, 1] = var_k
+    return log_mass

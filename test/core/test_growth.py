@@ -76,3 +76,25 @@ def test_the_exposure_only_moves_forward():
     trend.advance(2e-9)
     trend.advance(1e-9)
     assert trend.exposure == 2e-9
+
+
+def test_windows_that_drift_down_give_no_negative_growth():
+    # Lost motion never shrinks with wear: windows reading 10 % lower by the end of a
+    # recording (a bias settling, not wear) give k >= 0, and the law reads their level.
+    rng = np.random.default_rng(3)
+    exposure = 1e-12 * (np.arange(40) + 0.5)
+    z = (0.8 - 0.08 * np.arange(40) / 39) * ARCMIN + rng.normal(0.0, NOISE, 40)
+    trend = GrowthTrend()
+    for a, zk in zip(exposure, z):
+        trend.add(a, zk, NOISE ** 2)
+    trend.advance(exposure[-1])
+    mean, cov = trend.summary()
+    assert mean[1] >= 0.0
+    assert mean[0] + mean[1] == pytest.approx(np.mean(z), abs=0.03 * ARCMIN)
+
+
+def test_without_windows_no_growth_is_assumed():
+    # k >= 0 is imposed only once the windows place k; the prior alone reads no growth
+    # (a half-normal prior would put 2.4 arcmin of growth on a unit never seen).
+    mean, _ = GrowthTrend().summary()
+    assert mean[1] == 0.0
