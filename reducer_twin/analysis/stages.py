@@ -362,8 +362,22 @@ class JointBack:
         """
         return self._outputs(*self.twin.step(record))
 
-    def _outputs(self, wear, life):
-        level, message, values = self.twin.summary(wear, life).diagnostic()
+    def process_many(self, records):
+        """
+        Step the estimator with each record in turn; the life predictions are made together.
+
+        Returns
+        -------
+        list of dict
+            :meth:`process` of each record, in order.
+
+        """
+        return [self._outputs(wear, life, summary)
+                for wear, life, summary in self.twin.step_many(records)]
+
+    def _outputs(self, wear, life, summary=None):
+        summary = summary or self.twin.summary(wear, life)
+        level, message, values = summary.diagnostic()
         # Encoded here: in a worker process this work leaves the reading process.
         log_ns = stamp_ns(wear.record['stamp_s'])
         diagnostics = encode_diagnostic_array(log_ns, [Status(
@@ -434,7 +448,7 @@ class LocalBacks:
         if kind == 'start':
             self._done.append((joint, [back.initial(items)]))
         else:
-            self._done.append((joint, [back.process(r) for r in items]))
+            self._done.append((joint, back.process_many(items)))
 
     def poll(self):
         """Return the outputs ready so far, ``[(joint, [outputs])]``."""
