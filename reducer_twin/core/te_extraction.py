@@ -1235,20 +1235,14 @@ class WindowAnalyzer:
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
         taken = np.zeros((starts.size, 3))
+        pooled = self._pooled_friction_sums(x, effort_s, speed, use, starts, ends)
+        # Every window's fit at once (the same LAPACK call per window as one at a time).
+        betas, idents = _solve_identifiable_many(*(np.array([p[j] for p in pooled])
+                                                   for j in range(3)))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            sel = use[a:b]
-            xk = x[:, a:b][:, sel]
-            yk = effort_s[a:b][sel]
-            self._fric_n = self._friction_memory * self._fric_n + xk @ xk.T
-            self._fric_r = self._friction_memory * self._fric_r + xk @ yk
-            self._fric_e = self._friction_memory * self._fric_e + np.einsum('ij,ij->i', xk, xk)
-            self._fric_yy = self._friction_memory * self._fric_yy + float(yk @ yk)
-            self._fric_m = self._friction_memory * self._fric_m + yk.size
-            moving = speed[a:b][sel]
-            self._fric_dir = self._friction_memory * self._fric_dir + np.array(
-                [np.count_nonzero(moving > _FRICTION_SPEED),
-                 np.count_nonzero(moving < -_FRICTION_SPEED)])
-            beta, ident = _solve_identifiable(self._fric_n, self._fric_r, self._fric_e)
+            (self._fric_n, self._fric_r, self._fric_e, self._fric_yy, self._fric_m,
+             self._fric_dir) = pooled[k]
+            beta, ident = betas[k], idents[k]
             fc, fv = self._significant_friction(beta, ident)
             self.coulomb_friction, self.viscous_friction = fc, fv
             # The effort as the fit explains it, where its acceleration is whole (the
@@ -1266,6 +1260,42 @@ class WindowAnalyzer:
             else:
                 taken[k, :2] = 0.0
         return out, drag, model, taken
+
+    def _pooled_friction_sums(self, x, effort, speed, use, starts, ends):
+        """
+        The friction fit's pooled sums after each window, from where the last batch left them.
+
+        Each window adds the normal equations of its samples in ``use`` to the sums
+        forgotten by ``friction_memory_windows``; the sums do not depend on the fits, so
+        they are formed first and the fits solved together.
+
+        Returns
+        -------
+        list of tuple
+            Per window ``(normal, rhs, energy, yy, samples, directions)``, as
+            ``_fric_n``, ``_fric_r``, ``_fric_e``, ``_fric_yy``, ``_fric_m`` and
+            ``_fric_dir`` stand after it.
+
+        """
+        used = np.flatnonzero(use)
+        lo, hi = np.searchsorted(used, starts).tolist(), np.searchsorted(used, ends).tolist()
+        x_used, y_used, speed_used = x[:, used], effort[used], speed[used]
+        memory = self._friction_memory
+        n, r, e = self._fric_n, self._fric_r, self._fric_e
+        yy, m, direction = self._fric_yy, self._fric_m, self._fric_dir
+        pooled = []
+        for a, b in zip(lo, hi):
+            xk, yk, moving = x_used[:, a:b], y_used[a:b], speed_used[a:b]
+            n = memory * n + xk @ xk.T
+            r = memory * r + xk @ yk
+            e = memory * e + np.einsum('ij,ij->i', xk, xk)
+            yy = memory * yy + float(yk @ yk)
+            m = memory * m + yk.size
+            direction = memory * direction + np.array(
+                [np.count_nonzero(moving > _FRICTION_SPEED),
+                 np.count_nonzero(moving < -_FRICTION_SPEED)])
+            pooled.append((n, r, e, yy, m, direction))
+        return pooled
 
     def _toward_model(self, torque, band, model, win, starts):
         """
