@@ -19,6 +19,7 @@ import numpy as np
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
+from reducer_twin.core.wear import depth_per_mesh_pass
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
@@ -464,6 +465,21 @@ class LocalBacks:
         """Release nothing (the stages live in this process)."""
 
 
+def _warm_up(params, life_config):
+    """
+    Build what a reducer's stages compute once per process, before its first samples come.
+
+    The window analysis's mesh depth table (about 50 ms), the model tables and the life
+    stage's first draws are kept by the process once made; the worker makes them for
+    every configured reducer while the reading process opens the bag and reads its
+    first chunk, instead of when its first window needs them.
+    """
+    reducers = set(params.values()) if isinstance(params, dict) else {params}
+    for reducer in reducers - {None}:
+        depth_per_mesh_pass(reducer.rating.rated_torque, reducer)
+        JointBack('', reducer, life_config).initial(0.0)
+
+
 def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
@@ -476,6 +492,7 @@ def _back_worker(inbox, outbox):
                 break
             if item[0] == _CONFIG:
                 local.configure(item[1], item[2], item[3])
+                _warm_up(item[1], item[2])
             elif item[0] == _ADD_FRONT:
                 local.add_front(item[1], JointFront(*item[1:]))
             elif item[0] == _FLUSH:
