@@ -1263,7 +1263,7 @@ class WindowAnalyzer:
 
     def _pooled_friction_sums(self, x, effort, speed, use, starts, ends):
         """
-        The friction fit's pooled sums after each window, from where the last batch left them.
+        Return the friction fit's pooled sums after each window, from the last batch's.
 
         Each window adds the normal equations of its samples in ``use`` to the sums
         forgotten by ``friction_memory_windows``; the sums do not depend on the fits, so
@@ -1489,19 +1489,16 @@ class WindowAnalyzer:
             level) for :meth:`_borrow_flanks`.
 
         """
-        reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
-        n_par = energy.shape[1]
+        reduced, dof = stats['reduced'], stats['dof']
         normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
         shape = (n_win, 2 * self.torque_bins)
         raw = {'moments': stats['moments'], 'count': stats['count'].reshape(shape),
                'su': stats['su'].reshape(shape), 'suu': stats['suu'].reshape(shape),
                's0': stats['s0'].reshape(shape + (-1,)), 's1': stats['s1'].reshape(shape + (-1,))}
-        pool_n = np.empty((n_win, n_par, n_par))
-        pool_r = np.empty((n_win, n_par))
-        pool_raw = np.empty((n_win, n_par))
         pool = self._pool
-        groups = {key: np.empty((n_win,) + pool[key].shape)
-                  for key in ('count', 'su', 'suu', 's0', 's1')}
+        # The pool after each window; its flank lines are projected out of all at once.
+        after = {key: np.empty((n_win,) + value.shape) for key, value in pool.items()}
+        groups = {key: after[key] for key in ('count', 'su', 'suu', 's0', 's1')}
         groups['shift'] = np.empty(n_win)
         for k in range(n_win):
             # The windows' TE is centred on each one's mean: refer it to one level for the
@@ -1540,13 +1537,12 @@ class WindowAnalyzer:
             pool['stz'] -= pool['s0']
             for key, value in add.items():
                 pool[key] += value
-            for key, value in groups.items():
-                if key != 'shift':
-                    value[k] = pool[key]
+            for key, value in after.items():
+                value[k] = pool[key]
             groups['shift'][k] = d
-            red = pool['moments'] - self._level_correction(pool)
-            pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
-            pool_raw[k] = np.diagonal(pool['moments'])[:-1]
+        red = after['moments'] - self._level_correction(after)
+        pool_n, pool_r = red[:, :-1, :-1], red[:, :-1, -1]
+        pool_raw = np.diagonal(after['moments'], axis1=1, axis2=2)[:, :-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
@@ -1558,14 +1554,15 @@ class WindowAnalyzer:
 
     def _level_correction(self, pool):
         """
-        Projection of the pooled flank lines out of the pooled moments, ``(P+1, P+1)``.
+        Projection of the pooled flank lines out of the pooled moments, ``(..., P+1, P+1)``.
 
         The pool's groups are ``(|T| bin, torque sign)`` over all its windows:
         each a level with a slope in ``u`` and a drift over the windows (the
         lost motion grows, quickly in a time-compressed recording), shared by
         the windows, so that the harmonics are told from the hysteresis by the
         positions at which the joint meets the same load in different moves,
-        not only within one window.
+        not only within one window. ``pool`` holds one pool or a stack of them (a
+        leading axis of windows).
         """
         n = pool['count']
         has = n > 0
@@ -1575,14 +1572,14 @@ class WindowAnalyzer:
             c_uu = pool['suu'] - n * u_m ** 2
             c_tt = pool['stt'] - n * t_m ** 2
             c_ut = pool['sut'] - n * u_m * t_m
-            b_u = pool['s1'] - u_m[:, None] * pool['s0']
-            b_t = pool['stz'] - t_m[:, None] * pool['s0']
+            b_u = pool['s1'] - u_m[..., None] * pool['s0']
+            b_t = pool['stz'] - t_m[..., None] * pool['s0']
         use_u = has & (n >= 3) & (c_uu > 1e-12 * n * self.centres.max() ** 2)
         use_t = has & (n >= 3) & (c_tt > 1e-6 * n)
         c_uu, c_tt, c_ut = (np.where(use_u, c_uu, 1.0), np.where(use_t, c_tt, 1.0),
                             np.where(use_u & use_t, c_ut, 0.0))
-        b_u = np.where(use_u[:, None], b_u, 0.0)
-        b_t = np.where(use_t[:, None], b_t, 0.0)
+        b_u = np.where(use_u[..., None], b_u, 0.0)
+        b_t = np.where(use_t[..., None], b_t, 0.0)
         det = c_uu * c_tt - c_ut ** 2
         ok = det > 1e-9 * c_uu * c_tt
         # Inverse of the centred (u, tau) Gram matrix; a nearly collinear pair keeps u only.
@@ -1593,9 +1590,11 @@ class WindowAnalyzer:
                             np.where(use_u & use_t, i_ut, 0.0))
         i_tt = np.where(use_t & ~use_u, 1.0 / c_tt, i_tt)
         s0 = pool['s0']
-        return ((s0 * inv_n[:, None]).T @ s0
-                + (b_u * i_uu[:, None]).T @ b_u + (b_t * i_tt[:, None]).T @ b_t
-                + (b_u * i_ut[:, None]).T @ b_t + (b_t * i_ut[:, None]).T @ b_u)
+
+        def gram(a, weight, b):
+            return np.swapaxes(a * weight[..., None], -1, -2) @ b
+        return (gram(s0, inv_n, s0) + gram(b_u, i_uu, b_u) + gram(b_t, i_tt, b_t)
+                + gram(b_u, i_ut, b_t) + gram(b_t, i_ut, b_u))
 
     def _hysteresis(self, stats, beta, noise, pooled):
         """Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins)."""
