@@ -324,23 +324,41 @@ class LifeDraws:
         return self.pick.shape[0]
 
 
-def _trend_times(trend, limit, duty_rate, normal, rows=None):
+def _trend_times(trends, limit, duty_rate, normal, follow):
     """
-    Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``.
+    Time to the limit by the observed trends, for the samples that follow them.
 
-    With ``rows``, only those samples' times (``duty_rate`` given for them alone); the
-    draws are made for all, so each sample's time is the one of the whole set.
+    Parameters
+    ----------
+    trends : sequence of GrowthTrendState
+        One growth law per estimate (Q).
+    limit : float
+        Lost-motion limit [rad].
+    duty_rate : ndarray, shape (Q, n)
+        Each sample's future duty rate [m per operating second].
+    normal : ndarray, shape (n, 3)
+        Standard-normal draws of ``[β, k, g]``.
+    follow : ndarray of bool, shape (Q, n)
+        The samples that follow the growth law.
+
+    Returns
+    -------
+    ndarray
+        The times of the samples in ``follow`` [s], in its order; each is the one of
+        the whole set of draws of its estimate.
+
     """
-    draws = np.asarray(trend.mean, dtype=float) + normal @ _covariance_root(
-        np.asarray(trend.cov, dtype=float)).T
-    if rows is not None:
-        draws = draws[rows]
+    mean = np.array([np.asarray(tr.mean, dtype=float) for tr in trends])
+    roots = np.array([_covariance_root(np.asarray(tr.cov, dtype=float)).T for tr in trends])
+    draws = (mean[:, None, :] + np.matmul(normal, roots))[follow]
+    exposure = np.broadcast_to(np.array([float(tr.exposure) for tr in trends])[:, None],
+                               follow.shape)[follow]
     beta, k = draws[:, 0], draws[:, 1]
     g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         ratio = (limit - beta) / k
-        a_lim = trend.exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
-        t = np.where(k <= 0.0, np.inf, (a_lim - trend.exposure) / duty_rate)
+        a_lim = exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
+        t = np.where(k <= 0.0, np.inf, (a_lim - exposure) / duty_rate[follow])
     return np.where(np.isnan(t), np.inf, np.maximum(t, 0.0))
 
 
@@ -566,12 +584,14 @@ def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, c
             part = t[drifting]
             spread = np.sqrt(drift[drifting, None] * np.minimum(part, 10.0 * horizon_s) / 3.0)
             t[drifting] = part * np.exp(-spread * draws.drift)
-        for k, p_trend in enumerate(p_trends):
-            if p_trend > 0.0:
-                # The samples that follow the growth law (a share p_trend) get its times.
-                rows = np.flatnonzero(draws.pick < p_trend)
-                t[k, rows] = _trend_times(queries[k].trend, limit, duty[k, rows] * rate[k, 0],
-                                          draws.trend, rows)
+        trending = [k for k, p_trend in enumerate(p_trends) if p_trend > 0.0]
+        if trending:
+            # The samples that follow the growth law (a share p_trend) get its times.
+            follow = draws.pick < np.array([p_trends[k] for k in trending])[:, None]
+            part = t[trending]
+            part[follow] = _trend_times([queries[k].trend for k in trending], limit,
+                                        duty[trending] * rate[trending], draws.trend, follow)
+            t[trending] = part
     return t, np.count_nonzero(t > horizon_s, axis=1)
 
 
