@@ -19,6 +19,7 @@ import numpy as np
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
+from reducer_twin.core.wear import depth_per_mesh_pass
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
@@ -362,8 +363,22 @@ class JointBack:
         """
         return self._outputs(*self.twin.step(record))
 
-    def _outputs(self, wear, life):
-        level, message, values = self.twin.summary(wear, life).diagnostic()
+    def process_many(self, records):
+        """
+        Step the estimator with each record in turn; the life predictions are made together.
+
+        Returns
+        -------
+        list of dict
+            :meth:`process` of each record, in order.
+
+        """
+        return [self._outputs(wear, life, summary)
+                for wear, life, summary in self.twin.step_many(records)]
+
+    def _outputs(self, wear, life, summary=None):
+        summary = summary or self.twin.summary(wear, life)
+        level, message, values = summary.diagnostic()
         # Encoded here: in a worker process this work leaves the reading process.
         log_ns = stamp_ns(wear.record['stamp_s'])
         diagnostics = encode_diagnostic_array(log_ns, [Status(
@@ -434,7 +449,7 @@ class LocalBacks:
         if kind == 'start':
             self._done.append((joint, [back.initial(items)]))
         else:
-            self._done.append((joint, [back.process(r) for r in items]))
+            self._done.append((joint, back.process_many(items)))
 
     def poll(self):
         """Return the outputs ready so far, ``[(joint, [outputs])]``."""
@@ -450,6 +465,21 @@ class LocalBacks:
         """Release nothing (the stages live in this process)."""
 
 
+def _warm_up(params, life_config):
+    """
+    Build what a reducer's stages compute once per process, before its first samples come.
+
+    The window analysis's mesh depth table (about 50 ms), the model tables and the life
+    stage's first draws are kept by the process once made; the worker makes them for
+    every configured reducer while the reading process opens the bag and reads its
+    first chunk, instead of when its first window needs them.
+    """
+    reducers = set(params.values()) if isinstance(params, dict) else {params}
+    for reducer in reducers - {None}:
+        depth_per_mesh_pass(reducer.rating.rated_torque, reducer)
+        JointBack('', reducer, life_config).initial(0.0)
+
+
 def _back_worker(inbox, outbox):
     """Run the estimator and life stages on records sent by the analysing process."""
     try:
@@ -462,6 +492,7 @@ def _back_worker(inbox, outbox):
                 break
             if item[0] == _CONFIG:
                 local.configure(item[1], item[2], item[3])
+                _warm_up(item[1], item[2])
             elif item[0] == _ADD_FRONT:
                 local.add_front(item[1], JointFront(*item[1:]))
             elif item[0] == _FLUSH:

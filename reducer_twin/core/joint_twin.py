@@ -231,8 +231,25 @@ def assess(stage, wear_record):
         The ``wear`` record.
 
     """
-    record, level, message = stage.process(wear_record)
-    return LifeEstimate(MappingProxyType(record), level, message)
+    return assess_many(stage, [wear_record])[0]
+
+
+def assess_many(stage, wear_records, duties=None):
+    """
+    Return the :class:`LifeEstimate` of each of several ``wear`` records, sampled together.
+
+    Parameters
+    ----------
+    stage : LifeStage
+        The reducer's life stage.
+    wear_records : sequence of Mapping
+        The ``wear`` records.
+    duties : sequence, optional
+        The duty summary in force at each record (default the stage's current one).
+
+    """
+    return [LifeEstimate(MappingProxyType(record), level, message)
+            for record, level, message in stage.process_many(wear_records, duties)]
 
 
 def estimate_numbers(wear, life, observed):
@@ -375,6 +392,33 @@ class TwinBack:
         """Estimate and assess one window; return ``(WearEstimate, LifeEstimate)``."""
         wear = self.estimate(record)
         return wear, self.assess(wear.record)
+
+    def step_many(self, records):
+        """
+        Step the estimator with each window in turn, then assess all of them at once.
+
+        The same results as :meth:`step` and :meth:`summary` window by window; the
+        remaining-life samples of all windows are evaluated as one array.
+
+        Parameters
+        ----------
+        records : sequence of Mapping
+            ``te_features`` records, oldest first.
+
+        Returns
+        -------
+        list of tuple
+            ``(WearEstimate, LifeEstimate, HealthSummary)`` per window.
+
+        """
+        wears, duties, te_pp = [], [], []
+        for record in records:
+            wears.append(self.estimate(record))
+            duties.append(self.life.duty)
+            te_pp.append(self.te_pp_rad)
+        lives = assess_many(self.life, [w.record for w in wears], duties)
+        return [(wear, life, HealthSummary.of(wear.record, life, pp))
+                for wear, life, pp in zip(wears, lives, te_pp)]
 
     def summary(self, wear, life):
         """Return the :class:`HealthSummary` of an estimate and its life."""

@@ -37,6 +37,7 @@ duty, to be shown beside the estimate.
 
 from dataclasses import dataclass, field
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -323,24 +324,68 @@ class LifeDraws:
         return self.pick.shape[0]
 
 
-def _trend_times(trend, limit, duty_rate, normal, rows=None):
+def _trend_times(trends, limit, duty_rate, normal, follow):
     """
-    Time to the limit by the observed trend for standard-normal draws ``normal (n, 3)``.
+    Time to the limit by the observed trends, for the samples that follow them.
 
-    With ``rows``, only those samples' times (``duty_rate`` given for them alone); the
-    draws are made for all, so each sample's time is the one of the whole set.
+    Parameters
+    ----------
+    trends : sequence of GrowthTrendState
+        One growth law per estimate (Q).
+    limit : float
+        Lost-motion limit [rad].
+    duty_rate : ndarray, shape (Q, n)
+        Each sample's future duty rate [m per operating second].
+    normal : ndarray, shape (n, 3)
+        Standard-normal draws of ``[β, k, g]``.
+    follow : ndarray of bool, shape (Q, n)
+        The samples that follow the growth law.
+
+    Returns
+    -------
+    ndarray
+        The times of the samples in ``follow`` [s], in its order; each is the one of
+        the whole set of draws of its estimate.
+
     """
-    draws = np.asarray(trend.mean, dtype=float) + normal @ _covariance_root(
-        np.asarray(trend.cov, dtype=float)).T
-    if rows is not None:
-        draws = draws[rows]
+    mean = np.array([np.asarray(tr.mean, dtype=float) for tr in trends])
+    roots = np.array([_covariance_root(np.asarray(tr.cov, dtype=float)).T for tr in trends])
+    draws = (mean[:, None, :] + np.matmul(normal, roots))[follow]
+    exposure = np.broadcast_to(np.array([float(tr.exposure) for tr in trends])[:, None],
+                               follow.shape)[follow]
     beta, k = draws[:, 0], draws[:, 1]
     g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         ratio = (limit - beta) / k
-        a_lim = trend.exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
-        t = np.where(k <= 0.0, np.inf, (a_lim - trend.exposure) / duty_rate)
+        a_lim = exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
+        t = np.where(k <= 0.0, np.inf, (a_lim - exposure) / duty_rate[follow])
     return np.where(np.isnan(t), np.inf, np.maximum(t, 0.0))
+
+
+class LifeQuery(NamedTuple):
+    """
+    One estimate whose remaining life :func:`remaining_lives` samples.
+
+    Attributes
+    ----------
+    state : WearEstimator or tuple
+        The estimator, or its ``(x, P)`` (see :func:`remaining_life`).
+    duty_rate : float
+        Run-in-free Archard rate of the recent duty [m per operating second].
+    duty_rate_rel_std : float
+        Uncertainty of the future mean duty rate, sd of ``ln ȧ``.
+    rate_drift : float
+        Random-walk intensity of ``ln s`` per operating second [1/s].
+    trend : GrowthTrendState or None
+        The observed growth law and its probability.
+
+    """
+
+    state: object
+    duty_rate: float
+    duty_rate_rel_std: float = 0.0
+    rate_drift: float = 0.0
+    trend: object = None
 
 
 def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_HORIZON_S,
@@ -405,9 +450,43 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
         ``rate_drift`` is out of range, or ``draws`` hold another number of samples.
 
     """
-    x, P = _state_arrays(state)
-    if not (math.isfinite(duty_rate) and duty_rate >= 0.0):
-        raise InvalidInput(out_of_range('duty_rate', duty_rate, 'm/s', 'finite and >= 0'))
+    query = LifeQuery(state, duty_rate, duty_rate_rel_std, rate_drift, trend)
+    return remaining_lives([query], params, limit=limit, horizon_s=horizon_s,
+                           n_samples=n_samples, rng=rng, keep_samples=keep_samples,
+                           draws=draws)[0]
+
+
+def remaining_lives(queries, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_HORIZON_S,
+                    n_samples=2000, rng=None, keep_samples=False, draws=None):
+    """
+    Sample the remaining life of several estimates at once (one reducer, common draws).
+
+    Each answer is the one :func:`remaining_life` gives for its query alone with the
+    same draws; the samples of all queries are evaluated as one array.
+
+    Parameters
+    ----------
+    queries : sequence of LifeQuery
+        The estimates, with their duty and growth law.
+    params : ReducerParams
+        Reducer parameters.
+    limit, horizon_s, n_samples, rng, keep_samples, draws
+        As for :func:`remaining_life`.
+
+    Returns
+    -------
+    list of LifePrediction
+        One per query, in order.
+
+    Raises
+    ------
+    InvalidInput
+        If a state or trend is malformed or a duty rate negative or not finite.
+    InvalidParameter
+        As for :func:`remaining_life`.
+
+    """
+    checked = [_check_query(q) for q in queries]
     if not (math.isfinite(horizon_s) and horizon_s > 0.0):
         raise InvalidParameter(out_of_range('horizon_s', horizon_s, 's', '> 0'))
     if isinstance(n_samples, bool) or int(n_samples) != n_samples or n_samples < 1:
@@ -416,52 +495,104 @@ def remaining_life(state, duty_rate, params, limit=LOST_MOTION_LIMIT, horizon_s=
     if draws is not None and draws.n_samples != n_samples:
         raise InvalidParameter(f'draws hold {draws.n_samples} samples, expected n_samples = '
                                f'{n_samples}')
-    if not (math.isfinite(duty_rate_rel_std) and duty_rate_rel_std >= 0.0):
-        raise InvalidParameter(out_of_range('duty_rate_rel_std', duty_rate_rel_std, '', '>= 0'))
-    if not (math.isfinite(rate_drift) and rate_drift >= 0.0):
-        raise InvalidParameter(out_of_range('rate_drift', rate_drift, '1/s', '>= 0'))
-    p_trend = _trend_probability(trend)
+    p_trends = [_check_future(q) for q in queries]
     curve = lost_motion_curve(params)
     _check_limit(curve, limit)  # the limit must lie inside the model's table
-    wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
-    w_lim = float(wear_at_lost_motion(limit, baseline, curve))
-    lm = unit_lost_motion(wear_mean, baseline, curve)
-    es = _event_state(curve, lm, limit, baseline)
-    met = bool(lm >= limit)
-    if wear_mean >= w_lim or met:
-        zeros = np.zeros(n_samples) if keep_samples else None
-        return LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
-                              float(horizon_s), w_lim, n_samples, zeros)
+    out = [None] * len(queries)
+    live = []
+    for i, (x, P) in enumerate(checked):
+        wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
+        w_lim = float(wear_at_lost_motion(limit, baseline, curve))
+        lm = unit_lost_motion(wear_mean, baseline, curve)
+        es = _event_state(curve, lm, limit, baseline)
+        met = bool(lm >= limit)
+        if wear_mean >= w_lim or met:
+            zeros = np.zeros(n_samples) if keep_samples else None
+            out[i] = LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
+                                    float(horizon_s), w_lim, n_samples, zeros)
+        else:
+            live.append((i, es, met, w_lim))
+    if not live:
+        return out
     if draws is None:
         draws = LifeDraws.draw(n_samples, rng)
-    states = x + draws.state @ _covariance_root(P).T
-    wear = np.maximum(states[:, 0], 0.0)
-    lim = wear_at_lost_motion(limit, states[:, 2], curve)
-    duty = np.exp(duty_rate_rel_std * draws.duty)
+    rows = [i for i, _, _, _ in live]
+    t, censored = _sampled_times([queries[i] for i in rows], [checked[i] for i in rows],
+                                 [p_trends[i] for i in rows], params, limit, horizon_s, draws,
+                                 curve)
+    capped = np.minimum(t, horizon_s)
+    quantiles = np.quantile(capped, [0.1, 0.5, 0.9], axis=1).T.tolist()
+    means = capped.mean(axis=1).tolist()
+    for k, (i, es, met, w_lim) in enumerate(live):
+        p10, p50, p90 = quantiles[k]
+        out[i] = LifePrediction(
+            p10=p10, p50=p50, p90=p90,
+            p10_censored=p10 >= horizon_s, p50_censored=p50 >= horizon_s,
+            p90_censored=p90 >= horizon_s,
+            mean=means[k],
+            fraction_censored=float(censored[k] / n_samples),
+            limit_reached=False, event_state=es, threshold_met=met,
+            horizon_s=float(horizon_s), wear_limit=w_lim, n_samples=n_samples,
+            samples=capped[k] if keep_samples else None)
+    return out
+
+
+def _check_query(query):
+    """Validate a query's state and duty rate; return its ``(x, P)`` as four states."""
+    x, P = _state_arrays(query.state)
+    duty_rate = query.duty_rate
+    if not (math.isfinite(duty_rate) and duty_rate >= 0.0):
+        raise InvalidInput(out_of_range('duty_rate', duty_rate, 'm/s', 'finite and >= 0'))
+    return x, P
+
+
+def _check_future(query):
+    """Validate a query's duty uncertainty, drift and growth law; return its probability."""
+    rel_std, drift = query.duty_rate_rel_std, query.rate_drift
+    if not (math.isfinite(rel_std) and rel_std >= 0.0):
+        raise InvalidParameter(out_of_range('duty_rate_rel_std', rel_std, '', '>= 0'))
+    if not (math.isfinite(drift) and drift >= 0.0):
+        raise InvalidParameter(out_of_range('rate_drift', drift, '1/s', '>= 0'))
+    return _trend_probability(query.trend)
+
+
+def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, curve):
+    """
+    Time of event of every draw of every query, shape (queries, samples) [s].
+
+    Returns the times (infinite where the limit is never met) and, per query, the
+    count of times beyond the horizon.
+    """
+    x = np.array([s[0] for s in states])
+    roots = np.array([_covariance_root(s[1]).T for s in states])
+    rate = np.array([float(q.duty_rate) for q in queries])[:, None]
+    rel_std = np.array([float(q.duty_rate_rel_std) for q in queries])[:, None]
+    drift = np.array([float(q.rate_drift) for q in queries])
+    sampled = x[:, None, :] + np.matmul(draws.state, roots)
+    wear = np.maximum(sampled[..., 0], 0.0)
+    lim = wear_at_lost_motion(limit, sampled[..., 2], curve)
+    duty = np.exp(rel_std * draws.duty)
     wp = params.wear
     remaining = run_in_free_wear(lim, wp) - run_in_free_wear(wear, wp)
-    speed = np.exp(states[:, 1]) * duty * duty_rate
+    speed = np.exp(sampled[..., 1]) * duty * rate
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = np.where(remaining <= 0.0, 0.0, remaining / speed)
         t[np.isnan(t)] = np.inf
-        if rate_drift > 0.0:
+        drifting = np.flatnonzero(drift > 0.0)
+        if drifting.size:
             # The mean of the drifting ln s over the time to the event.
-            drift = np.sqrt(rate_drift * np.minimum(t, 10.0 * horizon_s) / 3.0)
-            t = t * np.exp(-drift * draws.drift)
-        if p_trend > 0.0:
+            part = t[drifting]
+            spread = np.sqrt(drift[drifting, None] * np.minimum(part, 10.0 * horizon_s) / 3.0)
+            t[drifting] = part * np.exp(-spread * draws.drift)
+        trending = [k for k, p_trend in enumerate(p_trends) if p_trend > 0.0]
+        if trending:
             # The samples that follow the growth law (a share p_trend) get its times.
-            rows = np.flatnonzero(draws.pick < p_trend)
-            t[rows] = _trend_times(trend, limit, duty[rows] * duty_rate, draws.trend, rows)
-    capped = np.minimum(t, horizon_s)
-    p10, p50, p90 = (float(v) for v in np.quantile(capped, [0.1, 0.5, 0.9]))
-    return LifePrediction(
-        p10=p10, p50=p50, p90=p90,
-        p10_censored=p10 >= horizon_s, p50_censored=p50 >= horizon_s,
-        p90_censored=p90 >= horizon_s,
-        mean=float(capped.mean()),
-        fraction_censored=float(np.count_nonzero(t > horizon_s) / n_samples),
-        limit_reached=False, event_state=es, threshold_met=met, horizon_s=float(horizon_s),
-        wear_limit=w_lim, n_samples=n_samples, samples=capped if keep_samples else None)
+            follow = draws.pick < np.array([p_trends[k] for k in trending])[:, None]
+            part = t[trending]
+            part[follow] = _trend_times([queries[k].trend for k in trending], limit,
+                                        duty[trending] * rate[trending], draws.trend, follow)
+            t[trending] = part
+    return t, np.count_nonzero(t > horizon_s, axis=1)
 
 
 def _trend_probability(trend):

@@ -18,7 +18,7 @@ import numpy as np
 
 from .errors import InvalidInput, InvalidParameter
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
-from .life import LOST_MOTION_LIMIT, remaining_life
+from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
 from .units import HOUR
 
@@ -457,6 +457,37 @@ class LifeStage:
             The prediction (common random numbers: the same record gives the same answer).
 
         """
+        return self.predictions([wear_record], keep_samples)[0]
+
+    def predictions(self, wear_records, keep_samples=False):
+        """
+        Sample the remaining life of several ``wear`` records at once.
+
+        Each is the :meth:`prediction` of its record alone; the samples of all are
+        evaluated together (:func:`~reducer_twin.core.life.remaining_lives`).
+
+        Parameters
+        ----------
+        wear_records : sequence of mapping
+            Outputs of :meth:`EstimatorStage.record`.
+        keep_samples : bool
+            Keep the sampled times in the results.
+
+        Returns
+        -------
+        list of LifePrediction
+            One per record, in order.
+
+        """
+        queries = [self._query(r) for r in wear_records]
+        if self._draws is None:
+            self._draws = LifeDraws.draw(self.n_samples, np.random.default_rng(0))
+        return remaining_lives(queries, self.params, limit=self.limit, horizon_s=self.horizon_s,
+                               n_samples=self.n_samples, draws=self._draws,
+                               keep_samples=keep_samples)
+
+    def _query(self, wear_record):
+        """Return the :class:`~reducer_twin.core.life.LifeQuery` of a ``wear`` record."""
         x, P = state_from_record(wear_record)
         rate = float(wear_record['duty_rate_m_per_s'])
         measured = float(wear_record.get('duty_rate_rel_std', 0.0))
@@ -465,14 +496,8 @@ class LifeStage:
                 and drift >= 0.0):
             raise InvalidInput(f'wear record holds a bad duty_rate_rel_std ({measured!r}) or '
                                f'log_rate_drift_per_s ({drift!r}): both must be finite and >= 0')
-        if self._draws is None:
-            self._draws = LifeDraws.draw(self.n_samples, np.random.default_rng(0))
-        return remaining_life((x, P), rate, self.params, limit=self.limit,
-                              horizon_s=self.horizon_s, n_samples=self.n_samples,
-                              draws=self._draws,
-                              duty_rate_rel_std=float(np.hypot(measured, self.duty_rate_rel_std)),
-                              keep_samples=keep_samples, rate_drift=drift,
-                              trend=trend_from_record(wear_record))
+        return LifeQuery((x, P), rate, float(np.hypot(measured, self.duty_rate_rel_std)), drift,
+                         trend_from_record(wear_record))
 
     def process(self, wear_record):
         """
@@ -492,8 +517,34 @@ class LifeStage:
             (``updates`` 0).
 
         """
-        pred = self.prediction(wear_record)
-        cat = catalogue_life(self.duty, self.params) if self.duty is not None else float('nan')
+        return self.process_many([wear_record])[0]
+
+    def process_many(self, wear_records, duties=None):
+        """
+        Predict remaining life from several ``wear`` records at once.
+
+        Parameters
+        ----------
+        wear_records : sequence of mapping
+            Outputs of :meth:`EstimatorStage.record`.
+        duties : sequence, optional
+            The duty summary in force at each record (what :meth:`observe_duty`
+            kept when it was made), for the catalogue life; default the current one.
+
+        Returns
+        -------
+        list of tuple
+            :meth:`process` of each record, in order.
+
+        """
+        if duties is None:
+            duties = [self.duty] * len(wear_records)
+        return [self._assessment(r, p, d) for r, p, d in
+                zip(wear_records, self.predictions(wear_records), duties)]
+
+    def _assessment(self, wear_record, pred, duty):
+        """Return ``(record, level, message)`` of a record, its prediction and duty."""
+        cat = catalogue_life(duty, self.params) if duty is not None else float('nan')
         record = {
             'stamp_s': wear_record['stamp_s'], 'p10_s': pred.p10, 'p50_s': pred.p50,
             'p90_s': pred.p90, 'mean_s': pred.mean, 'p10_censored': float(pred.p10_censored),

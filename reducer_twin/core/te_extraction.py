@@ -1235,20 +1235,14 @@ class WindowAnalyzer:
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
         taken = np.zeros((starts.size, 3))
+        pooled = self._pooled_friction_sums(x, effort_s, speed, use, starts, ends)
+        # Every window's fit at once (the same LAPACK call per window as one at a time).
+        betas, idents = _solve_identifiable_many(*(np.array([p[j] for p in pooled])
+                                                   for j in range(3)))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
-            sel = use[a:b]
-            xk = x[:, a:b][:, sel]
-            yk = effort_s[a:b][sel]
-            self._fric_n = self._friction_memory * self._fric_n + xk @ xk.T
-            self._fric_r = self._friction_memory * self._fric_r + xk @ yk
-            self._fric_e = self._friction_memory * self._fric_e + np.einsum('ij,ij->i', xk, xk)
-            self._fric_yy = self._friction_memory * self._fric_yy + float(yk @ yk)
-            self._fric_m = self._friction_memory * self._fric_m + yk.size
-            moving = speed[a:b][sel]
-            self._fric_dir = self._friction_memory * self._fric_dir + np.array(
-                [np.count_nonzero(moving > _FRICTION_SPEED),
-                 np.count_nonzero(moving < -_FRICTION_SPEED)])
-            beta, ident = _solve_identifiable(self._fric_n, self._fric_r, self._fric_e)
+            (self._fric_n, self._fric_r, self._fric_e, self._fric_yy, self._fric_m,
+             self._fric_dir) = pooled[k]
+            beta, ident = betas[k], idents[k]
             fc, fv = self._significant_friction(beta, ident)
             self.coulomb_friction, self.viscous_friction = fc, fv
             # The effort as the fit explains it, where its acceleration is whole (the
@@ -1266,6 +1260,42 @@ class WindowAnalyzer:
             else:
                 taken[k, :2] = 0.0
         return out, drag, model, taken
+
+    def _pooled_friction_sums(self, x, effort, speed, use, starts, ends):
+        """
+        Return the friction fit's pooled sums after each window, from the last batch's.
+
+        Each window adds the normal equations of its samples in ``use`` to the sums
+        forgotten by ``friction_memory_windows``; the sums do not depend on the fits, so
+        they are formed first and the fits solved together.
+
+        Returns
+        -------
+        list of tuple
+            Per window ``(normal, rhs, energy, yy, samples, directions)``, as
+            ``_fric_n``, ``_fric_r``, ``_fric_e``, ``_fric_yy``, ``_fric_m`` and
+            ``_fric_dir`` stand after it.
+
+        """
+        used = np.flatnonzero(use)
+        lo, hi = np.searchsorted(used, starts).tolist(), np.searchsorted(used, ends).tolist()
+        x_used, y_used, speed_used = x[:, used], effort[used], speed[used]
+        memory = self._friction_memory
+        n, r, e = self._fric_n, self._fric_r, self._fric_e
+        yy, m, direction = self._fric_yy, self._fric_m, self._fric_dir
+        pooled = []
+        for a, b in zip(lo, hi):
+            xk, yk, moving = x_used[:, a:b], y_used[a:b], speed_used[a:b]
+            n = memory * n + xk @ xk.T
+            r = memory * r + xk @ yk
+            e = memory * e + np.einsum('ij,ij->i', xk, xk)
+            yy = memory * yy + float(yk @ yk)
+            m = memory * m + yk.size
+            direction = memory * direction + np.array(
+                [np.count_nonzero(moving > _FRICTION_SPEED),
+                 np.count_nonzero(moving < -_FRICTION_SPEED)])
+            pooled.append((n, r, e, yy, m, direction))
+        return pooled
 
     def _toward_model(self, torque, band, model, win, starts):
         """
@@ -1459,19 +1489,16 @@ class WindowAnalyzer:
             level) for :meth:`_borrow_flanks`.
 
         """
-        reduced, energy, dof = stats['reduced'], stats['energy'], stats['dof']
-        n_par = energy.shape[1]
+        reduced, dof = stats['reduced'], stats['dof']
         normal, rhs = reduced[:, :-1, :-1], reduced[:, :-1, -1]
         shape = (n_win, 2 * self.torque_bins)
         raw = {'moments': stats['moments'], 'count': stats['count'].reshape(shape),
                'su': stats['su'].reshape(shape), 'suu': stats['suu'].reshape(shape),
                's0': stats['s0'].reshape(shape + (-1,)), 's1': stats['s1'].reshape(shape + (-1,))}
-        pool_n = np.empty((n_win, n_par, n_par))
-        pool_r = np.empty((n_win, n_par))
-        pool_raw = np.empty((n_win, n_par))
         pool = self._pool
-        groups = {key: np.empty((n_win,) + pool[key].shape)
-                  for key in ('count', 'su', 'suu', 's0', 's1')}
+        # The pool after each window; its flank lines are projected out of all at once.
+        after = {key: np.empty((n_win,) + value.shape) for key, value in pool.items()}
+        groups = {key: after[key] for key in ('count', 'su', 'suu', 's0', 's1')}
         groups['shift'] = np.empty(n_win)
         for k in range(n_win):
             # The windows' TE is centred on each one's mean: refer it to one level for the
@@ -1510,13 +1537,12 @@ class WindowAnalyzer:
             pool['stz'] -= pool['s0']
             for key, value in add.items():
                 pool[key] += value
-            for key, value in groups.items():
-                if key != 'shift':
-                    value[k] = pool[key]
+            for key, value in after.items():
+                value[k] = pool[key]
             groups['shift'][k] = d
-            red = pool['moments'] - self._level_correction(pool)
-            pool_n[k], pool_r[k] = red[:-1, :-1], red[:-1, -1]
-            pool_raw[k] = np.diagonal(pool['moments'])[:-1]
+        red = after['moments'] - self._level_correction(after)
+        pool_n, pool_r = red[:, :-1, :-1], red[:, :-1, -1]
+        pool_raw = np.diagonal(after['moments'], axis1=1, axis2=2)[:, :-1]
         beta, ident = _solve_identifiable_many(pool_n, pool_r, pool_raw)
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
@@ -1528,14 +1554,15 @@ class WindowAnalyzer:
 
     def _level_correction(self, pool):
         """
-        Projection of the pooled flank lines out of the pooled moments, ``(P+1, P+1)``.
+        Projection of the pooled flank lines out of the pooled moments, ``(..., P+1, P+1)``.
 
         The pool's groups are ``(|T| bin, torque sign)`` over all its windows:
         each a level with a slope in ``u`` and a drift over the windows (the
         lost motion grows, quickly in a time-compressed recording), shared by
         the windows, so that the harmonics are told from the hysteresis by the
         positions at which the joint meets the same load in different moves,
-        not only within one window.
+        not only within one window. ``pool`` holds one pool or a stack of them (a
+        leading axis of windows).
         """
         n = pool['count']
         has = n > 0
@@ -1545,14 +1572,14 @@ class WindowAnalyzer:
             c_uu = pool['suu'] - n * u_m ** 2
             c_tt = pool['stt'] - n * t_m ** 2
             c_ut = pool['sut'] - n * u_m * t_m
-            b_u = pool['s1'] - u_m[:, None] * pool['s0']
-            b_t = pool['stz'] - t_m[:, None] * pool['s0']
+            b_u = pool['s1'] - u_m[..., None] * pool['s0']
+            b_t = pool['stz'] - t_m[..., None] * pool['s0']
         use_u = has & (n >= 3) & (c_uu > 1e-12 * n * self.centres.max() ** 2)
         use_t = has & (n >= 3) & (c_tt > 1e-6 * n)
         c_uu, c_tt, c_ut = (np.where(use_u, c_uu, 1.0), np.where(use_t, c_tt, 1.0),
                             np.where(use_u & use_t, c_ut, 0.0))
-        b_u = np.where(use_u[:, None], b_u, 0.0)
-        b_t = np.where(use_t[:, None], b_t, 0.0)
+        b_u = np.where(use_u[..., None], b_u, 0.0)
+        b_t = np.where(use_t[..., None], b_t, 0.0)
         det = c_uu * c_tt - c_ut ** 2
         ok = det > 1e-9 * c_uu * c_tt
         # Inverse of the centred (u, tau) Gram matrix; a nearly collinear pair keeps u only.
@@ -1563,9 +1590,11 @@ class WindowAnalyzer:
                             np.where(use_u & use_t, i_ut, 0.0))
         i_tt = np.where(use_t & ~use_u, 1.0 / c_tt, i_tt)
         s0 = pool['s0']
-        return ((s0 * inv_n[:, None]).T @ s0
-                + (b_u * i_uu[:, None]).T @ b_u + (b_t * i_tt[:, None]).T @ b_t
-                + (b_u * i_ut[:, None]).T @ b_t + (b_t * i_ut[:, None]).T @ b_u)
+
+        def gram(a, weight, b):
+            return np.swapaxes(a * weight[..., None], -1, -2) @ b
+        return (gram(s0, inv_n, s0) + gram(b_u, i_uu, b_u) + gram(b_t, i_tt, b_t)
+                + gram(b_u, i_ut, b_t) + gram(b_t, i_ut, b_u))
 
     def _hysteresis(self, stats, beta, noise, pooled):
         """Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins)."""

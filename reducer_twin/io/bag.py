@@ -36,7 +36,8 @@ from reducer_twin.io.mcap_format import MAGIC
 from reducer_twin.io.mcap_reader import McapBagReader, RawBatch, ReadWarning
 from reducer_twin.io.rosbag1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
 from reducer_twin.io.rosbag1 import VERSION as ROS1_VERSION
-from reducer_twin.io.rosbag2_metadata import custom_data_strings, parse_qos_profiles
+from reducer_twin.io.rosbag2_metadata import custom_data_strings, load_yaml
+from reducer_twin.io.rosbag2_metadata import parse_qos_profiles
 from reducer_twin.msg_adapters import dynamic_joint_state as djs
 from reducer_twin.msg_adapters.jointstate_cdr import (
     concat_batches, decode_joint_states, empty_batch)
@@ -642,7 +643,7 @@ def _safe_qos(value):
 def _read_metadata_yaml(path):
     try:
         text = path.read_text(encoding='utf-8')
-        document = yaml.safe_load(text)
+        document = load_yaml(text)
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
         raise BagError(f'{path} cannot be read as YAML: {err}') from err
     if not isinstance(document, dict) or not isinstance(

@@ -34,7 +34,7 @@ from reducer_twin.core.errors import BagError
 from reducer_twin.io.mcap_format import (
     MAGIC, MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE,
     OP_MESSAGE_INDEX, OP_METADATA, OP_SCHEMA, RECORD_NAMES)
-from reducer_twin.io.rosbag2_metadata import custom_data_strings
+from reducer_twin.io.rosbag2_metadata import custom_data_strings, load_yaml
 import yaml
 
 _CODECS = ('', 'zstd', 'lz4')
@@ -402,7 +402,7 @@ class McapBagReader:
         for name, values in reversed(self.metadata):
             if name == 'rosbag2' and 'serialized_metadata' in values:
                 try:
-                    info = yaml.safe_load(values['serialized_metadata'])
+                    info = load_yaml(values['serialized_metadata'])
                 except yaml.YAMLError as err:
                     self._warn(None, f'the rosbag2 metadata record is not YAML: {err}')
                     return None

@@ -155,6 +155,24 @@ def qos_from_dict(item):
         raise InvalidInput(f'QoS profile {item!r} is not understood: {err}') from err
 
 
+_SAFE_LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)
+_BASE_LOADER = getattr(yaml, 'CBaseLoader', yaml.BaseLoader)
+"""PyYAML's loaders on libyaml where it is built with it (the same constructors, faster)."""
+
+
+def load_yaml(text):
+    """
+    Read a YAML document as :func:`yaml.safe_load` does (libyaml's parser when available).
+
+    Raises
+    ------
+    yaml.YAMLError
+        If the text is not YAML.
+
+    """
+    return yaml.load(text, Loader=_SAFE_LOADER)
+
+
 def parse_qos_profiles(value):
     """
     Parse ``offered_qos_profiles`` as found in a bag.
@@ -182,7 +200,7 @@ def parse_qos_profiles(value):
         return (value,)
     if isinstance(value, str):
         try:
-            value = yaml.safe_load(value)
+            value = load_yaml(value)
         except yaml.YAMLError as err:
             raise InvalidInput(f'offered_qos_profiles is not YAML: {err}') from err
         if value is None:
@@ -203,7 +221,7 @@ _PLAIN = re.compile(r'[A-Za-z0-9_./][A-Za-z0-9_./\-]*')
 @functools.lru_cache(maxsize=4096)
 def _reads_back(text):
     """Whether YAML reads the plain scalar ``text`` as that string (cached: 0.3 ms a call)."""
-    return yaml.safe_load(text) == text
+    return load_yaml(text) == text
 
 
 def _scalar(value):
@@ -344,7 +362,7 @@ def custom_data_strings(text):
 
     """
     try:
-        raw = yaml.load(text, Loader=yaml.BaseLoader)
+        raw = yaml.load(text, Loader=_BASE_LOADER)
     except yaml.YAMLError:
         return None
     if isinstance(raw, dict) and 'rosbag2_bagfile_information' in raw:

@@ -78,6 +78,23 @@ def test_the_pieces_one_per_node_give_what_the_whole_twin_gives(stream, updates)
         assert back.summary(wear, life).as_dict().keys() == u.summary.as_dict().keys()
 
 
+def test_windows_stepped_together_give_what_each_step_gives(stream, updates):
+    # The bag analysis hands a chunk's windows over at once: the estimator steps each in
+    # turn and the life predictions of all are sampled together, with the same results.
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=AGING))
+    records = [front.record(f) for piece in stream for f in front.update(*piece)]
+    records += [front.record(f) for f in front.flush()]
+    back = TwinBack(PARAMS)
+    steps = back.step_many(records[:2]) + back.step_many(records[2:])
+    assert len(steps) == len(updates)
+    for (wear, life, summary), u in zip(steps, updates):
+        assert wear.status == u.wear.status
+        np.testing.assert_array_equal(list(wear.record.values()), list(u.wear.record.values()))
+        np.testing.assert_array_equal(list(life.record.values()), list(u.life.record.values()))
+        assert (life.level, life.message) == (u.life.level, u.life.message)
+        assert summary == u.summary
+
+
 def test_the_health_summary_is_the_diagnostic_status_in_its_documented_order(updates):
     summary = updates[-1].summary
     level, message, values = summary.diagnostic()

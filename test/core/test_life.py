@@ -12,7 +12,8 @@ from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig, run_in_free_wear, WearEstimator
 from reducer_twin.core.life import (catalogue_life, event_state, GrowthTrendState, LifeDraws,
-                                    limit_wear, LOST_MOTION_LIMIT, remaining_life, threshold_met)
+                                    LifeQuery, limit_wear, LOST_MOTION_LIMIT, remaining_life,
+                                    remaining_lives, threshold_met)
 from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accuracy,
                                        interval_coverage, prognostic_horizon, relative_accuracy)
 from reducer_twin.core.params import ReducerParams
@@ -153,6 +154,27 @@ def test_draws_made_before_give_the_prediction_of_drawing_from_the_same_source(
         drawn_before = remaining_life((x, P), rated_rate, params, draws=draws, **args)
         assert drawn_before == drawn_here
         np.testing.assert_array_equal(drawn_before.samples, drawn_here.samples)
+
+
+def test_estimates_sampled_together_get_the_answers_each_gets_alone(params, rated_rate):
+    # One reducer's windows, assessed at once: worn out, certain, drifting, following a
+    # growth law, with the duty uncertain; each answer is exactly the one of its own call.
+    draws = LifeDraws.draw(2000)
+    queries = [LifeQuery(state(5e-6, wear_sd=1e-6, log_scale_sd=0.3), rated_rate, 0.2, 1e-9,
+                         trend_state(0.4, 1.0)),
+               LifeQuery(state(30e-6), rated_rate),
+               LifeQuery(state(1e-6, log_scale_sd=0.6), rated_rate, 0.0, 1e-9),
+               LifeQuery(state(5e-6), 0.0),
+               LifeQuery(state(2e-6), rated_rate, 0.1, 0.0, trend_state(1.0, 0.7))]
+    together = remaining_lives(queries, params, draws=draws, keep_samples=True)
+    for query, life in zip(queries, together):
+        alone = remaining_life(query.state, query.duty_rate, params,
+                               duty_rate_rel_std=query.duty_rate_rel_std,
+                               rate_drift=query.rate_drift, trend=query.trend, draws=draws,
+                               keep_samples=True)
+        assert life == alone
+        np.testing.assert_array_equal(life.samples, alone.samples)
+    assert together[1].limit_reached and not together[0].limit_reached
 
 
 def test_draws_of_another_sample_count_are_refused(params, rated_rate):
