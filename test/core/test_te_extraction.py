@@ -498,6 +498,17 @@ def test_a_100_hz_stream_of_a_loaded_joint_gives_its_lost_motion():
     assert analyzer.not_observed_reason() is None
 
 
+@pytest.mark.parametrize('rate_hz, needed', [
+    (1000.0, 20), (200.0, 20), (125.0, 13), (100.0, 10), (50.0, 10)])
+def test_below_200_hz_a_flank_needs_the_samples_of_the_same_stream_time_at_least_10(
+        rate_hz, needed):
+    # 20 samples at 200 Hz and above are 0.1 s of stream; a low-rate window holds its low
+    # |T| bins, which the load passes quickly at each reversal, for about as long.
+    _, _, analyzer = _noisy_run(470.0, 0.01 * PARAMS.rating.rated_torque, rate_hz)
+    assert analyzer.flank_samples() == needed
+    assert WindowAnalyzer(PARAMS).flank_samples() == 20     # rate not yet known
+
+
 def test_a_stream_without_velocity_gets_it_from_the_output_angle():
     with_v, truth, _ = _noisy_run(470.0, 2.0, 1000.0)
     without, _, analyzer = _noisy_run(470.0, 2.0, 1000.0, velocity=False)
