@@ -1752,7 +1752,9 @@ class WindowAnalyzer:
         is observed nearest the test torque. The table is bilinear,
         so the model is linear in ``(w, c)`` between wear nodes: the weighted
         sum of squares is minimised exactly on every interval at once. The
-        standard error is scaled by the reduced chi-square when above 1.
+        standard error is scaled by the reduced chi-square when above 1. The
+        reading is then weighed against a straight curve's
+        (:meth:`_or_straight`).
 
         Parameters
         ----------
@@ -1789,6 +1791,7 @@ class WindowAnalyzer:
         # A bin far from the test torque says less about the lost motion there: its share of
         # the curve's shape between the two is the model's, and a reducer may differ.
         reach = 2.0 * np.abs(torque_b - self.takeup_torque) / self.tables.series_stiffness
+        measured = np.where(usable, 1.0 / np.where(usable, sig_b, 1.0) ** 2, 0.0)
         sig_b = np.hypot(sig_b, _SHAPE_ERROR * reach)
         weight = np.where(usable, 1.0 / np.where(usable, sig_b, 1.0) ** 2, 0.0)[..., None]
         h_b = np.where(usable, h_b, 0.0)[..., None]
@@ -1821,8 +1824,71 @@ class WindowAnalyzer:
         half = 0.5e-6
         lo, hi = np.maximum(wear - half, grid[0]), np.minimum(wear + half, grid[-1])
         dlm = (self.tables.lost_motion(hi) - self.tables.lost_motion(lo)) / (hi - lo)
-        return (wear, wear_std, self.tables.lost_motion(wear), np.abs(dlm) * wear_std,
-                comp[pick, best])
+        lm, lm_std = self.tables.lost_motion(wear), np.abs(dlm) * wear_std
+        resid = (miss[pick, :, best] - slope[pick, :, best] * move[pick, best][:, None]
+                 - lever[..., 0] * comp[pick, best][:, None])
+        lm, lm_std = self._or_straight(torque_b, h_b[..., 0], weight[..., 0], measured, prior,
+                                       (wear > grid[0]) & (m > 1), lm, lm_std,
+                                       (measured * resid ** 2).sum(axis=1))
+        return wear, wear_std, lm, lm_std, comp[pick, best]
+
+    def _or_straight(self, torque_b, h_b, weight, measured, prior, open_, lm, lm_std, chi2):
+        """
+        Weigh the model's reading against a straight hysteresis curve's.
+
+        Above its take-up a reducer's spring may be straighter than the model's, whose
+        contacts stiffen with the load: read along the model's curve, a straight one is
+        extrapolated to the test torque along a bend it does not have (5-6 % on units
+        of 0.6-0.8 arcmin, whose model curve bends most; the sign depends on the bins'
+        reach). The alternative is ``H_b = L + 2·|T|_b·(1/k_s + c)``, ``c`` with the
+        compliance prior, whose lost motion is its level ``L`` (the width left when
+        the windup of the fitted stiffness is taken off). The two readings are averaged
+        with the weights of their likelihoods (equal prior odds; chi-square of the bins'
+        measurement errors only, without the shape error, which is the model's), the
+        variance including their spread. A fit on the table's lower bound (censored) or
+        with a single bin keeps the model's reading.
+
+        Parameters
+        ----------
+        torque_b, h_b : ndarray, shape (W, B)
+            Bin torques [N·m] and widths [rad].
+        weight, measured : ndarray, shape (W, B)
+            Weights of the bins with and without the shape error [rad^-2], 0 where unused.
+        prior : float
+            Precision of the compliance prior [(N·m/rad)^2].
+        open_ : ndarray of bool, shape (W,)
+            Windows whose model reading may be weighed.
+        lm, lm_std : ndarray, shape (W,)
+            The model's lost motion and its standard error [rad].
+        chi2 : ndarray, shape (W,)
+            The model fit's chi-square under ``measured``.
+
+        Returns
+        -------
+        tuple of ndarray
+            Lost motion and its standard error [rad].
+
+        """
+        arm = 2.0 * torque_b
+        rest = h_b - arm / self.tables.series_stiffness
+        n11, n12 = weight.sum(axis=1), (weight * arm).sum(axis=1)
+        n22 = (weight * arm ** 2).sum(axis=1) + prior
+        r1, r2 = (weight * rest).sum(axis=1), (weight * arm * rest).sum(axis=1)
+        det = n11 * n22 - n12 ** 2
+        m = (weight > 0.0).sum(axis=1)
+        with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
+            level = (n22 * r1 - n12 * r2) / det
+            comp = (n11 * r2 - n12 * r1) / det
+            resid = rest - level[:, None] - arm * comp[:, None]
+            fit_chi2 = (weight * resid ** 2).sum(axis=1) + prior * comp ** 2
+            var = np.maximum(1.0, fit_chi2 / np.maximum(m - 1, 1)) * n22 / det
+            odds = np.exp(np.clip(0.5 * ((measured * resid ** 2).sum(axis=1) - chi2), -50.0, 50.0))
+            share = 1.0 / (1.0 + odds)
+        share = np.where(open_ & (det > 0.0) & np.isfinite(level) & np.isfinite(var), share, 0.0)
+        level, var = np.where(share > 0.0, level, lm), np.where(share > 0.0, var, 0.0)
+        mixed = (1.0 - share) * lm + share * level
+        spread = share * (1.0 - share) * (lm - level) ** 2
+        return mixed, np.sqrt((1.0 - share) * lm_std ** 2 + share * var + spread)
 
 
 _SHAPE_ERROR = 0.02
