@@ -213,6 +213,15 @@ DUTY_UNKNOWN_REL_STD = 0.1
 DUTY_BATCH_WINDOWS = 10
 """Windows per batch of the duty rate's standard error (batch means)."""
 
+INTERP_SEARCH_BELOW = 1000
+"""
+Values below which the run-in map is read by np.interp's binary search, not by division.
+
+The division takes a few more passes over the values and wins only where the 15 steps
+of a search over the map's 20 001 points cost more than those (measured: 150 values
+6.6 against 8.6 µs, 2000 values 28 against 17 µs).
+"""
+
 _CHI2_1_MEDIAN = 0.454936423119572
 """Median of the χ² distribution with one degree of freedom."""
 
@@ -334,7 +343,16 @@ def run_in_free_wear(wear, wear_params):
     """
     grid_w, grid_s, g_end = _run_in_free_map(wear_params)
     w = np.asarray(wear, dtype=float)
-    s = np.interp(w, grid_w, grid_s)
+    if w.size < INTERP_SEARCH_BELOW:
+        s = np.interp(w, grid_w, grid_s)
+        s = np.where(w < 0.0, w, s)
+        return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
+    # np.interp on the table's uniform grid, the interval found by division instead of a
+    # binary search over its 20 001 points (NaN stays NaN).
+    intervals = grid_w.size - 1
+    u = w * (intervals / grid_w[-1])
+    i = np.fmin(np.fmax(u, 0.0), float(intervals - 1)).astype(np.intp)
+    s = grid_s[i] + (u - i) * _run_in_free_steps(wear_params)[i]
     s = np.where(w < 0.0, w, s)
     return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
 
@@ -361,6 +379,12 @@ def wear_from_run_in_free(free_wear, wear_params):
     w = np.interp(s, grid_s, grid_w)
     w = np.where(s < 0.0, s, w)
     return np.where(s > grid_s[-1], grid_w[-1] + (s - grid_s[-1]) * g_end, w)
+
+
+@lru_cache(maxsize=16)
+def _run_in_free_steps(wear_params):
+    """Return the run-in-free wear's step per interval of the map's uniform wear grid [m]."""
+    return np.diff(_run_in_free_map(wear_params)[1])
 
 
 @lru_cache(maxsize=16)
@@ -716,9 +740,22 @@ class WearEstimator:
         P = np.einsum('k,cki,ckj->cij', self._wc, d, d)
         if Z is None:
             return m, P
+        return (m, P) + self._observed(Z, d)
+
+    def _observed(self, Z, d=None):
+        """
+        Mean and variance of the points' observations, and their covariance with the state.
+
+        ``d`` the points less their mean (:meth:`_moments`' terms); without it, only the
+        mean and variance. The state's own covariance, a sum over every point and pair
+        of states, is not formed where it is not wanted.
+        """
         z = Z @ self._wm
         dz = Z - z[:, None]
-        return m, P, z, (dz ** 2) @ self._wc, np.einsum('k,cki,ck->ci', self._wc, d, dz)
+        szz = (dz ** 2) @ self._wc
+        if d is None:
+            return z, szz
+        return z, szz, np.einsum('k,cki,ck->ci', self._wc, d, dz)
 
     # filter steps ----------------------------------------------------------------------
 
@@ -895,7 +932,8 @@ class WearEstimator:
         R = rho * sigma2 + smear
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
-        _, _, zc, szz, cxz = self._moments(X, self._hx(X))
+        zc, szz, cxz = self._observed(self._hx(X),
+                                      X - np.einsum('k,ckn->cn', self._wm, X)[:, None, :])
         S = szz + R
         d2 = (z - zc) ** 2 / S
         w = np.exp(self._lw - self._lw.max())
@@ -1059,6 +1097,13 @@ class WearEstimator:
                 solved = np.linalg.solve(P[:-1] + P[1:], gaps[..., None])[..., 0]
             except np.linalg.LinAlgError:
                 solved = None
+            if solved is not None and \
+                    np.all(np.einsum('ci,ci->c', gaps, solved) > MERGE_DISTANCE ** 2):
+                # No neighbours close enough: the components stay as they are (in order).
+                self._lw, self._m, self._P = lw, m, P
+                self._lw -= _logsumexp(self._lw)
+                self._refresh()
+                return
             out = [[lw[0], m[0], P[0]]]
             merged = False
             for k in range(1, lw.size):
@@ -1271,7 +1316,7 @@ class WearEstimator:
         """
         X = self._sigma(self._m, self._P)
         true = unit_lost_motion(X[..., 0], X[..., 2], self._h)
-        _, _, zc, szz, _ = self._moments(X, true)
+        zc, szz = self._observed(true)
         w = np.exp(self._lw - self._lw.max())
         w /= w.sum()
         mean = float(w @ zc)

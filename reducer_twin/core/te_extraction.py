@@ -1226,11 +1226,10 @@ class WindowAnalyzer:
         # Coulomb shape, speed].
         x = np.empty((_FRICTION_TERMS, n))
         x[0] = 1.0
-        np.cos(theta, out=x[1])
-        np.sin(theta, out=x[2])
-        double = 2.0 * theta
-        np.cos(double, out=x[3])
-        np.sin(double, out=x[4])
+        cos, sin = np.cos(theta, out=x[1]), np.sin(theta, out=x[2])
+        # Twice the angle by the double-angle formulas, not two more trigonometric passes.
+        np.multiply(cos - sin, cos + sin, out=x[3])
+        np.multiply(2.0 * sin, cos, out=x[4])
         x[5] = accel
         coulomb_shape = np.tanh(np.divide(speed, _FRICTION_SPEED, out=x[6]), out=x[6])
         x[7] = speed
