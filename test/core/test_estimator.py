@@ -356,15 +356,21 @@ def test_a_used_reducer_of_unknown_history_is_found_within_15_percent_after_20_w
         assert est.trend_probability == 0.0
 
 
+def replay_recorded(params, name):
+    """Step a new estimator through the te_features records of ``test/core/data/<name>``."""
+    doc = json.loads((DATA / name).read_text())
+    est = WearEstimator(params)
+    for row in doc['records']:
+        est.step(features_from_record(dict(zip(doc['fields'], row))))
+    return est, doc
+
+
 def test_a_worn_unit_is_not_read_as_a_new_one_built_11_um_loose(params):
     # Real windows (the independent generator's base joint, seed 2021, 1 % effort noise,
     # a unit at 74 % of its life): the new-unit hypothesis once explained them by an
     # as-built offset of 11 um and a fit bias of 0.27 arcmin (11 and 5 sd), and the
     # mixture swung to it: the lost motion read 10 % low while every window was right.
-    doc = json.loads((DATA / 'independent_seed2021_base.json').read_text())
-    est = WearEstimator(params)
-    for row in doc['records']:
-        est.step(features_from_record(dict(zip(doc['fields'], row))))
+    est, doc = replay_recorded(params, 'independent_seed2021_base.json')
     lm, _ = est.lost_motion()
     assert lm == pytest.approx(doc['true_lost_motion_rad'], rel=0.03)
     assert abs(est.baseline) <= 4.0 * est.config.as_built_std
@@ -376,10 +382,7 @@ def test_steady_windows_at_one_wear_neither_walk_the_baseline_nor_drag_the_readi
     # bias and the as-built offset once walked along their ridge (the bias to 4 prior sd),
     # the wear model read 30 % low, and a growth law with negative growth followed the
     # windows down: -6.6 % reported with a 0.9 % sd.
-    doc = json.loads((DATA / 'independent_seed2020_base.json').read_text())
-    est = WearEstimator(params)
-    for row in doc['records']:
-        est.step(features_from_record(dict(zip(doc['fields'], row))))
+    est, doc = replay_recorded(params, 'independent_seed2020_base.json')
     lm, sd = est.lost_motion()
     truth = doc['true_lost_motion_rad']
     assert lm == pytest.approx(truth, rel=0.05)
