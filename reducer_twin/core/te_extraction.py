@@ -2033,11 +2033,20 @@ def _window_medians(values, starts, ends):
 
 def _solve_identifiable_many(normal, rhs, energy):
     """
-    :func:`_solve_identifiable` for a stack of systems, shape (W, P, P), (W, P), (W, P).
+    Solve a stack of normal equations, leaving out parameters the data cannot identify.
 
-    Each round inverts the systems that keep the same parameters as one stack (the
-    same LAPACK call per matrix as one at a time), so the results are those of
-    :func:`_solve_identifiable` for each system.
+    Shapes (W, P, P), (W, P), (W, P). A parameter is identifiable when the share of
+    its regressor's energy that no other regressor explains, ``1/(A^-1)_jj`` of the
+    energy-scaled matrix ``A``, is at least :data:`_MIN_IDENTIFIABILITY`; the least
+    identifiable parameter of a system is removed until all that remain pass. Each
+    round inverts the systems that keep the same parameters as one stack (the same
+    LAPACK call per matrix as one at a time).
+
+    Returns
+    -------
+    tuple of ndarray
+        Coefficients (0 where not identifiable) and the identifiable masks.
+
     """
     n_sys, n_par = rhs.shape
     ident = energy > 0.0
@@ -2069,8 +2078,7 @@ def _identifiability(sub):
     """
     Inverses of a stack of scaled normal matrices and each parameter's unexplained share.
 
-    A singular matrix gets a share of 0 for every parameter (as in
-    :func:`_solve_identifiable`).
+    A singular matrix gets a share of 0 for every parameter.
     """
     try:
         inv = np.linalg.inv(sub)
@@ -2088,22 +2096,3 @@ def _identifiability(sub):
     with np.errstate(divide='ignore'):
         share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
     return inv, np.where(np.isfinite(share), share, 0.0)
-
-
-def _solve_identifiable(normal, rhs, energy):
-    """
-    Solve normal equations, leaving out parameters the data cannot identify.
-
-    A parameter is identifiable when the share of its regressor's energy
-    that no other regressor explains, ``1/(A^-1)_jj`` of the energy-scaled
-    matrix ``A``, is at least :data:`_MIN_IDENTIFIABILITY`. The least
-    identifiable parameter is removed until all that remain pass.
-
-    Returns
-    -------
-    tuple of ndarray
-        Coefficients (0 where not identifiable) and the identifiable mask.
-
-    """
-    beta, ident = _solve_identifiable_many(normal[None], rhs[None], energy[None])
-    return beta[0], ident[0]
