@@ -54,7 +54,8 @@ from reducer_twin.analysis.stages import te_values, WorkerBacks
 from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
-from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, StreamCleaner
+from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, PAIRING_FACTS
+from reducer_twin.core.ingest import SHARED_STAMPS, StreamCleaner
 from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
@@ -622,8 +623,9 @@ class JointResult:
         dict
             ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
             ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
-            ``observed``, ``windows`` (windows with a lost motion) and ``reason`` (why
-            not observed, else None).
+            ``observed``, ``windows`` (windows with a lost motion), ``reason`` (why
+            not observed, else None) and ``pairing`` (how link and motor samples were
+            paired, and why).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
@@ -637,6 +639,7 @@ class JointResult:
         out['observed'] = observed
         out['windows'] = int(self.windows)
         out['reason'] = None if observed else (self.reason or 'no usable window')
+        out['pairing'] = self.counts.get('pairing')
         return out
 
 
@@ -1063,6 +1066,8 @@ class _Run:
                     counts[f'{side}_{reason}'] = int(count)
                 counts[f'{side}_missing'] = int(cleaner.missing)
             counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
+            counts.update(front.pairer.ticks.facts() if motor_clean is not None else
+                          {'pairing': SHARED_STAMPS, 'tick_paired': 0})
             counts.update({k: int(v) for k, v in front.spikes.counts.items()})
             counts['published'] = int(front.samples)
             malformed = sum(chunks.malformed.values())
@@ -1087,7 +1092,8 @@ class _Run:
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
             bad = sum(v for k, v in counts.items()
-                      if k not in ('published', 'step') and not k.endswith('_wrap'))
+                      if k not in ('published', 'step', *PAIRING_FACTS)
+                      and not k.endswith('_wrap'))
             statuses.append(Status('OK' if bad == 0 else 'WARN',
                                    f'reducer_twin: {joint} encoder ingest', 'streams clean'
                                    if bad == 0 else f'{bad} samples dropped or repaired',

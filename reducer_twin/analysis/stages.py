@@ -76,7 +76,7 @@ class JointFront:
         # Offline a partner can come chunks later: hold link samples for PAIR_HOLD_S.
         self.pairer = Pairer(settings.ingest, motor_scale, hold_s=PAIR_HOLD_S,
                              effort=settings.effort_source,
-                             motor_effort_scale=self.effort_scale)
+                             motor_effort_scale=self.effort_scale, ratio=self.ratio)
         self.unpaired = 0
         self.samples = 0
         self.period_ns = None

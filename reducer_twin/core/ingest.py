@@ -669,15 +669,266 @@ class PairedSamples:
                                 self.effort, self.link_velocity])
 
 
+TICK_TOLERANCE = 0.3
+"""
+Largest stamp difference of a link and a motor sample of one controller tick [periods].
+
+A controller reads both encoders of a joint in the same cycle; the stamps it writes
+differ by the publish jitter of each topic (tens of µs, a few percent of a 1 kHz period).
+0.3 periods keeps every such pair (the generator of ``bench/`` clips each stamp's jitter at
+0.3 periods) and is far from the neighbouring ticks.
+"""
+
+TICK_RATE_TOLERANCE = 0.02
+"""Largest relative difference of the two streams' nominal periods still taken as one rate."""
+
+TICK_MIN_STEPS = 200
+"""Differences of consecutive same-tick pairs needed before the pairing is decided."""
+
+TICK_CONFIDENCE = 5.0
+"""The slope must lie this many standard errors away from 1/2 for a decision."""
+
+PAIRINGS = ('interpolate', 'tick')
+"""How a motor sample is found for a link sample: interpolated at its stamp, or its own tick's."""
+
+PAIRING_FACTS = ('pairing', 'tick_paired')
+"""
+Diagnostic values that report the pairing (:meth:`TickPairing.facts`), facts and no faults.
+
+``pairing``: which pairing is in use and why; ``tick_paired``: link samples paired with
+their tick's motor sample.
+"""
+
+SHARED_STAMPS = 'shared stamps: one message carries both encoders of a tick'
+"""The pairing of the combined form (nothing to decide)."""
+
+
+class TickPairing:
+    """
+    Decide from the data whether a link and a motor sample of one tick belong together.
+
+    A controller (ros2_control) reads the link and motor encoders of a joint in the same
+    cycle; when the stamps then differ, the difference ``d`` is either publish jitter (the
+    samples were taken together: pair them as they are) or real timing (the stamps are
+    the sample times: interpolate the motor angle at the link stamp). Interpolating
+    jittered stamps adds ``omega·d`` to the TE (0.1 arcmin at 1 rad/s for 30 µs), noise
+    that grows with speed; pairing true stamps by tick adds the same. The data say which:
+    with ``D = (theta_motor(t_link) - theta_motor[k])/i`` the change the interpolation makes
+    (the motor angle interpolated at the link stamp minus the tick's own sample, referred to
+    the output), the interpolated TE's sample-to-sample change regresses on ``D``'s with
+    slope ``-1`` when the stamps are jitter (the interpolation adds ``-D``) and ``0`` when
+    they are true (the interpolated TE is the smooth one). ``beta`` is minus that slope; the
+    pairing is decided once ``beta`` lies :data:`TICK_CONFIDENCE` standard errors from 1/2
+    after at least :data:`TICK_MIN_STEPS` steps: by tick when ``0.5 < beta < 1.5``, else by
+    interpolation. Until then, and whenever the streams are not candidates (different rates,
+    no motor stamp within :data:`TICK_TOLERANCE` periods of a link stamp, no motion to tell
+    them apart), the motor angle is interpolated as before.
+
+    Parameters
+    ----------
+    ratio : float
+        Reduction ratio ``i`` (input angles are divided by it).
+
+    Attributes
+    ----------
+    decided : str or None
+        One of :data:`PAIRINGS` once decided, else None.
+    tick_paired : int
+        Link samples paired with their tick's motor sample.
+
+    """
+
+    def __init__(self, ratio):
+        self.ratio = float(ratio)
+        self.decided = None
+        self.tick_paired = 0
+        self._sums = np.zeros(3)        # sum dx², dx·dy, dy² of the steps
+        self._steps = 0
+        self._periods = {'link': _PeriodLearner(), 'motor': _PeriodLearner()}
+        self._last = None               # (t, x, y) of the last observed pair: steps across calls
+
+    @property
+    def pairing(self):
+        """Return the pairing in use: ``'tick'`` or ``'interpolate'``."""
+        return self.decided or 'interpolate'
+
+    @property
+    def beta(self):
+        """Return the fraction of the stamp differences that is jitter, and its standard error."""
+        sxx, sxy, syy = self._sums
+        n = self._steps
+        if n < 3 or sxx <= 0.0:
+            return math.nan, math.nan
+        beta = -sxy / sxx
+        var = max(syy - sxy * sxy / sxx, 0.0) / (n - 1)
+        return beta, math.sqrt(var / sxx)
+
+    def reason(self):
+        """
+        Say which pairing is in use and why (for the diagnostics and the analysis summary).
+
+        Returns
+        -------
+        str
+            The pairing and the evidence behind it.
+
+        """
+        beta, se = self.beta
+        fig = f'stamp-difference slope {beta:.2f} ± {se:.2f}' if np.isfinite(beta) else ''
+        if self.decided == 'tick':
+            return (f'tick: the stamps of one controller tick differ by jitter ({fig}); '
+                    'link and motor samples of a tick are paired as they are')
+        if self.decided == 'interpolate':
+            return (f'interpolate: the stamps are the sample times ({fig}); the motor angle '
+                    'is interpolated at each link stamp')
+        periods = [p.period for p in self._periods.values()]
+        if None not in periods and not _same_rate(*periods):
+            return 'interpolate: the link and motor streams have different rates'
+        return ('interpolate: not enough evidence to pair by controller tick'
+                + (f' ({fig}, {self._steps} steps)' if fig else ''))
+
+    def facts(self):
+        """Return the :data:`PAIRING_FACTS` of the diagnostics and the analysis summary."""
+        return {'pairing': self.reason(), 'tick_paired': int(self.tick_paired)}
+
+    def learn(self, side, t):
+        """
+        Take stamps of one side into the estimate of its nominal period.
+
+        Parameters
+        ----------
+        side : str
+            ``'link'`` or ``'motor'``.
+        t : ndarray
+            New stamps in time order (any unit, the same for both sides).
+
+        """
+        self._periods[side].add(t)
+
+    def match(self, t_link, t_motor):
+        """
+        Index of the motor sample of the same tick for each link stamp, -1 where none.
+
+        Parameters
+        ----------
+        t_link, t_motor : ndarray
+            Increasing stamps of the two sides (one unit).
+
+        Returns
+        -------
+        ndarray of int64 or None
+            None when the streams are no candidates (rates unknown or different).
+
+        """
+        p_link, p_motor = self._periods['link'].period, self._periods['motor'].period
+        if p_link is None or p_motor is None or not _same_rate(p_link, p_motor):
+            return None
+        if t_link.size == 0 or t_motor.size == 0:
+            return np.full(t_link.size, -1, dtype=np.int64)
+        j = np.searchsorted(t_motor, t_link)
+        lo = np.clip(j - 1, 0, t_motor.size - 1)
+        hi = np.clip(j, 0, t_motor.size - 1)
+        # Differences in the stamps' own type (ns as int64 keep their precision).
+        d_lo = np.abs(t_link - t_motor[lo])
+        d_hi = np.abs(t_motor[hi] - t_link)
+        near = np.where(d_hi < d_lo, hi, lo)
+        dist = np.minimum(d_lo, d_hi)
+        ok = dist <= TICK_TOLERANCE * p_link
+        out = np.where(ok, near, -1)
+        # One motor sample per link sample: a motor sample claimed twice pairs neither.
+        taken = out[ok]
+        if taken.size > 1:
+            dup = np.zeros(t_motor.size, dtype=np.int64)
+            np.add.at(dup, taken, 1)
+            out[ok & (dup[np.maximum(out, 0)] > 1)] = -1
+        return out
+
+    def observe(self, t_link, link, motor_interp, motor_tick, ok):
+        """
+        Take same-tick pairs into the evidence; decide when it suffices.
+
+        Parameters
+        ----------
+        t_link : ndarray
+            Link stamps (the unit of :meth:`learn`).
+        link : ndarray
+            Link angles [rad].
+        motor_interp : ndarray
+            Input-side motor angle interpolated at each link stamp [rad].
+        motor_tick : ndarray
+            Input-side angle of the tick's own motor sample [rad].
+        ok : ndarray of bool
+            Samples where both are known.
+
+        """
+        if self.decided is not None:
+            return
+        period = self._periods['link'].period
+        rows = np.flatnonzero(ok)
+        if rows.size == 0 or period is None:
+            return
+        t = t_link[rows]
+        x = (motor_interp[rows] - motor_tick[rows]) / self.ratio
+        y = link[rows] - motor_interp[rows] / self.ratio
+        if self._last is not None:
+            t = np.concatenate([[self._last[0]], t])
+            x = np.concatenate([[self._last[1]], x])
+            y = np.concatenate([[self._last[2]], y])
+        self._last = (t[-1], float(x[-1]), float(y[-1]))
+        step = np.diff(t) <= 1.5 * period
+        dx, dy = np.diff(x)[step], np.diff(y)[step]
+        if dx.size >= 16:
+            # A torque reversal moves the TE by the lost motion within a few samples:
+            # such steps say nothing about the stamps and are left out.
+            dev = np.abs(dy - np.median(dy))
+            mad = np.median(dev)
+            if mad > 0.0:
+                keep = dev <= 10.0 * 1.4826 * mad
+                dx, dy = dx[keep], dy[keep]
+        self._sums += (float(dx @ dx), float(dx @ dy), float(dy @ dy))
+        self._steps += dx.size
+        if self._steps >= TICK_MIN_STEPS:
+            beta, se = self.beta
+            if np.isfinite(beta) and abs(beta - 0.5) > TICK_CONFIDENCE * se:
+                self.decided = 'tick' if 0.5 < beta < 1.5 else 'interpolate'
+
+
+class _PeriodLearner:
+    """The nominal period of a stream: median of its first :data:`PERIOD_STEPS` steps."""
+
+    def __init__(self):
+        self.period = None
+        self._steps = []
+        self._last = None
+
+    def add(self, t):
+        if self.period is not None or t.size == 0:
+            return
+        if self._last is not None:
+            t = np.concatenate([[self._last], t])
+        self._last = t[-1]
+        steps = np.diff(t)
+        self._steps.extend(steps[steps > 0].tolist())
+        if len(self._steps) >= PERIOD_STEPS:
+            self.period = np.median(self._steps[:PERIOD_STEPS])
+
+
+def _same_rate(p_link, p_motor):
+    return abs(p_link - p_motor) <= TICK_RATE_TOLERANCE * max(p_link, p_motor)
+
+
 class Pairer:
     """
     Align a motor stream to a link stream of the same joint.
 
     The motor angle is interpolated linearly at each link stamp, from motor
     samples of the same segment no further than ``max_gap_s`` away on both
-    sides. Link samples waiting for a later motor sample are held while
-    the link stream runs on for up to ``max_gap_s``; link samples that cannot
-    be paired are counted as ``unpaired``.
+    sides; given the ``ratio``, a :class:`TickPairing` decides from the data
+    whether the samples of one controller tick are paired as they are instead
+    (their stamps differ by jitter only). Link samples waiting for a later
+    motor sample are held while the link stream runs on for up to
+    ``max_gap_s``; link samples that cannot be paired are counted as
+    ``unpaired``.
 
     Parameters
     ----------
@@ -697,26 +948,40 @@ class Pairer:
         effort is interpolated at the link stamps like its angle.
     motor_effort_scale : float
         Factor that turns the motor entry's effort into output torque.
+    ratio : float, optional
+        Reduction ratio; None: always interpolate (no :class:`TickPairing`).
+
+    Attributes
+    ----------
+    unpaired : int
+        Link samples that could not be paired.
+    ticks : TickPairing or None
+        The pairing rule and its evidence.
 
     """
 
     def __init__(self, config=None, motor_scale=1.0, hold_s=None, effort='link',
-                 motor_effort_scale=1.0):
+                 motor_effort_scale=1.0, ratio=None):
         self.config = config or IngestConfig()
         self.motor_scale = float(motor_scale)
         self.hold_ns = int((self.config.max_gap_s if hold_s is None else hold_s) * 1e9)
         self.effort = effort
         self.motor_effort_scale = float(motor_effort_scale)
         self.unpaired = 0
+        self.ticks = None if ratio is None else TickPairing(ratio)
         self._motor = CleanStream.empty()
         self._link = CleanStream.empty()
 
     def add_motor(self, stream):
         """Append cleaned motor samples."""
+        if self.ticks is not None:
+            self.ticks.learn('motor', stream.t_ns)
         self._motor = _concat(self._motor, stream)
 
     def add_link(self, stream):
         """Append cleaned link samples."""
+        if self.ticks is not None:
+            self.ticks.learn('link', stream.t_ns)
         self._link = _concat(self._link, stream)
 
     def pop(self, final=False):
@@ -765,11 +1030,16 @@ class Pairer:
         span = (t_hi - t_lo).astype(float)
         frac = np.where(span > 0, (lt - t_lo) / np.where(span > 0, span, 1.0), 0.0)
         m = motor.position[lo] + frac * (motor.position[hi] - motor.position[lo])
+        tick = self._tick(lt, link.position[idx], m, motor, ok)
+        if tick is not None:
+            m = np.where(tick >= 0, motor.position[np.maximum(tick, 0)], m)
         self.unpaired += int(np.count_nonzero(~ok))
         good = idx[ok]
         torque = link.effort[good]
         if self.effort != 'link':
             me = motor.effort[lo] + frac * (motor.effort[hi] - motor.effort[lo])
+            if tick is not None:
+                me = np.where(tick >= 0, motor.effort[np.maximum(tick, 0)], me)
             torque = choose_effort(torque, me[ok], self.effort, self.motor_effort_scale)
         out = PairedSamples(link.t_ns[good], m[ok] * self.motor_scale, link.position[good],
                             torque, link.velocity[good])
@@ -780,6 +1050,31 @@ class Pairer:
             keep_from = len(motor)
         self._motor = _take(motor, np.arange(keep_from, len(motor)))
         return out
+
+    def _tick(self, lt, link, m, motor, ok):
+        """
+        Return the tick's motor sample of each link stamp (-1: interpolated), or None.
+
+        Same-tick pairs feed the evidence of :attr:`ticks` until it decides.
+        """
+        ticks = self.ticks
+        if ticks is None or ticks.decided == 'interpolate' or lt.size == 0:
+            return None
+        match = ticks.match(lt, motor.t_ns)
+        if match is None:
+            return None
+        # Only a partner of the same segment (no gap or clock jump between them).
+        near = np.maximum(match, 0)
+        j = np.clip(np.searchsorted(motor.t_ns, lt), 0, len(motor) - 1)
+        match = np.where((match >= 0) & (motor.segment[near] == motor.segment[j]), match, -1)
+        if ticks.decided is None:
+            scale = self.motor_scale
+            ticks.observe(lt, link, m * scale, motor.position[near] * scale, ok & (match >= 0))
+            if ticks.decided != 'tick':
+                return None
+        match = np.where(ok, match, -1)
+        ticks.tick_paired += int(np.count_nonzero(match >= 0))
+        return match
 
 
 EFFORT_SOURCES = ('auto', 'link', 'motor')

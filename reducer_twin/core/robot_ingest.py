@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .ingest import choose_effort, IngestConfig, motor_effort_scale, Pairer, SpikeFilter
-from .ingest import SpikeFilterBank, StreamCleaner
+from .ingest import SHARED_STAMPS, SpikeFilterBank, StreamCleaner
 
 
 STREAMS = {
@@ -78,7 +78,8 @@ class RobotIngest:
         self.motor = StreamCleaner(config) if self.split else None
         self.spikes = SpikeFilterBank(ratio, len(self.joints), config)
         self.pairers = [Pairer(config, self.scale, effort=effort_source,
-                               motor_effort_scale=self.effort_scale) for _ in self.joints]
+                               motor_effort_scale=self.effort_scale, ratio=ratio)
+                        for _ in self.joints]
         self.joint_spikes = [SpikeFilter(ratio, config) for _ in self.joints]
 
     def process(self, link, motor=()):
@@ -159,6 +160,8 @@ class RobotIngest:
                 c[f'{side}_{reason}'] = count
             c[f'{side}_missing'] = cleaner.missing
         c['unpaired'] = self.pairers[k].unpaired
+        c.update(self.pairers[k].ticks.facts() if self.split else
+                 {'pairing': SHARED_STAMPS, 'tick_paired': 0})
         c.update(self.joint_spikes[k].counts if self.split else self.spikes.counts(k))
         return c
 

@@ -36,6 +36,7 @@ import math
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
+from .ingest import TickPairing
 from .transmission_error import model_tables
 from .wear import wear_rate
 
@@ -408,6 +409,14 @@ class TEExtractor:
     was reset) is computed in pieces from there, so that the samples after the
     reset are not taken for late ones.
 
+    Link and motor samples on stamps of their own go through the rule of
+    :class:`~reducer_twin.core.ingest.TickPairing` (the one ``encoder_ingest``
+    and the bag analysis apply): once the data show that the stamps of one
+    controller tick differ by jitter only, each link sample is paired with its
+    tick's motor sample (the motor sample takes the link stamp) instead of the
+    motor angle interpolated at the link stamp; ``link_time_offset_s`` then
+    reads the motor angle that far from the tick along the motor's motion.
+
     Parameters
     ----------
     ratio : float
@@ -417,6 +426,11 @@ class TEExtractor:
     link_time_offset_s : float
         Time offset of the link encoder behind its stamps [s].
 
+    Attributes
+    ----------
+    ticks : TickPairing or None
+        The pairing rule and its evidence (its ``reason()`` says which is in use).
+
     """
 
     def __init__(self, ratio, max_gap_s=0.005, link_time_offset_s=0.0):
@@ -424,6 +438,10 @@ class TEExtractor:
         self.max_gap_s = max_gap_s
         self.link_time_offset_s = link_time_offset_s
         self.last_te = None
+        try:
+            self.ticks = TickPairing(ratio) if math.isfinite(ratio) and ratio != 0 else None
+        except (TypeError, ValueError):
+            self.ticks = None   # compute_te says what is wrong
 
     def update(self, t_motor, motor_angle, t_link, link_angle):
         """
@@ -454,12 +472,49 @@ class TEExtractor:
         return _join([self._compute(tm[m], am[m], tl[k], al[k]) for m, k in pieces])
 
     def _compute(self, t_motor, motor_angle, t_link, link_angle):
+        if self.ticks is not None:
+            t_motor, motor_angle = self._by_tick(t_motor, motor_angle, t_link, link_angle)
         stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,
                             self.max_gap_s, self.link_time_offset_s, self.last_te)
         kept = np.flatnonzero(stream.valid)
         if kept.size:
             self.last_te = float(stream.te[kept[-1]])
         return stream
+
+    def _by_tick(self, t_motor, motor_angle, t_link, link_angle):
+        """
+        Return the motor stream to pair with: restamped to the link stamps where by tick.
+
+        Streams that share their stamps, and chunks with a sample that ``compute_te``
+        would drop, are returned as given.
+        """
+        try:
+            tm, am, tl, al = (np.asarray(a, dtype=float)
+                              for a in (t_motor, motor_angle, t_link, link_angle))
+        except (TypeError, ValueError):
+            return t_motor, motor_angle     # compute_te says what is wrong
+        if (tm.ndim != 1 or tl.ndim != 1 or tm.shape != am.shape or tl.shape != al.shape
+                or tm.size < 2 or tl.size < 2 or (tm.shape == tl.shape and np.array_equal(tm, tl))
+                or _usable(tm, am)[0] is not None or _usable(tl, al)[0] is not None):
+            return t_motor, motor_angle
+        ticks = self.ticks
+        ticks.learn('link', tl)
+        ticks.learn('motor', tm)
+        if ticks.decided == 'interpolate':
+            return t_motor, motor_angle
+        match = ticks.match(tl, tm)
+        if match is None:
+            return t_motor, motor_angle
+        paired = match >= 0
+        if ticks.decided is None:
+            m_u, l_u = np.unwrap(am), np.unwrap(al)
+            inside = paired & (tl >= tm[0]) & (tl <= tm[-1])
+            ticks.observe(tl, l_u, np.interp(tl, tm, m_u), m_u[np.maximum(match, 0)], inside)
+            if ticks.decided != 'tick':
+                return t_motor, motor_angle
+        rows = np.flatnonzero(paired)
+        ticks.tick_paired += rows.size
+        return tl[rows], am[match[rows]]
 
     @staticmethod
     def _pieces(t_motor, t_link):

@@ -1,6 +1,7 @@
 """Each node's ``/diagnostics``: the period parameter, the publisher and the report timer."""
 
 from diagnostic_msgs.msg import DiagnosticArray
+from reducer_twin.core.ingest import PAIRING_FACTS
 from reducer_twin.core.units import m_to_um
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
 from reducer_twin.nodes.parameters import SpecParameters
@@ -115,7 +116,7 @@ def ingest_statuses(counts, rejected):
     statuses = []
     for joint, c in counts.items():
         bad = sum(v for k, v in c.items()
-                  if k not in ('published', 'step') and not k.endswith('_wrap'))
+                  if k not in ('published', 'step', *PAIRING_FACTS) and not k.endswith('_wrap'))
         c['rejected_messages'] = rejected
         statuses.append((f'reducer_twin: {joint} encoder ingest', joint,
                          'OK' if bad == 0 else 'WARN',

@@ -39,7 +39,8 @@ AGING = 180_000.0
 SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
                       wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
 JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
-             'lost_motion_arcmin', 'messages', 'rejected', 'observed', 'windows', 'reason'}
+             'lost_motion_arcmin', 'messages', 'rejected', 'observed', 'windows', 'reason',
+             'pairing'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
              'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',
@@ -91,6 +92,7 @@ def test_the_json_has_the_issue_shape_and_the_estimate_approaches_the_truth(
         got = data['joints'][name]
         assert set(got) == JSON_KEYS
         assert got['messages'] == 15_000 and got['rejected'] == 0
+        assert got['pairing'].startswith('shared stamps')    # one message per tick
         # Wear within 10 % of the truth after 3000 h (the README's accuracy floor).
         assert got['wear_um'] == pytest.approx(truth[name]['true_wear_um'], rel=0.10)
         assert 0.0 < got['wear_std_um'] < 0.1 * got['wear_um']
