@@ -675,8 +675,8 @@ Largest stamp difference of a link and a motor sample of one controller tick [pe
 
 A controller reads both encoders of a joint in the same cycle; the stamps it writes
 differ by the publish jitter of each topic (tens of µs, a few percent of a 1 kHz period).
-0.3 periods keeps every such pair (the generator of ``bench/`` clips each stamp's jitter at
-0.3 periods) and is far from the neighbouring ticks.
+0.3 periods keeps every such pair and stays far from the neighbouring ticks (0.7 periods
+away at least).
 """
 
 TICK_RATE_TOLERANCE = 0.02
