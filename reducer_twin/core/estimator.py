@@ -1248,15 +1248,24 @@ class WearEstimator:
         """
         Return the observed growth law now.
 
+        The law is fitted to the windows' readings ``z``, which carry the window
+        fit's bias ``c``; the unit's own lost motion is ``z - c``. Within the law
+        ``c`` cannot be told from ``β`` (both are constant), so the windows never
+        learn it: the law of the unit has ``β - c`` with ``c`` at its prior
+        (``fit_bias_std``), as the wear model's ``h(w + b)`` has. Without it, a unit
+        that followed the law was reported as sure of its lost motion as the
+        windows' scatter allows, however biased the fit.
+
         Returns
         -------
         tuple
             ``(probability, mean, cov, exposure)``: :attr:`trend_probability`,
-            the mean ``[β [rad], k [rad], g]`` of the power law
-            ``z = β + k·(A/A_now)^g`` and its covariance, and ``A_now`` [m].
+            the mean ``[β [rad], k [rad], g]`` of the unit's power law
+            ``LM = β + k·(A/A_now)^g`` and its covariance, and ``A_now`` [m].
 
         """
         mean, cov = self._growth.summary()
+        cov[0, 0] += self.config.fit_bias_std ** 2
         return self.trend_probability, mean, cov, self._growth.exposure
 
     @property
@@ -1323,7 +1332,7 @@ class WearEstimator:
         var = max(float(w @ (szz + (zc - mean) ** 2)), 0.0)
         p = self.trend_probability
         if p > 0.0:
-            m, cov = self._growth.summary() if trend is None else trend[1:3]
+            m, cov = self.growth_trend()[1:3] if trend is None else trend[1:3]
             t_mean, t_var = m[0] + m[1], cov[0, 0] + cov[1, 1] + 2.0 * cov[0, 1]
             mixed = p * t_mean + (1.0 - p) * mean
             var = p * (t_var + (t_mean - mixed) ** 2) + (1.0 - p) * (var + (mean - mixed) ** 2)

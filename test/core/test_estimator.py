@@ -441,6 +441,23 @@ def test_a_lost_motion_linear_in_exposure_is_recognised_as_another_growth_law(pa
     assert exposure == pytest.approx(80 * 2e-9, rel=1e-9)
 
 
+def test_a_unit_that_follows_another_law_is_no_surer_of_its_lost_motion_than_the_fit_bias(
+        params):
+    # The law is fitted to the windows, which carry the fit's bias: 80 windows of 0.03
+    # arcmin place their level within ~0.01 arcmin, the unit's lost motion only within
+    # the bias prior (it read 0.02 arcmin sure while the fit was 0.04 arcmin off).
+    est = WearEstimator(params, NEW)
+    for f in linear_run(params, 3)[:80]:
+        est.step(f)
+    bias = est.config.fit_bias_std
+    probability, mean, cov, _ = est.growth_trend()
+    lm, lm_std = est.lost_motion()
+    assert probability > 0.9
+    assert cov[0, 0] >= bias ** 2
+    assert bias <= lm_std <= 1.5 * bias
+    assert lm == pytest.approx((0.5 + 2.5 * 80 / 160) * ARCMIN, abs=2.0 * lm_std)
+
+
 def test_lost_motion_that_follows_the_model_keeps_the_model(params):
     features, _, eol = synthetic_run(params, 1.0, seed=3)
     est = WearEstimator(params, NEW)
