@@ -22,7 +22,7 @@ from reducer_twin.core.estimator import (
     EstimatorConfig, lost_motion_curve, params_fingerprint, run_in_free_wear,
     wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import features_from_record
+from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 
@@ -214,6 +214,39 @@ def test_the_wear_estimate_is_consistent_over_many_lives(params):
                 nees.append(((est.wear - true_w[k]) / est.wear_std) ** 2)
     assert 0.5 <= np.mean(nees) <= 2.0
     assert 0.85 <= np.mean(np.array(nees) <= 4.0) <= 1.0
+
+
+def test_the_remaining_life_interval_holds_the_truth_in_both_tails_over_many_lives(params):
+    """
+    P10-P90 of the remaining life over 48 units drawn from the prior, at 25-75 % of life.
+
+    Calibrated, not conservative: the interval holds the true remaining life about 80 %
+    of the time, with neither tail empty nor dominant. 48 lives measure each share to a
+    few percent (their evaluations are correlated within a life): 84 % (5 / 11 %) today.
+    """
+    rng = np.random.default_rng(33)
+    config = EstimatorConfig()
+    below = above = total = 0
+    for seed in range(48):
+        scale = math.exp(rng.normal(0.0, 0.7))
+        as_built = rng.normal(0.0, config.as_built_std)
+        bias = rng.normal(0.0, config.fit_bias_std)
+        features, _, eol = synthetic_run(params, scale, seed=seed, window=4 * WINDOW,
+                                         as_built=as_built, bias=bias)
+        stage, life = EstimatorStage(params, config), LifeStage(params)
+        end = sum(f.duty.exposure_s for f in features[:eol + 1])
+        elapsed = 0.0
+        for k, f in enumerate(features):
+            stage.estimator.step(f)
+            elapsed += f.duty.exposure_s
+            if 0.25 * eol <= k <= 0.75 * eol and k % 5 == 0:
+                prediction = life.prediction(stage.record(f.t_end))
+                below += end - elapsed < prediction.p10
+                above += end - elapsed > prediction.p90
+                total += 1
+    assert 0.72 <= 1.0 - (below + above) / total <= 0.88
+    assert 0.03 <= below / total <= 0.17
+    assert 0.03 <= above / total <= 0.17
 
 
 def test_observations_are_applied_at_the_middle_of_their_window(params):
