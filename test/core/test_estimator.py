@@ -196,17 +196,22 @@ def test_the_duty_rate_error_is_small_for_a_periodic_duty_and_large_for_a_changi
 # --------------------------------------------------------------------------- calibration
 
 
-def test_the_wear_estimate_is_consistent_over_many_lives(params):
-    """NEES of the wear between 25 and 75 % of life over 8 units drawn from the prior: [0.5, 2]."""
-    rng = np.random.default_rng(21)
-    config = EstimatorConfig()
-    nees = []
-    for seed in range(8):
+def lives_from_the_prior(params, config, n, seed):
+    """Yield ``n`` synthetic lives, rate, as-built offset and fit bias drawn from the prior."""
+    rng = np.random.default_rng(seed)
+    for k in range(n):
         scale = math.exp(rng.normal(0.0, 0.7))
         as_built = rng.normal(0.0, config.as_built_std)
         bias = rng.normal(0.0, config.fit_bias_std)
-        features, true_w, eol = synthetic_run(params, scale, seed=seed, window=4 * WINDOW,
-                                              as_built=as_built, bias=bias)
+        yield synthetic_run(params, scale, seed=k, window=4 * WINDOW, as_built=as_built,
+                            bias=bias)
+
+
+def test_the_wear_estimate_is_consistent_over_many_lives(params):
+    """NEES of the wear between 25 and 75 % of life over 8 units drawn from the prior: [0.5, 2]."""
+    config = EstimatorConfig()
+    nees = []
+    for features, true_w, eol in lives_from_the_prior(params, config, 8, seed=21):
         est = WearEstimator(params, config)
         for k, f in enumerate(features):
             est.step(f)
@@ -224,15 +229,9 @@ def test_the_remaining_life_interval_holds_the_truth_in_both_tails_over_many_liv
     of the time, with neither tail empty nor dominant. 48 lives measure each share to a
     few percent (their evaluations are correlated within a life): 84 % (5 / 11 %) today.
     """
-    rng = np.random.default_rng(33)
     config = EstimatorConfig()
     below = above = total = 0
-    for seed in range(48):
-        scale = math.exp(rng.normal(0.0, 0.7))
-        as_built = rng.normal(0.0, config.as_built_std)
-        bias = rng.normal(0.0, config.fit_bias_std)
-        features, _, eol = synthetic_run(params, scale, seed=seed, window=4 * WINDOW,
-                                         as_built=as_built, bias=bias)
+    for features, _, eol in lives_from_the_prior(params, config, 48, seed=33):
         stage, life = EstimatorStage(params, config), LifeStage(params)
         end = sum(f.duty.exposure_s for f in features[:eol + 1])
         elapsed = 0.0

@@ -651,6 +651,13 @@ def te_in_chunks(extractor, streams, chunk=250):
     return np.concatenate([p.te for p in parts])
 
 
+def interpolated_te(streams):
+    """TE of ``controller_streams`` with the motor angle always interpolated (no tick rule)."""
+    extractor = TEExtractor(RATIO)
+    extractor.ticks = None
+    return te_in_chunks(extractor, streams)
+
+
 def test_jittered_stamps_of_one_tick_are_paired_by_tick_and_leave_encoder_level_te_noise():
     streams = controller_streams(stamps_are_true=False)
     extractor = TEExtractor(RATIO)
@@ -661,9 +668,7 @@ def test_jittered_stamps_of_one_tick_are_paired_by_tick_and_leave_encoder_level_
     # At the level of the encoders (0.1 µrad link, 0.025 µrad motor at the output): interpolating
     # 30 µs of jitter per stamp at up to 1.5 rad/s left 30 µrad (0.1 arcmin) of TE noise.
     assert rms_without_offset(err) < 0.5e-6
-    interpolated = TEExtractor(RATIO)
-    interpolated.ticks = None
-    assert rms_without_offset(te_in_chunks(interpolated, streams)[250:] - streams[4][250:]) > 10e-6
+    assert rms_without_offset(interpolated_te(streams)[250:] - streams[4][250:]) > 10e-6
 
 
 def test_true_stamps_of_jittered_sampling_instants_keep_the_interpolation():
@@ -673,9 +678,7 @@ def test_true_stamps_of_jittered_sampling_instants_keep_the_interpolation():
     assert extractor.ticks.decided == 'interpolate'
     assert 'sample times' in extractor.ticks.reason()
     assert extractor.ticks.tick_paired == 0
-    interpolated = TEExtractor(RATIO)
-    interpolated.ticks = None
-    np.testing.assert_array_equal(te, te_in_chunks(interpolated, streams))
+    np.testing.assert_array_equal(te, interpolated_te(streams))
     assert rms_without_offset(te - streams[4]) < 0.5e-6
 
 
