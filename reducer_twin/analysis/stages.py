@@ -24,8 +24,14 @@ from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, St
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
-TE_BATCH_S = 0.1
-"""Stream seconds of TE per ``te`` message (the node sends 20 ms batches)."""
+TE_BATCH_S = 0.5
+"""
+Stream seconds of TE per ``te`` message (the node sends 20 ms batches).
+
+Every sample is in the bag whatever the batch; ``te_monitor``'s analysis period (0.5 s)
+per message makes a fifth of the messages 0.1 s did, and the derived bag's writing is
+per message (of 23 k messages of a 6-joint bag at 1 kHz, 18 k were TE at 0.1 s).
+"""
 
 CALIBRATION_PIECE_S = 0.1
 """

@@ -37,8 +37,8 @@ score, Dawid 1984) to weigh the two models.
 import math
 
 import numpy as np
-from scipy import special
 
+from .normal_cdf import log_ndtr
 from .units import ARCMIN, UM
 
 EXPONENTS = np.round(np.arange(0.2, 1.6 + 1e-9, 0.02), 10)
@@ -258,7 +258,7 @@ def _truncate_growth(mean, cov):
     """
     s = np.sqrt(cov[:, 1, 1])
     a = -mean[:, 1] / s
-    log_mass = special.log_ndtr(-a)
+    log_mass = log_ndtr(-a)
     lam = np.exp(-0.5 * a * a - 0.5 * math.log(2.0 * math.pi) - log_mass)
     shift = s * lam
     shrink = 1.0 + a * lam - lam * lam
