@@ -25,6 +25,7 @@ import numpy as np
 from .contact import _engagement_rotation
 from .geometry import flank_phases, lever_arms_cs, normal_clearance_cs
 from .kinematics import eccentric_angle, effective_lever_radius, total_ratio
+from .table_store import digest, stored_table, table_store
 
 _PHASE_SAMPLES = 48
 _CHUNK = 2048
@@ -459,29 +460,6 @@ class ModelTables:
         return np.interp(lost_motion_rad, lm, self.wear)
 
 
-_TABLE_STORE = None
-
-
-def use_table_store(store):
-    """
-    Keep the period-mean rotation tables in ``store`` between processes.
-
-    The tables take a few seconds to build. A store (the disk cache of
-    :mod:`reducer_twin.io.table_cache`) lets every process of the same
-    parameters reuse them; the core itself keeps them in memory only.
-
-    Parameters
-    ----------
-    store : object or None
-        ``load(key, shape)`` returns a finite array of ``shape`` or None,
-        ``save(key, array)`` keeps one (and must not raise); None computes
-        the tables in every process.
-
-    """
-    global _TABLE_STORE
-    _TABLE_STORE = store
-
-
 def table_key(params, torque, wear):
     """
     Return the key of a rotation table: a digest of everything it depends on.
@@ -499,9 +477,7 @@ def table_key(params, torque, wear):
         24 hexadecimal digits.
 
     """
-    import hashlib
-    return hashlib.sha256(repr((params, _PHASE_SAMPLES, torque.tobytes(), wear.tobytes(),
-                                TABLE_VERSION)).encode()).hexdigest()[:24]
+    return digest(params, _PHASE_SAMPLES, torque.tobytes(), wear.tobytes(), TABLE_VERSION)
 
 
 def _cached_table(params, torque, wear):
@@ -521,21 +497,16 @@ def _cached_table(params, torque, wear):
         Mean beta [rad].
 
     """
-    store = _TABLE_STORE
-    key = table_key(params, torque, wear) if store is not None else None
-    if store is not None:
-        beta = store.load(key, (torque.size, wear.size))
-        if beta is not None:
-            return beta
-    grid = _phase_grid(params.geometry)
-    tt, ww = np.meshgrid(torque, wear, indexing='ij')
-    psi = np.tile(grid, tt.size)
-    beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
-                         np.repeat(ww.ravel(), grid.size), params)
-    beta = beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
-    if store is not None:
-        store.save(key, beta)
-    return beta
+    def build():
+        grid = _phase_grid(params.geometry)
+        tt, ww = np.meshgrid(torque, wear, indexing='ij')
+        psi = np.tile(grid, tt.size)
+        beta = mesh_rotation(psi, np.repeat(tt.ravel(), grid.size),
+                             np.repeat(ww.ravel(), grid.size), params)
+        return beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
+
+    key = table_key(params, torque, wear) if table_store() is not None else None
+    return stored_table(key, (torque.size, wear.size), build)
 
 
 TABLE_VERSION = 2

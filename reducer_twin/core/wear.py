@@ -37,6 +37,7 @@ import numpy as np
 from .contact import hertz_half_width, hertz_mean_pressure, LOADED_FORCE, solve_mesh
 from .geometry import equivalent_radius
 from .kinematics import mesh_pass_rate, total_ratio
+from .table_store import digest, stored_table, table_store
 
 MESH_PHASE_SAMPLES = 64
 """Samples of the eccentric angle over one mesh period (the period average is within 1e-4)."""
@@ -49,6 +50,9 @@ TABLE_POINTS = 321
 
 TABLE_PHASE_SAMPLES = 32
 """Eccentric-angle samples per torque of the table (the period average is within 5e-4)."""
+
+DEPTH_TABLE_VERSION = 1
+"""Bump when the depth table's content changes for the same parameters (it is stored)."""
 
 PAPER_TABLE2_HOURS = (1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0)
 """Operating hours of the paper's Table 2."""
@@ -281,7 +285,10 @@ def _depth_table(geometry, materials, rating, wear_params):
                            wear=wear_params)
     lo, hi = (math.log(rating.rated_torque * f) for f in TABLE_TORQUE_RANGE)
     torque = np.exp(np.linspace(lo, hi, TABLE_POINTS))
-    depth = mesh_depth_per_pass(torque, params, TABLE_PHASE_SAMPLES)
+    key = digest('depth per mesh pass', params, TABLE_PHASE_SAMPLES, torque.tobytes(),
+                 DEPTH_TABLE_VERSION) if table_store() is not None else None
+    depth = stored_table(key, torque.shape,
+                         lambda: mesh_depth_per_pass(torque, params, TABLE_PHASE_SAMPLES))
     step = np.diff(depth)
     for a in (torque, depth, step):
         a.setflags(write=False)

@@ -1,7 +1,7 @@
 """
-The disk cache of the core's transmission-error tables.
+The disk cache of the core's slow tables (rotation tables, depth per mesh pass).
 
-:func:`reducer_twin.core.transmission_error.use_table_store` takes any store;
+:func:`reducer_twin.core.table_store.use_table_store` takes any store;
 this one keeps each table as ``mesh-table-<key>.npy`` in
 ``$XDG_CACHE_HOME/reducer_twin`` (``~/.cache/reducer_twin``), so every process
 (nodes, the command, tests) of the same parameters and grid reuses it. A
@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from reducer_twin.core import transmission_error
+from reducer_twin.core import table_store
 
 
 def default_cache_dir():
@@ -54,7 +54,7 @@ class TableCache:
         Parameters
         ----------
         key : str
-            :func:`~reducer_twin.core.transmission_error.table_key`.
+            :func:`~reducer_twin.core.table_store.digest` of the table.
         shape : tuple of int
             The expected shape.
 
@@ -79,7 +79,7 @@ class TableCache:
         Parameters
         ----------
         key : str
-            :func:`~reducer_twin.core.transmission_error.table_key`.
+            :func:`~reducer_twin.core.table_store.digest` of the table.
         beta : ndarray
             The table.
 
@@ -114,5 +114,5 @@ def install(root=None):
 
     """
     cache = TableCache(root)
-    transmission_error.use_table_store(cache)
+    table_store.use_table_store(cache)
     return cache

@@ -1,8 +1,8 @@
-"""The disk cache of the core's transmission-error tables."""
+"""The disk cache of the core's slow tables: rotation tables and the depth per mesh pass."""
 
 import numpy as np
 import pytest
-from reducer_twin.core import transmission_error
+from reducer_twin.core import table_store, transmission_error, wear
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.io.table_cache import TableCache
 
@@ -14,11 +14,11 @@ WEAR = np.array([0.0, 5e-6])
 @pytest.fixture
 def cache(tmp_path):
     """Install a table cache in a fresh directory for one test."""
-    previous = transmission_error._TABLE_STORE
+    previous = table_store.table_store()
     store = TableCache(tmp_path / 'cache')
-    transmission_error.use_table_store(store)
+    table_store.use_table_store(store)
     yield store
-    transmission_error.use_table_store(previous)
+    table_store.use_table_store(previous)
 
 
 def test_a_computed_table_is_stored_and_read_back_equal_by_numpy(cache):
@@ -32,7 +32,7 @@ def test_a_computed_table_is_stored_and_read_back_equal_by_numpy(cache):
 
 def test_the_core_alone_computes_the_same_table_without_any_file(tmp_path, cache):
     stored = transmission_error._cached_table(PARAMS, TORQUE, WEAR)
-    transmission_error.use_table_store(None)
+    table_store.use_table_store(None)
     np.testing.assert_array_equal(transmission_error._cached_table(PARAMS, TORQUE, WEAR),
                                   stored)
 
@@ -58,3 +58,18 @@ def test_a_cache_that_cannot_be_written_is_skipped(tmp_path):
     store.save('key', np.ones((2, 2)))
     assert store.load('key', (2, 2)) is None
     assert blocker.read_text() == 'not a directory'
+
+
+def test_the_depth_table_is_stored_and_a_new_process_reads_it_back_bit_for_bit(cache):
+    # The depth per mesh pass takes ~0.1 s at every start of a node or a command.
+    wear._depth_table.cache_clear()
+    built = wear._table_for.__wrapped__(PARAMS)
+    assert len(list(cache.root.iterdir())) == 1
+    wear._depth_table.cache_clear()      # as a new process would start
+    read = wear._table_for.__wrapped__(PARAMS)
+    np.testing.assert_array_equal(read.depth, built.depth)
+    np.testing.assert_array_equal(read.step, built.step)
+    table_store.use_table_store(None)
+    wear._depth_table.cache_clear()
+    np.testing.assert_array_equal(wear._table_for.__wrapped__(PARAMS).depth, built.depth)
+    wear._depth_table.cache_clear()
