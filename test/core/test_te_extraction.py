@@ -658,10 +658,15 @@ def interpolated_te(streams):
     return te_in_chunks(extractor, streams)
 
 
-def test_jittered_stamps_of_one_tick_are_paired_by_tick_and_leave_encoder_level_te_noise():
-    streams = controller_streams(stamps_are_true=False)
+def through_the_tick_rule(stamps_are_true):
+    """Streams of ``controller_streams``, the extractor they went through and its TE."""
+    streams = controller_streams(stamps_are_true=stamps_are_true)
     extractor = TEExtractor(RATIO)
-    te = te_in_chunks(extractor, streams)
+    return streams, extractor, te_in_chunks(extractor, streams)
+
+
+def test_jittered_stamps_of_one_tick_are_paired_by_tick_and_leave_encoder_level_te_noise():
+    streams, extractor, te = through_the_tick_rule(stamps_are_true=False)
     assert extractor.ticks.pairing == 'tick'
     assert 'jitter' in extractor.ticks.reason()
     err = (te - streams[4])[250:]          # from the second chunk on (the first decides)
@@ -672,9 +677,7 @@ def test_jittered_stamps_of_one_tick_are_paired_by_tick_and_leave_encoder_level_
 
 
 def test_true_stamps_of_jittered_sampling_instants_keep_the_interpolation():
-    streams = controller_streams(stamps_are_true=True)
-    extractor = TEExtractor(RATIO)
-    te = te_in_chunks(extractor, streams)
+    streams, extractor, te = through_the_tick_rule(stamps_are_true=True)
     assert extractor.ticks.decided == 'interpolate'
     assert 'sample times' in extractor.ticks.reason()
     assert extractor.ticks.tick_paired == 0
