@@ -345,14 +345,13 @@ def run_in_free_wear(wear, wear_params):
     w = np.asarray(wear, dtype=float)
     if w.size < INTERP_SEARCH_BELOW:
         s = np.interp(w, grid_w, grid_s)
-        s = np.where(w < 0.0, w, s)
-        return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
-    # np.interp on the table's uniform grid, the interval found by division instead of a
-    # binary search over its 20 001 points (NaN stays NaN).
-    intervals = grid_w.size - 1
-    u = w * (intervals / grid_w[-1])
-    i = np.fmin(np.fmax(u, 0.0), float(intervals - 1)).astype(np.intp)
-    s = grid_s[i] + (u - i) * _run_in_free_steps(wear_params)[i]
+    else:
+        # np.interp on the table's uniform grid, the interval found by division instead of
+        # a binary search over its 20 001 points (NaN stays NaN).
+        intervals = grid_w.size - 1
+        u = w * (intervals / grid_w[-1])
+        i = np.fmin(np.fmax(u, 0.0), float(intervals - 1)).astype(np.intp)
+        s = grid_s[i] + (u - i) * _run_in_free_steps(wear_params)[i]
     s = np.where(w < 0.0, w, s)
     return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
 

@@ -1030,7 +1030,7 @@ class Pairer:
         span = (t_hi - t_lo).astype(float)
         frac = np.where(span > 0, (lt - t_lo) / np.where(span > 0, span, 1.0), 0.0)
         m = motor.position[lo] + frac * (motor.position[hi] - motor.position[lo])
-        tick = self._tick(lt, link.position[idx], m, motor, ok)
+        tick = self._tick(lt, link.position[idx], m, motor, hi, ok)
         if tick is not None:
             m = np.where(tick >= 0, motor.position[np.maximum(tick, 0)], m)
         self.unpaired += int(np.count_nonzero(~ok))
@@ -1051,11 +1051,13 @@ class Pairer:
         self._motor = _take(motor, np.arange(keep_from, len(motor)))
         return out
 
-    def _tick(self, lt, link, m, motor, ok):
+    def _tick(self, lt, link, m, motor, after, ok):
         """
         Return the tick's motor sample of each link stamp (-1: interpolated), or None.
 
-        Same-tick pairs feed the evidence of :attr:`ticks` until it decides.
+        ``after`` is the first motor sample at or after each link stamp (clipped to the
+        stream), whose segment a partner must share. Same-tick pairs feed the evidence
+        of :attr:`ticks` until it decides.
         """
         ticks = self.ticks
         if ticks is None or ticks.decided == 'interpolate' or lt.size == 0:
@@ -1065,8 +1067,7 @@ class Pairer:
             return None
         # Only a partner of the same segment (no gap or clock jump between them).
         near = np.maximum(match, 0)
-        j = np.clip(np.searchsorted(motor.t_ns, lt), 0, len(motor) - 1)
-        match = np.where((match >= 0) & (motor.segment[near] == motor.segment[j]), match, -1)
+        match = np.where((match >= 0) & (motor.segment[near] == motor.segment[after]), match, -1)
         if ticks.decided is None:
             scale = self.motor_scale
             ticks.observe(lt, link, m * scale, motor.position[near] * scale, ok & (match >= 0))

@@ -25,7 +25,7 @@ import numpy as np
 from .contact import _engagement_rotation
 from .geometry import flank_phases, lever_arms_cs, normal_clearance_cs
 from .kinematics import eccentric_angle, effective_lever_radius, total_ratio
-from .table_store import digest, stored_table, table_store
+from .table_store import digest, stored_table
 
 _PHASE_SAMPLES = 48
 _CHUNK = 2048
@@ -505,8 +505,7 @@ def _cached_table(params, torque, wear):
                              np.repeat(ww.ravel(), grid.size), params)
         return beta.reshape(tt.size, grid.size).mean(axis=1).reshape(tt.shape)
 
-    key = table_key(params, torque, wear) if table_store() is not None else None
-    return stored_table(key, (torque.size, wear.size), build)
+    return stored_table(table_key(params, torque, wear), (torque.size, wear.size), build)
 
 
 TABLE_VERSION = 2

@@ -37,7 +37,7 @@ import numpy as np
 from .contact import hertz_half_width, hertz_mean_pressure, LOADED_FORCE, solve_mesh
 from .geometry import equivalent_radius
 from .kinematics import mesh_pass_rate, total_ratio
-from .table_store import digest, stored_table, table_store
+from .table_store import digest, stored_table
 
 MESH_PHASE_SAMPLES = 64
 """Samples of the eccentric angle over one mesh period (the period average is within 1e-4)."""
@@ -286,7 +286,7 @@ def _depth_table(geometry, materials, rating, wear_params):
     lo, hi = (math.log(rating.rated_torque * f) for f in TABLE_TORQUE_RANGE)
     torque = np.exp(np.linspace(lo, hi, TABLE_POINTS))
     key = digest('depth per mesh pass', params, TABLE_PHASE_SAMPLES, torque.tobytes(),
-                 DEPTH_TABLE_VERSION) if table_store() is not None else None
+                 DEPTH_TABLE_VERSION)
     depth = stored_table(key, torque.shape,
                          lambda: mesh_depth_per_pass(torque, params, TABLE_PHASE_SAMPLES))
     step = np.diff(depth)
