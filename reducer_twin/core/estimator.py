@@ -947,7 +947,7 @@ class WearEstimator:
         # A window across which the lost motion does not grow adds nothing that tells the
         # fit's bias from the as-built offset: the bias is a consider state for it.
         consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
-        self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)))
+        self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)), rho)
         self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz, consider)
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
@@ -976,16 +976,22 @@ class WearEstimator:
         self._tidy()
         return UpdateResult('rejected' if outlier else 'accepted', y, nis)
 
-    def _score_trend(self, z, z_mix, v_mix, R):
-        """Score both models' predictions of ``z``, then add it to the growth trend."""
+    def _score_trend(self, z, z_mix, v_mix, R, rho):
+        """
+        Score both models' predictions of ``z``, then add it to the growth trend.
+
+        ``R`` is the window's noise variance with the noise scale ``rho`` in it; the
+        growth law takes ``R/rho`` and applies the latest ``rho`` to all its windows.
+        """
         exposure = self._archard if self._observed_at is None else self._observed_at
+        self._growth.set_noise_scale(rho)
         if self._growth.windows >= SCORE_AFTER:
             lw, m, v = self._growth.predictive(exposure, R)
             log_trend = _logsumexp(lw - 0.5 * np.log(v) - 0.5 * (z - m) ** 2 / v)
             log_model = -0.5 * math.log(v_mix + R) - 0.5 * (z - z_mix) ** 2 / (v_mix + R)
             self._score += log_trend - log_model
             self._scored += 1
-        self._growth.add(exposure, z, R)
+        self._growth.add(exposure, z, R / rho)
 
     def _posterior(self, m0, P0, z, R, zc, szz, cxz, consider):
         """
@@ -1515,7 +1521,8 @@ class WearEstimator:
                 if any(len(row) != 3 for row in noise):
                     raise ValueError('noise rows must hold 3 values')
                 trend = (float(d['trend'][0]), int(d['trend'][1]))
-                growth = GrowthTrend.from_state(d['growth'])
+                est._noise = noise
+                growth = GrowthTrend.from_state(d['growth'], legacy_scale=est.noise_scale)
                 archard = float(d['archard_exposure'])
                 score = (float(d['trend_score'][0]), int(d['trend_score'][1]))
             if lw.ndim != 1 or lw.size == 0 or m.shape != (lw.size, N_FILTER):

@@ -26,8 +26,16 @@ the weighted sums ``Σ w·x xᵀ``, ``Σ w·z·x``, ``Σ w·z²`` with
 0.02), which makes an update O(grid) and the state a few hundred numbers,
 whatever the length of the history. The exposure is rescaled to ``A_now``
 only when the posterior is formed (a factor ``A_now^-g`` per ``g``). Each
-window's noise ``R`` is the one the wear estimator used for it (Student-t
-weight included), so the two models see the same data.
+window's noise is the one the wear estimator used for it (Student-t weight
+included), so the two models see the same data, with one difference: the
+learnt noise scale ``ρ`` (:attr:`GrowthTrend.noise_scale`, the ratio of
+observed to reported variance) is applied to every window when the
+posterior is formed, not frozen into each window's weight when it came.
+The estimator learns ``ρ`` over its first tens of windows; frozen, the
+earliest windows (weighed with ``ρ = 1``) outweighed the later ones by the
+``ρ`` learnt since, up to 25 times, and a few early windows read high
+bent the law (measured: a unit whose windows scatter 3x their reported sd
+had its P50 at 60 % of life +68 % long; with ``ρ`` applied to all, +22 %).
 
 :meth:`GrowthTrend.predictive` gives the one-step-ahead predictive density
 of a window, which the estimator compares with its own (prequential log
@@ -78,6 +86,7 @@ class GrowthTrend:
         self.szz = 0.0                # Σw·z²
         self.windows = 0
         self.exposure = 0.0           # A_now [m]
+        self.noise_scale = 1.0        # ρ, applied to every window's R
         self._cached = None
 
     # -- data ----------------------------------------------------------------------------
@@ -93,7 +102,7 @@ class GrowthTrend:
         z : float
             Observed lost motion [rad].
         R : float
-            Its noise variance [rad²] (> 0).
+            Its noise variance before the noise scale ``ρ`` [rad²] (> 0).
 
         """
         a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
@@ -103,6 +112,13 @@ class GrowthTrend:
         self.szz += w * z * z
         self.windows += 1
         self._cached = None
+
+    def set_noise_scale(self, rho):
+        """Set ``ρ``, the factor on every window's noise variance (> 0)."""
+        rho = float(rho)
+        if rho != self.noise_scale:
+            self.noise_scale = rho
+            self._cached = None
 
     def advance(self, exposure):
         """Set the exposure now, ``A_now`` [m] (the end of the latest window)."""
@@ -131,8 +147,9 @@ class GrowthTrend:
         """
         a_ref = (exposure if exposure is not None else self.exposure) / EXPOSURE_UNIT
         scale = a_ref ** -EXPONENTS if a_ref > 0.0 else np.ones_like(EXPONENTS)
-        s0, s1, s2 = self.sxx.T
-        z0, z1 = self.sxz.T
+        inv_rho = 1.0 / self.noise_scale
+        s0, s1, s2 = self.sxx.T * inv_rho
+        z0, z1 = self.sxz.T * inv_rho
         beta0, beta_sd = NEW_PRIOR
         prec0 = np.array([1.0 / beta_sd ** 2, 1.0 / GROWTH_PRIOR_SD ** 2])
         L = np.empty((EXPONENTS.size, 2, 2))
@@ -142,7 +159,7 @@ class GrowthTrend:
         r = np.stack([z0 + prec0[0] * beta0, z1 * scale], axis=1)
         cov = np.linalg.inv(L)
         mean = np.einsum('gij,gj->gi', cov, r)
-        quad = self.szz + prec0[0] * beta0 ** 2 - np.einsum('gi,gi->g', mean, r)
+        quad = self.szz * inv_rho + prec0[0] * beta0 ** 2 - np.einsum('gi,gi->g', mean, r)
         _, logdet = np.linalg.slogdet(L)
         g0, g_sd = EXPONENT_PRIOR
         lw = -0.5 * quad - 0.5 * logdet - 0.5 * ((EXPONENTS - g0) / g_sd) ** 2
@@ -161,7 +178,7 @@ class GrowthTrend:
         exposure : float
             Archard exposure of the window's middle [m].
         R : float
-            Noise variance of the window [rad²].
+            Noise variance of the window, ``ρ`` included [rad²].
 
         Returns
         -------
@@ -204,17 +221,27 @@ class GrowthTrend:
         return {'sxx': [[float(v) for v in row] for row in self.sxx],
                 'sxz': [[float(v) for v in row] for row in self.sxz],
                 'szz': float(self.szz), 'windows': int(self.windows),
-                'exposure': float(self.exposure)}
+                'exposure': float(self.exposure), 'noise_scale': float(self.noise_scale)}
 
     @classmethod
-    def from_state(cls, d):
+    def from_state(cls, d, legacy_scale=1.0):
         """
         Restore from :meth:`state` output.
+
+        Parameters
+        ----------
+        d : mapping
+            The state.
+        legacy_scale : float
+            ``ρ`` to take for a state written before the sums were kept free
+            of it (no ``noise_scale``): their windows' weights held the ``ρ``
+            of their time, taken as this one, so the law is restored as it was.
 
         Raises
         ------
         ValueError
-            If the sums do not fit the exponent grid or are not finite.
+            If the sums do not fit the exponent grid, are not finite, or the
+            noise scale is not a positive number.
 
         """
         out = cls()
@@ -230,6 +257,14 @@ class GrowthTrend:
         if not (np.all(np.isfinite(sxx)) and np.all(np.isfinite(sxz))
                 and math.isfinite(out.szz) and math.isfinite(out.exposure)):
             raise ValueError('growth sums must be finite')
+        if 'noise_scale' in d:
+            out.noise_scale = float(d['noise_scale'])
+        else:
+            out.noise_scale = float(legacy_scale)
+            out.sxx, out.sxz, out.szz = (v * out.noise_scale for v in (sxx, sxz, out.szz))
+        if not (math.isfinite(out.noise_scale) and out.noise_scale > 0.0):
+            raise ValueError(f'growth noise_scale must be a finite number > 0, got '
+                             f'{out.noise_scale!r}')
         return out
 
 

@@ -60,9 +60,45 @@ def test_the_sums_survive_a_json_round_trip_and_give_the_same_posterior():
         np.testing.assert_array_equal(a, b)
 
 
+def test_the_latest_noise_scale_weighs_every_window_alike():
+    # The estimator learns the noise scale rho over its first windows. Windows taken
+    # while rho was still 1 must not outweigh later ones: the law is the one it would be
+    # had every window come with the latest rho.
+    rng = np.random.default_rng(5)
+    exposure = 3e-9 * (np.arange(40) + 0.5)
+    z = 0.6 * ARCMIN + 1.8 * ARCMIN * (exposure / exposure[-1]) + rng.normal(0.0, NOISE, 40)
+    learnt, hindsight = GrowthTrend(), GrowthTrend()
+    for k, (a, zk) in enumerate(zip(exposure, z)):
+        learnt.set_noise_scale(1.0 + 3.0 * k / 39)
+        learnt.add(a, zk, NOISE ** 2)
+        hindsight.add(a, zk, 4.0 * NOISE ** 2)
+    for trend in (learnt, hindsight):
+        trend.advance(exposure[-1])
+    for a, b in zip(learnt.summary(), hindsight.summary()):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12 * ARCMIN)
+    lw, m, v = learnt.predictive(exposure[-1], 4.0 * NOISE ** 2)
+    lw2, m2, v2 = hindsight.predictive(exposure[-1], 4.0 * NOISE ** 2)
+    np.testing.assert_allclose(lw, lw2, atol=1e-9)
+    np.testing.assert_allclose(v, v2, rtol=1e-9)
+
+
+def test_a_state_without_a_noise_scale_is_restored_as_it_was():
+    # Sums written before rho was kept out of them carry the rho of their time; restored
+    # with the estimator's rho now, the law is the one it was.
+    trend, _, _ = history(0.8)
+    old = trend.state()
+    del old['noise_scale']
+    restored = GrowthTrend.from_state(old, legacy_scale=2.5)
+    assert restored.noise_scale == 2.5
+    for a, b in zip(trend.summary(), restored.summary()):
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-15)
+
+
 @pytest.mark.parametrize('change', [
     {'sxx': [[0.0, 0.0, 0.0]]},
     {'sxz': [[math.nan, 0.0]] * EXPONENTS.size},
+    {'noise_scale': 0.0},
+    {'noise_scale': math.inf},
 ])
 def test_malformed_sums_are_refused(change):
     state = GrowthTrend().state()
