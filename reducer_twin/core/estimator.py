@@ -1170,15 +1170,20 @@ class WearEstimator:
         duty = features.duty
         exposure = self._duty_value(duty, 'exposure_s', 's')
         increment = self._duty_value(duty, 'archard_increment', 'm')
-        self._predict(0.5 * exposure, 0.5 * increment)
-        self._observed_at = self._archard + 0.5 * increment
-        self._window_increment = increment
-        try:
+        if not _finite(getattr(features, 'lost_motion', math.nan)):
+            # Nothing to apply at the middle (no reversal in the window): one step.
+            self._predict(exposure, increment)
             result = self.update(features)
-        finally:
-            self._observed_at = None
-            self._window_increment = 0.0
-        self._predict(0.5 * exposure, 0.5 * increment)
+        else:
+            self._predict(0.5 * exposure, 0.5 * increment)
+            self._observed_at = self._archard + 0.5 * increment
+            self._window_increment = increment
+            try:
+                result = self.update(features)
+            finally:
+                self._observed_at = None
+                self._window_increment = 0.0
+            self._predict(0.5 * exposure, 0.5 * increment)
         self._count_duty(exposure, increment)
         t_end = getattr(features, 't_end', None)
         if _finite(t_end):

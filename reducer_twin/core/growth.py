@@ -151,19 +151,28 @@ class GrowthTrend:
         s0, s1, s2 = self.sxx.T * inv_rho
         z0, z1 = self.sxz.T * inv_rho
         beta0, beta_sd = NEW_PRIOR
-        prec0 = np.array([1.0 / beta_sd ** 2, 1.0 / GROWTH_PRIOR_SD ** 2])
-        L = np.empty((EXPONENTS.size, 2, 2))
-        L[:, 0, 0] = s0 + prec0[0]
-        L[:, 0, 1] = L[:, 1, 0] = s1 * scale
-        L[:, 1, 1] = s2 * scale * scale + prec0[1]
-        r = np.stack([z0 + prec0[0] * beta0, z1 * scale], axis=1)
-        cov = np.linalg.inv(L)
-        mean = np.einsum('gij,gj->gi', cov, r)
-        quad = self.szz * inv_rho + prec0[0] * beta0 ** 2 - np.einsum('gi,gi->g', mean, r)
-        _, logdet = np.linalg.slogdet(L)
+        prec_beta, prec_k = 1.0 / beta_sd ** 2, 1.0 / GROWTH_PRIOR_SD ** 2
+        # The 2x2 precision L = [[l00, l01], [l01, l11]] per g, inverted in closed form.
+        l00 = s0 + prec_beta
+        l01 = s1 * scale
+        l11 = s2 * scale * scale + prec_k
+        det = l00 * l11 - l01 * l01
+        r0 = z0 + prec_beta * beta0
+        r1 = z1 * scale
+        cov = np.empty((EXPONENTS.size, 2, 2))
+        cov[:, 0, 0] = l11 / det
+        cov[:, 0, 1] = cov[:, 1, 0] = -l01 / det
+        cov[:, 1, 1] = l00 / det
+        mean = np.empty((EXPONENTS.size, 2))
+        mean[:, 0] = (l11 * r0 - l01 * r1) / det
+        mean[:, 1] = (l00 * r1 - l01 * r0) / det
+        quad = (self.szz * inv_rho + prec_beta * beta0 ** 2
+                - mean[:, 0] * r0 - mean[:, 1] * r1)
+        logdet = np.log(det)
         g0, g_sd = EXPONENT_PRIOR
         lw = -0.5 * quad - 0.5 * logdet - 0.5 * ((EXPONENTS - g0) / g_sd) ** 2
-        if np.median(cov[:, 1, 1]) < (TRUNCATE_BELOW * GROWTH_PRIOR_SD) ** 2:
+        half = EXPONENTS.size // 2     # the grid is odd: the median is its middle value
+        if np.partition(cov[:, 1, 1], half)[half] < (TRUNCATE_BELOW * GROWTH_PRIOR_SD) ** 2:
             lw += _truncate_growth(mean, cov)
         lw -= lw.max()
         lw -= math.log(np.exp(lw).sum())
