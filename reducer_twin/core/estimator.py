@@ -947,7 +947,10 @@ class WearEstimator:
         # A window across which the lost motion does not grow adds nothing that tells the
         # fit's bias from the as-built offset: the bias is a consider state for it.
         consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
-        self._score_trend(z, z_mix, v_mix, R * max(1.0, (nu + nis) / (nu + 1.0)), rho)
+        # The growth law sees the window as the wear model does: its noise, the Student-t
+        # weight and the lost motion's growth within the window (the components' smear).
+        self._score_trend(z, z_mix, v_mix,
+                          R * max(1.0, (nu + nis) / (nu + 1.0)) + float(w @ smear), rho)
         self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz, consider)
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
@@ -980,8 +983,9 @@ class WearEstimator:
         """
         Score both models' predictions of ``z``, then add it to the growth trend.
 
-        ``R`` is the window's noise variance with the noise scale ``rho`` in it; the
-        growth law takes ``R/rho`` and applies the latest ``rho`` to all its windows.
+        ``R`` is the window's noise variance with the noise scale ``rho`` in it (and
+        the growth within the window); the growth law takes ``R/rho`` and applies the
+        latest ``rho`` to all its windows.
         """
         exposure = self._archard if self._observed_at is None else self._observed_at
         self._growth.set_noise_scale(rho)

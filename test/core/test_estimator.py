@@ -258,6 +258,19 @@ def test_observations_are_applied_at_the_middle_of_their_window(params):
     assert abs(est.wear - true_w[2]) < 0.04 * true_w[2]
 
 
+def test_the_growth_law_counts_the_growth_within_a_window_as_noise_as_the_wear_model_does(
+        params):
+    # Windows so long that a quarter of the life passes in each: the lost motion a window
+    # reads is a mix over the growth across it. The wear model takes that spread as noise;
+    # the growth law must too, or it holds such windows several times surer than they are.
+    features, _, _ = synthetic_run(params, 1.0, seed=0, window=150 * WINDOW)
+    est = WearEstimator(params, NEW)
+    for f in features[:4]:
+        est.step(f)
+    weight = est._growth.sxx[0, 0] / est._growth.noise_scale   # sum of 1/R over the windows
+    assert weight < 0.25 * 4 / NOISE ** 2
+
+
 def test_the_noise_scale_is_learnt_from_the_scatter_not_from_the_reported_sd(params, tables):
     # The fit reports 0.02 arcmin but the windows scatter by 0.08: rho near 16.
     rng = np.random.default_rng(1)
