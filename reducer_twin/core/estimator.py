@@ -113,10 +113,11 @@ projecting each component's mean (Simon & Chia 2002).
 Growth law. Beside the wear model, :class:`.growth.GrowthTrend` learns the
 lost motion's growth against the Archard exposure from the windows
 themselves (a power law with the physics as its prior). Each window's
-one-step-ahead predictive density under both models is scored (prequential
-log score, Dawid 1984, from the :data:`SCORE_AFTER`-th usable window on);
-their difference gives the probability that the observed law, not the
-model's curve, holds (prior ``trend_probability``; 0 for a reducer of unknown
+predictive density under both models, as each predicted it
+:data:`SCORE_LAG` windows before, is scored (prequential log score, Dawid
+1984, from the :data:`SCORE_AFTER`-th usable window on; lagged because the
+remaining life is an extrapolation); their difference gives the probability
+that the observed law, not the model's curve, holds (prior ``trend_probability``; 0 for a reducer of unknown
 history, whose exposure since new is unknown). The remaining life is the
 mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
@@ -206,6 +207,21 @@ way, every ten windows (a unit built 2 µm tight, whose rate the prior puts
 
 SCORE_AFTER = 8
 """Usable windows both models have seen before their predictions are scored."""
+
+SCORE_LAG = 8
+"""
+Windows between a model's prediction and the window it is scored on.
+
+The remaining life is an extrapolation, so the two models are weighed by how well each
+extrapolates: each usable window is scored against the prediction both made
+``SCORE_LAG`` windows earlier, not the one-step prediction. The wear model follows a
+lost motion that grows unlike its curve by moving its rate every window, which its
+one-step predictions hide; eight windows ahead they show it. Measured on the independent
+generator (bench_accuracy, 120 windows a life; lags of 4, 8 and 16 windows gave the same
+figures within a unit): seed 1 RUL P50 within 30 % at 60 % of life 88 -> 92 %,
+alpha-lambda 84/84 -> 88/88 %; seed 2 alpha-lambda 83/90 -> 86/90 %; the model generator
+unchanged.
+"""
 
 DUTY_UNKNOWN_REL_STD = 0.1
 """Relative sd of the duty rate before three batches show it (the twin's former allowance)."""
@@ -673,6 +689,40 @@ def mixture_moments(log_weights, means, covs):
 # --------------------------------------------------------------------------- filter
 
 
+def _components_state(lw, m, P):
+    return [[float(a), [float(v) for v in b], [float(v) for v in c.ravel()]]
+            for a, b, c in zip(lw, m, P)]
+
+
+def _components_from_state(rows):
+    lw = np.array([c[0] for c in rows], dtype=float)
+    m = np.array([c[1] for c in rows], dtype=float)
+    P = np.array([c[2] for c in rows], dtype=float).reshape(-1, N_FILTER, N_FILTER)
+    return _checked_components(lw, m, P)
+
+
+def _checked_components(lw, m, P):
+    if lw.ndim != 1 or lw.size == 0 or m.shape != (lw.size, N_FILTER):
+        raise ValueError(f'components must be [log weight, {N_FILTER} means, '
+                         f'{N_FILTER}x{N_FILTER} covariance], got {m.shape}')
+    if not (np.all(np.isfinite(lw)) and np.all(np.isfinite(m)) and np.all(np.isfinite(P))):
+        raise ValueError('component weights, means and covariances must be finite')
+    return lw, m, P
+
+
+def _snapshot_state(snap):
+    return {'archard': float(snap['archard']), 'exposure_s': float(snap['exposure_s']),
+            'components': _components_state(snap['lw'], snap['m'], snap['P']),
+            'windows': int(snap['windows']), 'growth_exposure': float(snap['growth_exposure'])}
+
+
+def _snapshot_from_state(d):
+    lw, m, P = _components_from_state(d['components'])
+    return {'archard': float(d['archard']), 'exposure_s': float(d['exposure_s']),
+            'lw': lw, 'm': m, 'P': P, 'windows': int(d['windows']),
+            'growth_exposure': float(d['growth_exposure'])}
+
+
 class WearEstimator:
     """
     Gaussian sum of unscented filters on ``x = [w, ln s, b, ln κ]`` (see the module).
@@ -700,6 +750,9 @@ class WearEstimator:
         self._window_increment = 0.0
         self._score = 0.0
         self._scored = 0
+        self._lagged = []
+        self._recent = []
+        self._observed_exposure = None
         self._noise = []
         self._trend = 0.0
         self._trend_count = 0
@@ -949,8 +1002,8 @@ class WearEstimator:
         consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
         # The growth law sees the window as the wear model does: its noise, the Student-t
         # weight and the lost motion's growth within the window (the components' smear).
-        self._score_trend(z, z_mix, v_mix,
-                          R * max(1.0, (nu + nis) / (nu + 1.0)) + float(w @ smear), rho)
+        spread = float(w @ smear)
+        self._score_trend(z, R + spread, R * max(1.0, (nu + nis) / (nu + 1.0)) + spread, rho)
         self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz, consider)
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
@@ -979,23 +1032,63 @@ class WearEstimator:
         self._tidy()
         return UpdateResult('rejected' if outlier else 'accepted', y, nis)
 
-    def _score_trend(self, z, z_mix, v_mix, R, rho):
+    def _score_trend(self, z, R_score, R, rho):
         """
         Score both models' predictions of ``z``, then add it to the growth trend.
 
-        ``R`` is the window's noise variance with the noise scale ``rho`` in it (and
-        the growth within the window); the growth law takes ``R/rho`` and applies the
-        latest ``rho`` to all its windows.
+        The predictions are those made :data:`SCORE_LAG` windows before, with the
+        window's noise ``R_score`` (the noise scale's and the growth within the window
+        included, no Student-t weight: the same for both models). ``R`` is the noise
+        the growth law takes the window with (``rho`` and the Student-t weight in it);
+        the law keeps ``R/rho`` and applies the latest ``rho`` to all its windows.
         """
         exposure = self._archard if self._observed_at is None else self._observed_at
         self._growth.set_noise_scale(rho)
-        if self._growth.windows >= SCORE_AFTER:
-            lw, m, v = self._growth.predictive(exposure, R)
-            log_trend = _logsumexp(lw - 0.5 * np.log(v) - 0.5 * (z - m) ** 2 / v)
-            log_model = -0.5 * math.log(v_mix + R) - 0.5 * (z - z_mix) ** 2 / (v_mix + R)
-            self._score += log_trend - log_model
+        if len(self._lagged) == SCORE_LAG and self._growth.windows >= SCORE_AFTER:
+            self._score += self._lagged_score(self._lagged[0], z, R_score, rho)
             self._scored += 1
         self._growth.add(exposure, z, R / rho)
+        self._recent = (self._recent + [[exposure, z, R / rho]])[-SCORE_LAG:]
+
+    def _snapshot(self):
+        """
+        Return what a lagged prediction starts from.
+
+        The wear model now (copies), and where the growth law is (its windows and
+        exposure; its sums then are today's less the windows added since, kept in
+        ``_recent``).
+        """
+        return {'archard': self._archard, 'exposure_s': self._exposure_s,
+                'lw': self._lw.copy(), 'm': self._m.copy(), 'P': self._P.copy(),
+                'windows': self._growth.windows, 'growth_exposure': self._growth.exposure}
+
+    def _lagged_score(self, snap, z, R, rho):
+        """
+        Log predictive density of ``z`` under the growth law less that under the wear model.
+
+        Both predict from ``snap`` (:meth:`_snapshot`) to the window's middle: the wear
+        model's components through the Archard increment and the operation since, with
+        their process noise; the growth law at the window's exposure.
+        """
+        c = self.config
+        at = self._archard if self._observed_at is None else self._observed_at
+        now = self._exposure_s if self._observed_exposure is None else self._observed_exposure
+        X = self._fx(self._sigma(snap['m'], snap['P']), at - snap['archard'])
+        m, P = self._moments(X)
+        elapsed = now - snap['exposure_s']
+        P[:, 0, 0] += c.wear_noise_density * elapsed
+        P[:, 1, 1] += c.log_rate_scale_noise_density * elapsed
+        P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        zc, szz = self._observed(self._hx(self._sigma(m, P)))
+        v = szz + R
+        log_model = _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
+                               - 0.5 * (z - zc) ** 2 / v)
+        since = self._growth.windows - snap['windows']
+        growth = self._growth.rolled_back(self._recent[len(self._recent) - since:],
+                                          snap['growth_exposure'])
+        lw, mean, var = growth.predictive(at, R)
+        log_trend = _logsumexp(lw - 0.5 * np.log(var) - 0.5 * (z - mean) ** 2 / var)
+        return log_trend - log_model
 
     def _posterior(self, m0, P0, z, R, zc, szz, cxz, consider):
         """
@@ -1181,14 +1274,16 @@ class WearEstimator:
         else:
             self._predict(0.5 * exposure, 0.5 * increment)
             self._observed_at = self._archard + 0.5 * increment
+            self._observed_exposure = self._exposure_s + 0.5 * exposure
             self._window_increment = increment
             try:
                 result = self.update(features)
             finally:
-                self._observed_at = None
+                self._observed_at = self._observed_exposure = None
                 self._window_increment = 0.0
             self._predict(0.5 * exposure, 0.5 * increment)
         self._count_duty(exposure, increment)
+        self._lagged = (self._lagged + [self._snapshot()])[-SCORE_LAG:]
         t_end = getattr(features, 't_end', None)
         if _finite(t_end):
             self._t_end = float(t_end)
@@ -1218,6 +1313,8 @@ class WearEstimator:
         self._archard = 0.0
         self._score = 0.0
         self._scored = 0
+        self._lagged = []
+        self._recent = []
         self._noise = []
         self._trend = 0.0
         self._trend_count = 0
@@ -1447,10 +1544,11 @@ class WearEstimator:
             'config': asdict(self.config),
             'x': [float(v) for v in self.x],
             'P': [[float(v) for v in row] for row in self.P],
-            'components': [[float(lw), [float(v) for v in m], [float(v) for v in P.ravel()]]
-                           for lw, m, P in zip(self._lw, self._m, self._P)],
+            'components': _components_state(self._lw, self._m, self._P),
             'noise': [[float(v) for v in row] for row in self._noise],
             'growth': self._growth.state(),
+            'lagged': [_snapshot_state(snap) for snap in self._lagged],
+            'recent': [[float(v) for v in row] for row in self._recent],
             'archard_exposure': float(self._archard),
             'trend_score': [float(self._score), int(self._scored)],
             'trend': [float(self._trend), int(self._trend_count)],
@@ -1520,26 +1618,26 @@ class WearEstimator:
             est = cls(params, config)
             if version == 1:
                 lw, m, P, noise, trend = cls._from_version_1(d, config)
-                growth, archard, score = GrowthTrend(), 0.0, (0.0, 0)
+                growth, archard, score, lagged, recent = GrowthTrend(), 0.0, (0.0, 0), [], []
             else:
-                lw = np.array([c[0] for c in d['components']], dtype=float)
-                m = np.array([c[1] for c in d['components']], dtype=float)
-                P = np.array([c[2] for c in d['components']], dtype=float).reshape(
-                    -1, N_FILTER, N_FILTER)
+                lw, m, P = _components_from_state(d['components'])
                 noise = [[float(v) for v in row] for row in d['noise']]
                 if any(len(row) != 3 for row in noise):
                     raise ValueError('noise rows must hold 3 values')
                 trend = (float(d['trend'][0]), int(d['trend'][1]))
                 est._noise = noise
                 growth = GrowthTrend.from_state(d['growth'], legacy_scale=est.noise_scale)
+                lagged = [_snapshot_from_state(snap) for snap in d.get('lagged', [])]
+                recent = [[float(v) for v in row] for row in d.get('recent', [])]
+                if len(lagged) > SCORE_LAG or len(recent) > SCORE_LAG or any(
+                        len(row) != 3 for row in recent):
+                    raise ValueError(f'lagged and recent must hold at most {SCORE_LAG} '
+                                     'snapshots and windows [A, z, R]')
+                if lagged and growth.windows - lagged[0]['windows'] > len(recent):
+                    raise ValueError('recent must hold the windows since the oldest snapshot')
                 archard = float(d['archard_exposure'])
                 score = (float(d['trend_score'][0]), int(d['trend_score'][1]))
-            if lw.ndim != 1 or lw.size == 0 or m.shape != (lw.size, N_FILTER):
-                raise ValueError(f'components must be [log weight, {N_FILTER} means, '
-                                 f'{N_FILTER}x{N_FILTER} covariance], got {m.shape}')
-            if not (np.all(np.isfinite(lw)) and np.all(np.isfinite(m))
-                    and np.all(np.isfinite(P))):
-                raise ValueError('component weights, means and covariances must be finite')
+            lw, m, P = _checked_components(lw, m, P)
             added = ('censored',) if version == 1 else ()
             counters = {k: int(d['counters'][k]) if k not in added else 0
                         for k in est._counters}
@@ -1560,6 +1658,7 @@ class WearEstimator:
             raise StateFileError(f'state is malformed: {type(err).__name__}: {err}') from err
         est._lw, est._m, est._P = lw, m, P
         est._growth, est._archard = growth, archard
+        est._lagged, est._recent = lagged, recent
         est._score, est._scored = score
         est._noise = noise
         est._trend, est._trend_count = trend

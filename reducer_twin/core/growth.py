@@ -105,13 +105,47 @@ class GrowthTrend:
             Its noise variance before the noise scale ``ρ`` [rad²] (> 0).
 
         """
+        self._take(exposure, z, R, 1.0)
+
+    def _take(self, exposure, z, R, sign):
         a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
-        w = 1.0 / R
+        w = sign / R
         self.sxx += w * np.stack([np.ones_like(a), a, a * a], axis=1)
         self.sxz += w * z * np.stack([np.ones_like(a), a], axis=1)
         self.szz += w * z * z
-        self.windows += 1
+        self.windows += int(sign)
         self._cached = None
+
+    def rolled_back(self, windows, exposure):
+        """
+        Return the law as it was before the latest windows (a copy).
+
+        Parameters
+        ----------
+        windows : sequence of (exposure, z, R)
+            The latest windows, as given to :meth:`add`.
+        exposure : float
+            ``A_now`` then [m].
+
+        Returns
+        -------
+        GrowthTrend
+            The sums less those windows' terms (to rounding), at ``exposure``.
+
+        """
+        out = self.copy()
+        for a, z, R in windows:
+            out._take(a, z, R, -1.0)
+        out.exposure = float(exposure)
+        return out
+
+    def copy(self):
+        """Return an independent duplicate: the sums and the exposure now."""
+        out = GrowthTrend()
+        out.sxx, out.sxz, out.szz = self.sxx.copy(), self.sxz.copy(), self.szz
+        out.windows, out.exposure, out.noise_scale = self.windows, self.exposure, self.noise_scale
+        out._cached = self._cached
+        return out
 
     def set_noise_scale(self, rho):
         """Set ``ρ``, the factor on every window's noise variance (> 0)."""
