@@ -145,7 +145,7 @@ import math
 import numpy as np
 
 from .errors import InvalidInput, StateFileError
-from .growth import GrowthTrend
+from .growth import GrowthTrend, window_terms
 from .params import _Validated, spec
 from .sigma_points import merwe_weights
 from .transmission_error import model_tables
@@ -752,6 +752,7 @@ class WearEstimator:
         self._scored = 0
         self._lagged = []
         self._recent = []
+        self._recent_terms = []
         self._observed_exposure = None
         self._noise = []
         self._trend = 0.0
@@ -1047,8 +1048,10 @@ class WearEstimator:
         if len(self._lagged) == SCORE_LAG and self._growth.windows >= SCORE_AFTER:
             self._score += self._lagged_score(self._lagged[0], z, R_score, rho)
             self._scored += 1
-        self._growth.add(exposure, z, R / rho)
+        terms = window_terms(exposure, z, R / rho)
+        self._growth.add_terms(terms)
         self._recent = (self._recent + [[exposure, z, R / rho]])[-SCORE_LAG:]
+        self._recent_terms = (self._recent_terms + [terms])[-SCORE_LAG:]
 
     def _snapshot(self):
         """
@@ -1084,7 +1087,7 @@ class WearEstimator:
         log_model = _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
                                - 0.5 * (z - zc) ** 2 / v)
         since = self._growth.windows - snap['windows']
-        growth = self._growth.rolled_back(self._recent[len(self._recent) - since:],
+        growth = self._growth.rolled_back(self._recent_terms[len(self._recent) - since:],
                                           snap['growth_exposure'])
         lw, mean, var = growth.predictive(at, R)
         log_trend = _logsumexp(lw - 0.5 * np.log(var) - 0.5 * (z - mean) ** 2 / var)
@@ -1315,6 +1318,7 @@ class WearEstimator:
         self._scored = 0
         self._lagged = []
         self._recent = []
+        self._recent_terms = []
         self._noise = []
         self._trend = 0.0
         self._trend_count = 0
@@ -1659,6 +1663,7 @@ class WearEstimator:
         est._lw, est._m, est._P = lw, m, P
         est._growth, est._archard = growth, archard
         est._lagged, est._recent = lagged, recent
+        est._recent_terms = [window_terms(*row) for row in recent]
         est._score, est._scored = score
         est._noise = noise
         est._trend, est._trend_count = trend

@@ -67,6 +67,9 @@ TRUNCATE_BELOW = 0.05
 While the windows hardly place ``k`` the cut would only move the prior's half-normal mean
 (2.4 arcmin) into the law."""
 
+_MASS_NEGLIGIBLE_BEYOND = 8.3
+"""Sds of ``k`` above zero beyond which the truncation's lost mass is taken as none."""
+
 EXPOSURE_UNIT = UM
 """Unit of the exposure inside the sums [m] (keeps ``A^g`` and its square in range)."""
 
@@ -105,25 +108,25 @@ class GrowthTrend:
             Its noise variance before the noise scale ``ρ`` [rad²] (> 0).
 
         """
-        self._take(exposure, z, R, 1.0)
+        self.add_terms(window_terms(exposure, z, R))
 
-    def _take(self, exposure, z, R, sign):
-        a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
-        w = sign / R
-        self.sxx += w * np.stack([np.ones_like(a), a, a * a], axis=1)
-        self.sxz += w * z * np.stack([np.ones_like(a), a], axis=1)
-        self.szz += w * z * z
-        self.windows += int(sign)
+    def add_terms(self, terms):
+        """Take one window's terms (:func:`window_terms`) into the sums."""
+        xx, xz, zz = terms
+        self.sxx += xx
+        self.sxz += xz
+        self.szz += zz
+        self.windows += 1
         self._cached = None
 
-    def rolled_back(self, windows, exposure):
+    def rolled_back(self, terms, exposure):
         """
         Return the law as it was before the latest windows (a copy).
 
         Parameters
         ----------
-        windows : sequence of (exposure, z, R)
-            The latest windows, as given to :meth:`add`.
+        terms : sequence
+            The latest windows' :func:`window_terms`, oldest first.
         exposure : float
             ``A_now`` then [m].
 
@@ -134,9 +137,13 @@ class GrowthTrend:
 
         """
         out = self.copy()
-        for a, z, R in windows:
-            out._take(a, z, R, -1.0)
+        for xx, xz, zz in reversed(terms):
+            out.sxx -= xx
+            out.sxz -= xz
+            out.szz -= zz
+        out.windows -= len(terms)
         out.exposure = float(exposure)
+        out._cached = None
         return out
 
     def copy(self):
@@ -311,6 +318,37 @@ class GrowthTrend:
         return out
 
 
+def window_terms(exposure, z, R):
+    """
+    Return one window's terms of the sums ``Σ w·x xᵀ``, ``Σ w·z·x``, ``Σ w·z²``.
+
+    Parameters
+    ----------
+    exposure : float
+        Archard exposure of the window's middle [m].
+    z : float
+        Observed lost motion [rad].
+    R : float
+        Its noise variance before the noise scale ``ρ`` [rad²] (> 0).
+
+    Returns
+    -------
+    tuple
+        ``(xx (G, 3), xz (G, 2), zz)`` over the exponent grid.
+
+    """
+    a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** EXPONENTS
+    w = 1.0 / R
+    xx = np.empty((EXPONENTS.size, 3))
+    xx[:, 0] = w
+    xx[:, 1] = w * a
+    xx[:, 2] = w * (a * a)
+    xz = np.empty((EXPONENTS.size, 2))
+    xz[:, 0] = w * z
+    xz[:, 1] = w * z * a
+    return xx, xz, w * z * z
+
+
 def _truncate_growth(mean, cov):
     """
     Restrict the growth ``k`` to ``k >= 0``: wear never takes lost motion away.
@@ -336,7 +374,10 @@ def _truncate_growth(mean, cov):
     """
     s = np.sqrt(cov[:, 1, 1])
     a = -mean[:, 1] / s
-    log_mass = log_ndtr(-a)
+    # Beyond 8.3 sd the mass cut off is below 6e-17: ln Φ rounds to 0 against the weights.
+    log_mass = np.zeros_like(a)
+    near = -a < _MASS_NEGLIGIBLE_BEYOND
+    log_mass[near] = log_ndtr(-a[near])
     lam = np.exp(-0.5 * a * a - 0.5 * math.log(2.0 * math.pi) - log_mass)
     shift = s * lam
     shrink = 1.0 + a * lam - lam * lam
