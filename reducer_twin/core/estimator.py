@@ -117,8 +117,9 @@ predictive density under both models, as each predicted it
 :data:`SCORE_LAG` windows before, is scored (prequential log score, Dawid
 1984, from the :data:`SCORE_AFTER`-th usable window on; lagged because the
 remaining life is an extrapolation); their difference gives the probability
-that the observed law, not the model's curve, holds (prior ``trend_probability``; 0 for a reducer of unknown
-history, whose exposure since new is unknown). The remaining life is the
+that the observed law, not the model's curve, holds (prior
+``trend_probability``; 0 for a reducer of unknown history, whose exposure
+since new is unknown). The remaining life is the
 mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
