@@ -666,7 +666,7 @@ class Stream:
             lm = self.lost_motion[:, i]
             k = int(np.searchsorted(lm, limit))
             if 0 < k < len(lm):
-                h = self.hours_at(np.array([k - 1, k]))[:, i]
+                h = self.start_hours[i] + self.t[k - 1:k + 1] * self.spec.aging_factor / HOUR
                 out[i] = float(np.interp(limit, lm[k - 1:k + 1], h))
             elif k == 0 and lm[0] >= limit:
                 out[i] = float(self.start_hours[i])
