@@ -381,6 +381,13 @@ class Duty:
         ``f``: ``s = v*tau^2/(2f)``, ``v*(tau - f/2)``, ``1 - v*(1 - tau)^2/(2f)``
         with ``v = 1/(1 - f)``, ``tau = (t - start)/duration``.
 
+        Parameters
+        ----------
+        j : int
+            Joint index.
+        t : ndarray
+            Time of the recording [s].
+
         Returns
         -------
         tuple of ndarray

@@ -1,5 +1,5 @@
 """
-bench/third_generator.py: recordings whose physics neither the twin nor the second generator shares.
+bench/third_generator.py: recordings whose physics neither the twin nor the second generator has.
 
 The truth is checked against what the module docstring states: the catalogue
 lost motion (width of the torsional curve at +-3 % rated torque, at the middle of
