@@ -15,6 +15,13 @@ Two sources of truth, neither tuned to the other:
   exponent 1-2.5), its own duty cycle and joint kinds, effort noise 1-5 % of
   rated, no run-in. Its truth has no wear, so its "wear" figures are those of
   the estimated lost motion.
+* ``third`` (``--generators third``): ``bench/third_generator.py``, unlike both:
+  a catalogue torsional curve (soft zone to a knee torque, hysteresis loss),
+  efficiency-dependent effort, exposure as sliding distance times pin load,
+  run-in plus linear growth with a contamination step, a random (not periodic)
+  duty, encoder eccentricity and dropped messages. Drawn like the independent
+  truths; its life ends where its own stream's lost motion reaches the limit.
+  Printed per joint kind as whole cases.
 
 Every run covers a whole life (to 3 arcmin) in ``--windows`` windows of 2 s of
 stream (the aging factor is chosen for it) and goes through the core stages the
@@ -84,6 +91,7 @@ from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer  # noqa:
 from reducer_twin.core.transmission_error import model_tables  # noqa: E402
 from reducer_twin.core.units import ARCMIN, HOUR, UM  # noqa: E402
 from reducer_twin.msg_adapters.layouts import TE_FEATURES  # noqa: E402
+import third_generator as third  # noqa: E402
 
 WINDOW_S = 2.0
 RATE_HZ = 500.0
@@ -108,7 +116,7 @@ class Truth:
     Attributes
     ----------
     generator : str
-        ``'model'`` or ``'independent'``.
+        ``'model'``, ``'independent'`` or ``'third'``.
     seed : int
         Seed of the draw and of the noise.
     rate_scale : float
@@ -147,7 +155,8 @@ class Truth:
 
     def key(self):
         """Return a file name for the cached windows of this truth."""
-        text = json.dumps([GENERATOR_VERSION, asdict(self)], sort_keys=True)
+        versions = [GENERATOR_VERSION] + ([third.VERSION] if self.generator == 'third' else [])
+        text = json.dumps([*versions, asdict(self)], sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -174,10 +183,10 @@ def draw_model_truths(n, seed, windows, params):
     return out
 
 
-def draw_independent_truths(n, seed, windows):
-    """Draw ``n`` truths of the independent generator (it draws the unit from the seed)."""
-    rng = np.random.default_rng([seed, 2])
-    return [Truth('independent', seed=1000 * seed + k, kind=str(rng.choice(indep.KINDS)),
+def draw_independent_truths(n, seed, windows, generator='independent'):
+    """Draw ``n`` truths of the independent or the third generator (each draws its unit)."""
+    rng = np.random.default_rng([seed, 2 if generator == 'independent' else 3])
+    return [Truth(generator, seed=1000 * seed + k, kind=str(rng.choice(indep.KINDS)),
                   windows=windows) for k in range(n)]
 
 
@@ -265,6 +274,50 @@ def simulate_model(truth, params):
                np.array(wear_mid))
 
 
+def _window_ends(s, params, aging, link_kept=None, motor_kept=None):
+    """
+    Walk a generator's stream through the TE extraction and window analysis.
+
+    Parameters
+    ----------
+    s : stream
+        One joint's stream (``link_stamp_ns``, ``motor_stamp_ns``, ``link``, ``motor``,
+        ``effort``, ``velocity``; column 0).
+    params : ReducerParams
+        The twin's parameters.
+    aging : float
+        Operating seconds per stream second.
+    link_kept, motor_kept : ndarray of bool, optional
+        Messages that arrived (default: every one).
+
+    Returns
+    -------
+    tuple
+        ``(rows, ends)``: the ``te_features`` records and, per window, the sample
+        of the link stream at the window's end.
+
+    """
+    t0 = indep.START_S * 10 ** 9
+    t_link = (s.link_stamp_ns - t0) * 1e-9
+    t_motor = (s.motor_stamp_ns - t0) * 1e-9
+    extractor = TEExtractor(total_ratio(params.geometry))
+    calibration = TimeOffsetCalibration(extractor)
+    analyzer = WindowAnalyzer(params, window_s=WINDOW_S, aging_factor=aging)
+    rows, ends = [], []
+    chunk = int(RATE_HZ)
+    for a in range(0, len(s.t), chunk):
+        sl = slice(a, a + chunk)
+        lk = np.arange(a, min(a + chunk, len(s.t))) if link_kept is None \
+            else a + np.flatnonzero(link_kept[sl])
+        mk = lk if motor_kept is None else a + np.flatnonzero(motor_kept[sl])
+        stream = extractor.update(t_motor[mk], s.motor[mk, 0], t_link[lk], s.link[lk, 0])
+        for f in analyzer.update(stream, s.effort[lk, 0], s.velocity[lk, 0]):
+            calibration.observe(f)
+            rows.append([features_record(f, params)[k] for k in TE_FEATURES.fields])
+            ends.append(min(int(np.searchsorted(t_link, f.t_end)), len(s.t) - 1))
+    return rows, np.array(ends, dtype=int)
+
+
 def simulate_independent(truth, params):
     """Run one independent-generator life through the TE extraction and window analysis."""
     joints, _ = indep.draw_robot(truth.seed, (truth.kind,))
@@ -273,27 +326,35 @@ def simulate_independent(truth, params):
     spec = indep.Spec(seed=truth.seed, kinds=(truth.kind,), hours=1.02 * life_h,
                       aging_factor=aging, rate_hz=RATE_HZ, truth_topics=False)
     s = indep.generate(spec)
-    t0 = indep.START_S * 10 ** 9
-    t_link = (s.link_stamp_ns - t0) * 1e-9
-    t_motor = (s.motor_stamp_ns - t0) * 1e-9
-    extractor = TEExtractor(total_ratio(params.geometry))
-    calibration = TimeOffsetCalibration(extractor)
-    analyzer = WindowAnalyzer(params, window_s=WINDOW_S, aging_factor=aging)
-    rows, t_end, lm = [], [], []
-    chunk = int(RATE_HZ)
+    rows, k = _window_ends(s, params, aging)
     exposure_op = s.exposure[:, 0] / s.exposure_rate[0]  # operating seconds since new
-    for a in range(0, len(s.t), chunk):
-        sl = slice(a, a + chunk)
-        stream = extractor.update(t_motor[sl], s.motor[sl, 0], t_link[sl], s.link[sl, 0])
-        for f in analyzer.update(stream, s.effort[sl, 0], s.velocity[sl, 0]):
-            calibration.observe(f)
-            rows.append([features_record(f, params)[k] for k in TE_FEATURES.fields])
-            k = min(int(np.searchsorted(t_link, f.t_end)), len(s.t) - 1)
-            t_end.append(exposure_op[k])
-            lm.append(s.lost_motion[k, 0])
-    eol = life_h * HOUR
     nan = np.full(len(rows), np.nan)
-    return Run(truth, np.array(rows), np.array(t_end), eol, nan, np.array(lm), nan)
+    return Run(truth, np.array(rows), exposure_op[k], life_h * HOUR, nan,
+               s.lost_motion[k, 0], nan)
+
+
+def simulate_third(truth, params):
+    """
+    Run one third-generator life through the TE extraction and window analysis.
+
+    The life is the one this stream's own random duty gives (the lost motion's
+    crossing of the limit), not the drawn life at the duty's mean rate; the stream
+    runs to 1.3 drawn lives so that the crossing is in it.
+    """
+    joints, _ = third.draw_robot(truth.seed, (truth.kind,))
+    life_h = joints[0].life_h
+    aging = life_h * HOUR / (truth.windows * WINDOW_S)
+    spec = third.Spec(seed=truth.seed, kinds=(truth.kind,), hours=1.3 * life_h,
+                      aging_factor=aging, rate_hz=RATE_HZ, truth_topics=False)
+    s = third.generate(spec)
+    rows, k = _window_ends(s, params, aging, s.link_kept, s.motor_kept)
+    eol_h = float(s.end_of_life_h()[0])
+    if not math.isfinite(eol_h):
+        raise RuntimeError(f'third generator seed {truth.seed}: the limit is not reached in '
+                           f'{1.3 * life_h:.0f} h')
+    nan = np.full(len(rows), np.nan)
+    return Run(truth, np.array(rows), s.t[k] * aging, eol_h * HOUR, nan, s.lost_motion[k, 0],
+               nan)
 
 
 def generate(truth, params, cache=None):
@@ -305,7 +366,9 @@ def generate(truth, params, cache=None):
             values = {k: data[k] for k in names}
         values['eol'] = float(values['eol'])
         return Run(truth, **values)
-    run = (simulate_model if truth.generator == 'model' else simulate_independent)(truth, params)
+    simulate = {'model': simulate_model, 'independent': simulate_independent,
+                'third': simulate_third}[truth.generator]
+    run = simulate(truth, params)
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.stem + '.tmp.npz')
@@ -573,7 +636,8 @@ def main(argv=None):
     for gen in gens:
         truths = (draw_model_truths(args.truths, args.seed, args.windows, params)
                   if gen == 'model' else
-                  draw_independent_truths(args.independent_truths, args.seed, args.windows))
+                  draw_independent_truths(args.independent_truths, args.seed, args.windows,
+                                          gen))
         results, oracle = [], []
         for truth in truths:
             run = generate(truth, params, args.cache)
@@ -598,6 +662,12 @@ def main(argv=None):
         oracle = [r for r, s in zip(oracle, seen) if s]
         truths = [t for t, s in zip(truths, seen) if s]
         figures[gen] = report_case(f'{gen} generator', results, unit)
+        if gen == 'third':
+            for kind in third.KINDS:
+                pick = [r for r, t in zip(results, truths) if t.kind == kind]
+                if pick:
+                    figures[f'{gen} {kind}'] = report_case(f'  {gen} generator, {kind}', pick,
+                                                           unit)
         if gen == 'independent':
             for kind in indep.KINDS:
                 pick = [r for r, t in zip(results, truths) if t.kind == kind]

@@ -1,14 +1,17 @@
 """
 bench/bench_accuracy.py's fixed cases as specifications: units built unlike nominal.
 
+And the third generator's life as the benchmark scores it.
+
 Each case is a whole life of the project's simulator (120 windows, as the benchmark
 runs it) through the window analysis, the estimator and the life stage.
 """
 
 from bench_scripts import load
+import numpy as np
 import pytest
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.units import UM
+from reducer_twin.core.units import ARCMIN, UM
 
 acc = load('bench_accuracy')
 
@@ -25,3 +28,17 @@ def test_a_unit_built_tighter_or_looser_gets_its_remaining_life_within_30_percen
     figures = acc.evaluate(run, acc.estimate(run, params))
     assert abs(figures['p50_60']) <= 0.3
     assert figures['usable'] >= 40
+
+
+def test_a_third_generator_life_ends_where_its_own_lost_motion_reaches_the_limit():
+    # The third generator's duty is random: its life is the stream's crossing of 3 arcmin,
+    # near (not at) the life drawn at the duty's mean rate, and the windows run past it.
+    params = ReducerParams()
+    truth = acc.Truth('third', seed=1002, kind='wrist', windows=120)
+    run = acc.generate(truth, params)
+    (joint,), _ = acc.third.draw_robot(1002, ('wrist',))
+    assert abs(run.eol / (joint.life_h * 3600.0) - 1.0) < 0.1
+    assert np.all(np.diff(run.t_end) > 0) and run.t_end[-1] > run.eol
+    assert np.all(np.diff(run.lost_motion) >= 0)
+    np.testing.assert_allclose(np.interp(run.eol, run.t_end, run.lost_motion), 3.0 * ARCMIN,
+                               rtol=0.02)
