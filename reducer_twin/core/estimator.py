@@ -1058,12 +1058,14 @@ class WearEstimator:
         """
         Return what a lagged prediction starts from.
 
-        The wear model now (copies), and where the growth law is (its windows and
-        exposure; its sums then are today's less the windows added since, kept in
-        ``_recent``).
+        The wear model now, moment-matched (the mixture has collapsed to a few close
+        components by the time windows are scored; one Gaussian keeps the state
+        small), and where the growth law is (its windows and exposure; its sums then
+        are today's less the windows added since, kept in ``_recent``).
         """
+        x, P = self._estimate()
         return {'archard': self._archard, 'exposure_s': self._exposure_s,
-                'lw': self._lw.copy(), 'm': self._m.copy(), 'P': self._P.copy(),
+                'lw': np.zeros(1), 'm': x[None, :].copy(), 'P': P[None, :, :].copy(),
                 'windows': self._growth.windows, 'growth_exposure': self._growth.exposure}
 
     def _lagged_score(self, snap, z, R, rho):
