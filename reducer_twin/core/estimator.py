@@ -1147,7 +1147,14 @@ class WearEstimator:
         self._counters['consecutive_rejected'] = 0
 
     def _respread(self, y, s_mix):
-        """Search the rate again over the prior's range after persistent disagreement."""
+        """
+        Search the rate again over the prior's range after persistent disagreement.
+
+        The predictions made before (:meth:`_snapshot`) were of another reducer (a
+        jump, a rate many times the model's): both models are scored again only on
+        predictions made from here on.
+        """
+        self._lagged = []
         m, P = mixture_moments(self._lw, self._m, self._P)
         lo, hi, step, sd = RATE_GRID
         theta0 = math.log(self.config.initial_rate_scale)
