@@ -554,22 +554,28 @@ class _ForkedChunks:
 
 
 def _columns(batch, names, fields=3):
-    """Position, velocity and effort columns of the given names (NaN where absent)."""
+    """
+    Position, velocity and effort columns of the given names (NaN where absent).
+
+    Each in Fortran order: a column is contiguous, and every later pass (cleaning,
+    pairing, each joint's front) reads one joint's columns, not every entry of every
+    message (as a message's entries are decoded side by side).
+    """
     names = list(names)
     fields = (batch.position, batch.velocity, batch.effort)[:fields]
     if names == list(batch.names):
-        return list(fields)     # read only downstream: no copy
+        return [np.asfortranarray(values) for values in fields]
     index = {n: k for k, n in enumerate(batch.names)}
     have = [j for j, name in enumerate(names) if name in index]
     take = [index[names[j]] for j in have]
     out = []
     for values in fields:
         if len(have) == len(names):
-            out.append(values[:, take])
+            out.append(values.T[take].T)
             continue
-        cols = np.full((len(batch), len(names)), np.nan)
-        cols[:, have] = values[:, take]
-        out.append(cols)
+        cols = np.full((len(names), len(batch)), np.nan)
+        cols[have] = values.T[take]
+        out.append(cols.T)
     return out
 
 
