@@ -350,11 +350,10 @@ def _trend_times(trends, limit, duty_rate, normal, follow):
     """
     mean = np.array([np.asarray(tr.mean, dtype=float) for tr in trends])
     roots = np.array([_covariance_root(np.asarray(tr.cov, dtype=float)).T for tr in trends])
-    draws = (mean[:, None, :] + np.matmul(normal, roots))[follow]
+    beta, k, g = (draws[follow] for draws in _sampled_states(mean, roots, normal))
     exposure = np.broadcast_to(np.array([float(tr.exposure) for tr in trends])[:, None],
                                follow.shape)[follow]
-    beta, k = draws[:, 0], draws[:, 1]
-    g = np.clip(draws[:, 2], EXPONENTS[0], EXPONENTS[-1])
+    g = np.clip(g, EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         ratio = (limit - beta) / k
         a_lim = exposure * np.power(np.maximum(ratio, 0.0), 1.0 / g)
@@ -568,13 +567,13 @@ def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, c
     rate = np.array([float(q.duty_rate) for q in queries])[:, None]
     rel_std = np.array([float(q.duty_rate_rel_std) for q in queries])[:, None]
     drift = np.array([float(q.rate_drift) for q in queries])
-    sampled = x[:, None, :] + np.matmul(draws.state, roots)
-    wear = np.maximum(sampled[..., 0], 0.0)
-    lim = wear_at_lost_motion(limit, sampled[..., 2], curve)
+    wear, log_scale, baseline = _sampled_states(x, roots, draws.state)
+    wear = np.maximum(wear, 0.0)
+    lim = wear_at_lost_motion(limit, baseline, curve)
     duty = np.exp(rel_std * draws.duty)
     wp = params.wear
     remaining = run_in_free_wear(lim, wp) - run_in_free_wear(wear, wp)
-    speed = np.exp(sampled[..., 1]) * duty * rate
+    speed = np.exp(log_scale) * duty * rate
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = np.where(remaining <= 0.0, 0.0, remaining / speed)
         t[np.isnan(t)] = np.inf
@@ -593,6 +592,42 @@ def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, c
                                         duty[trending] * rate[trending], draws.trend, follow)
             t[trending] = part
     return t, np.count_nonzero(t > horizon_s, axis=1)
+
+
+def _sampled_states(mean, roots, normal):
+    """
+    Draws ``mean + normal·root`` of several queries, one array per state component.
+
+    Parameters
+    ----------
+    mean : ndarray, shape (Q, m)
+        Each query's mean.
+    roots : ndarray, shape (Q, m, m)
+        Each query's transposed covariance root (``rootᵀ·root`` the covariance).
+    normal : ndarray, shape (n, m)
+        Standard-normal draws, common to the queries.
+
+    Returns
+    -------
+    list of ndarray
+        ``m`` arrays of shape (Q, n): component ``j`` of every query's draws.
+
+    Notes
+    -----
+    Each component is the mean plus ``m`` products of a draw column with the roots'
+    entries (whole-array passes over every query): the stacked ``(n, m)·(m, m)``
+    products take five times as long for a few queries of thousands of draws, and no
+    BLAS call means no BLAS threads spinning beside a worker process.
+
+    """
+    columns = np.ascontiguousarray(normal.T)
+    out = []
+    for j in range(mean.shape[1]):
+        total = mean[:, j, None] + roots[:, 0, j, None] * columns[0]
+        for i in range(1, columns.shape[0]):
+            total += roots[:, i, j, None] * columns[i]
+        out.append(total)
+    return out
 
 
 def _trend_probability(trend):

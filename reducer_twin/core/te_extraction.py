@@ -1141,8 +1141,9 @@ class WindowAnalyzer:
         win = np.repeat(np.arange(n_win), ends - starts)
         drag = model = taken = None
         half = self._smoothing_half(t)
+        harmonics = self._harmonics(buf['theta'])
         if self.friction:
-            torque, drag, model, taken = self._friction(torque, t, buf['theta'], speed, win,
+            torque, drag, model, taken = self._friction(torque, t, harmonics, speed, win,
                                                         starts, ends, half)
         torque, band = self._smooth_torque(torque, half, win, starts, ends)
         if model is not None:
@@ -1159,7 +1160,7 @@ class WindowAnalyzer:
         ambiguous = (low <= 0.0) | ((high - np.abs(kept - torque) < self.takeup_torque)
                                     & (high > self.takeup_torque))
         te_mean = np.add.reduceat(y, starts) / (ends - starts)
-        z = self._regressors(buf['theta'], speed, y - te_mean[win])
+        z = self._regressors(harmonics, speed, y - te_mean[win])
         x = z[:-1]
         bins = self._bins(z, torque)
         stats = self._group_stats(z, torque, bins, win, starts, ends, ambiguous, normal=False)
@@ -1207,37 +1208,40 @@ class WindowAnalyzer:
                 duty=duty[k]))
         return out
 
-    def _regressors(self, theta, speed, y):
+    def _harmonics(self, theta):
         """
-        Stack ``sin(k·theta), cos(k·theta)`` per order, ``omega`` (time offset), then ``y``.
+        ``sin(k·theta), cos(k·theta)`` of the regressors' orders and of orders 1 and 2.
 
-        An order one above, or twice, an order already computed comes from
-        the angle-addition formulas instead of new sines and cosines.
+        Only order 1 takes sines and cosines (of the angle wrapped to a turn): every
+        other order comes from it by the angle-addition formulas, one above an order
+        already known, or twice one (the double-angle formulas), so order ``Zc`` takes
+        about ``2·log2(Zc)`` products instead of two trigonometric passes. The
+        friction's load model uses orders 1 and 2 of the same table.
+
+        Returns
+        -------
+        dict of int to tuple of ndarray
+            ``order -> (sin, cos)``.
+
         """
-        n_ord = len(self.orders)
-        z = np.empty((2 * n_ord + 2, theta.size))
         phi = theta - TWO_PI * np.round(theta / TWO_PI)
-        done = {}
+        done = {1: (np.sin(phi), np.cos(phi))}
+        wanted = {1, 2, *self.orders}
+        for order in sorted(wanted):
+            _harmonic(order, done)
+        return {order: done[order] for order in wanted}
+
+    def _regressors(self, harmonics, speed, y):
+        """Stack ``sin(k·theta), cos(k·theta)`` per order, ``omega`` (time offset), then ``y``."""
+        n_ord = len(self.orders)
+        z = np.empty((2 * n_ord + 2, y.size))
         for j, order in enumerate(self.orders):
-            s_k, c_k = z[2 * j], z[2 * j + 1]
-            if order - 1 in done and 1 in done:
-                (s_a, c_a), (s_1, c_1) = done[order - 1], done[1]
-                np.add(s_a * c_1, c_a * s_1, out=s_k)
-                np.subtract(c_a * c_1, s_a * s_1, out=c_k)
-            elif order % 2 == 0 and order // 2 in done:
-                s_h, c_h = done[order // 2]
-                np.multiply(2.0 * s_h, c_h, out=s_k)
-                np.multiply(c_h - s_h, c_h + s_h, out=c_k)
-            else:
-                phase = order * phi if order != 1 else phi
-                np.sin(phase, out=s_k)
-                np.cos(phase, out=c_k)
-            done[order] = (s_k, c_k)
+            z[2 * j], z[2 * j + 1] = harmonics[order]
         z[-2] = speed
         z[-1] = y
         return z
 
-    def _friction(self, torque, t, theta, speed, win, starts, ends, half):
+    def _friction(self, torque, t, harmonics, speed, win, starts, ends, half):
         """
         Take the friction the effort carries out of the torque, per window.
 
@@ -1284,10 +1288,7 @@ class WindowAnalyzer:
         # Coulomb shape, speed].
         x = np.empty((_FRICTION_TERMS, n))
         x[0] = 1.0
-        cos, sin = np.cos(theta, out=x[1]), np.sin(theta, out=x[2])
-        # Twice the angle by the double-angle formulas, not two more trigonometric passes.
-        np.multiply(cos - sin, cos + sin, out=x[3])
-        np.multiply(2.0 * sin, cos, out=x[4])
+        (x[2], x[1]), (x[4], x[3]) = harmonics[1], harmonics[2]
         x[5] = accel
         coulomb_shape = np.tanh(np.divide(speed, _FRICTION_SPEED, out=x[6]), out=x[6])
         x[7] = speed
@@ -2020,6 +2021,23 @@ def _whole(name, value, lo, hi):
     if not whole or not lo <= value <= hi:
         raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
     return int(value)
+
+
+def _harmonic(order, done):
+    """
+    Return ``(sin, cos)`` of ``order`` times the angle, kept in ``done`` with what it needs.
+
+    From order ``k - 1`` and order 1 (angle addition) when ``k - 1`` is known or ``k`` is
+    odd, else from order ``k/2`` (double angle); ``done`` holds order 1.
+    """
+    if order not in done:
+        if order - 1 in done or order % 2:
+            (s_a, c_a), (s_1, c_1) = _harmonic(order - 1, done), done[1]
+            done[order] = (s_a * c_1 + c_a * s_1, c_a * c_1 - s_a * s_1)
+        else:
+            s_h, c_h = _harmonic(order // 2, done)
+            done[order] = (2.0 * s_h * c_h, (c_h - s_h) * (c_h + s_h))
+    return done[order]
 
 
 def _window_mean(values, half, win, starts, ends):
