@@ -17,10 +17,16 @@ export PIP_DISABLE_PIP_VERSION_CHECK := 1
 
 .PHONY: demo test bench venv clean
 
+# The package's bytecode, written once (an editable install leaves it to the first import, and
+# where PYTHONDONTWRITEBYTECODE is set every process compiles every module again: 0.1 s each).
+COMPILE = $(PY) -m compileall -q reducer_twin msg_adapters >/dev/null
+
 demo: $(STAMP)
+	@$(COMPILE)
 	$(VENV)/bin/reducer-twin demo
 
 test: $(STAMP)
+	@$(COMPILE)
 	$(PY) -m pytest $(PYTEST_ARGS)
 
 # Benchmarks print figures; they are scripts, not timed assertions.
@@ -38,6 +44,7 @@ $(STAMP): setup.py setup.cfg requirements-ros.txt
 	$(PY) -m pip install --upgrade pip
 	$(PY) -m pip install -r requirements-ros.txt
 	$(PY) -m pip install -e '.[test,fleet]'
+	$(COMPILE)
 	@# Debian's headless Chromium renders the reports in the tests (test/fleet/test_report.py).
 	@command -v chromium >/dev/null 2>&1 || { [ "$$(id -u)" = 0 ] && \
 	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium) \
