@@ -830,29 +830,59 @@ def _qos(durability):
                 liveliness_lease_duration=infinite, avoid_ros_namespace_conventions=False)]
 
 
-def _messages(stream):
-    """Yield ``(topic, log_ns, k, kind)`` in receive order."""
+def _columns(stream):
+    """Return ``(link (position, velocity, effort), motor ..., link names, motor names)``."""
     spec = stream.spec
-    n = len(stream.t)
-    logs = [stream.link_log_ns]
-    kinds = [0]
+    names = [j.name for j in stream.joints]
+    motor_pos = stream.motor * (1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO)
+    motor_eff = stream.effort / RATIO
+    velocity = stream.velocity if spec.velocity else None
     if spec.layout == 'split':
-        logs.append(stream.motor_log_ns)
-        kinds.append(1)
-    if spec.truth_topics:
+        link = (stream.link, velocity, stream.effort if spec.effort_on == 'link' else None)
+        motor = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
+        return link, motor, names, names
+    nan = np.full(stream.link.shape, np.nan)
+    link = (np.hstack([stream.link, motor_pos]),
+            None if velocity is None else np.hstack([velocity, nan]),
+            np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
+            else np.hstack([nan, motor_eff]))
+    return link, None, names + [name + spec.motor_suffix for name in names], None
+
+
+def _events(stream, kept=None):
+    """
+    Return ``(log_ns, topic, sample)`` in receive order (topic 0 link, 1 motor, 2 truth).
+
+    Parameters
+    ----------
+    stream : Stream
+        Generated samples (``t``, ``link_log_ns``, ``motor_log_ns``, ``spec``).
+    kept : tuple of ndarray of bool, optional
+        ``(link, motor)``: the messages that arrived (default: every one).
+
+    """
+    n = len(stream.t)
+    kept = kept or (np.ones(n, dtype=bool),) * 2
+    index = [np.flatnonzero(kept[0])]
+    logs = [stream.link_log_ns[index[0]]]
+    if stream.spec.layout == 'split':
+        index.append(np.flatnonzero(kept[1]))
+        logs.append(stream.motor_log_ns[index[1]])
+    kinds = list(range(len(index)))
+    if stream.spec.truth_topics:
         picks = np.unique(np.concatenate([
             np.searchsorted(stream.t, np.arange(0.0, stream.t[-1], 1.0)), [n - 1]]))
+        index.append(picks)
         logs.append(stream.link_log_ns[picks] + 1000)
         kinds.append(2)
     log = np.concatenate(logs)
-    kind = np.concatenate([np.full(len(x), c) for x, c in zip(logs, kinds)])
-    index = np.concatenate([np.arange(n)] * (2 if spec.layout == 'split' else 1)
-                           + ([picks] if spec.truth_topics else []))
+    kind = np.concatenate([np.full(len(x), c) for x, c in zip(index, kinds)])
+    sample = np.concatenate(index)
     order = np.lexsort((kind, log))
-    return log[order], kind[order], index[order]
+    return log[order], kind[order], sample[order]
 
 
-def write_bag(stream, out, overwrite=False):
+def write_bag(stream, out, overwrite=False, kept=None, generator='independent_generator'):
     """
     Write the stream as a rosbag2 (version 9, MCAP) bag directory with rosbags.
 
@@ -861,11 +891,17 @@ def write_bag(stream, out, overwrite=False):
     Parameters
     ----------
     stream : Stream
-        Generated samples.
+        Generated samples (this generator's or one with the same fields, such
+        as ``third_generator.Stream``).
     out : str or Path
         Bag directory to create.
     overwrite : bool
         Replace an existing ``out``.
+    kept : tuple of ndarray of bool, optional
+        ``(link, motor)``: the messages that arrived; the others are not
+        written (default: every one; the combined layout uses ``link`` only).
+    generator : str
+        Name of the generator: the seed goes to ``custom_data`` as ``<generator>.seed``.
 
     Returns
     -------
@@ -885,92 +921,62 @@ def write_bag(stream, out, overwrite=False):
     if out.exists() and not overwrite:
         raise GeneratorError(f'--out {out} exists already; choose another path')
     ts = get_typestore(Stores.ROS2_JAZZY)
-    js_type = 'sensor_msgs/msg/JointState'
-    ma_type = 'std_msgs/msg/Float64MultiArray'
-    joint_state = ts.types[js_type]
-    header, stamp = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
-    multi = ts.types[ma_type]
-    layout = ts.types['std_msgs/msg/MultiArrayLayout']
-    dim = ts.types['std_msgs/msg/MultiArrayDimension']
+    js_type, ma_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray'
+    types = ts.types
     spec = stream.spec
-    names = [j.name for j in stream.joints]
-    n_j = len(names)
+    link_cols, motor_cols, link_names, motor_names = _columns(stream)
     empty = np.empty(0, dtype=np.float64)
-    scale = 1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO
-    motor_pos = stream.motor * scale
-    motor_eff = stream.effort / RATIO
-    nan = np.full((len(stream.t), n_j), np.nan)
-    if spec.layout == 'split':
-        link_cols = (stream.link, stream.velocity if spec.velocity else None,
-                     stream.effort if spec.effort_on == 'link' else None)
-        motor_cols = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
-        link_names, motor_names = names, names
-    else:
-        both = names + [name + spec.motor_suffix for name in names]
-        link_cols = (np.hstack([stream.link, motor_pos]),
-                     np.hstack([stream.velocity, nan]) if spec.velocity else None,
-                     np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
-                     else np.hstack([nan, motor_eff]))
-        motor_cols, link_names, motor_names = None, both, None
-    link_cols = tuple(np.ascontiguousarray(c) if c is not None else None for c in link_cols)
-    if motor_cols is not None:
-        motor_cols = tuple(np.ascontiguousarray(c) if c is not None else None
-                           for c in motor_cols)
-    label = ','.join(TRUTH_FIELDS)
-    truth_layout = layout(dim=[dim(label=label, size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))],
-                          data_offset=0)
-    parent = out.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=parent))
-    counts = {}
+    dim = types['std_msgs/msg/MultiArrayDimension'](
+        label=','.join(TRUTH_FIELDS), size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))
+    truth_layout = types['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0)
+
+    def joint_state(cols, msg_names, stamp_ns, k):
+        st = int(stamp_ns[k])
+        header = types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=st // 10 ** 9, nanosec=st % 10 ** 9),
+            frame_id='')
+        return ts.serialize_cdr(types[js_type](
+            header=header, name=msg_names, position=np.ascontiguousarray(cols[0][k]),
+            velocity=empty if cols[1] is None else np.ascontiguousarray(cols[1][k]),
+            effort=empty if cols[2] is None else np.ascontiguousarray(cols[2][k])), js_type)
+
+    def truth(i, k, remaining, hours):
+        values = np.array([stream.link_stamp_ns[k] * 1e-9, stream.lost_motion[k, i],
+                           stream.exposure[k, i], hours[i], remaining[i],
+                           stream.joints[i].lost_motion_new_rad,
+                           stream.joints[i].stiffness_nm_per_rad])
+        return ts.serialize_cdr(types[ma_type](layout=truth_layout, data=values), ma_type)
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=out.parent))
     try:
         writer = Writer(tmp / out.name, version=9, storage_plugin=StoragePlugin.MCAP)
         writer.set_custom_data(AGING_KEY, repr(float(spec.aging_factor)))
-        writer.set_custom_data('independent_generator.seed', str(spec.seed))
+        writer.set_custom_data(f'{generator}.seed', str(spec.seed))
         writer.open()
-        link_conn = writer.add_connection(spec.link_topic, js_type, typestore=ts,
-                                          offered_qos_profiles=_qos('VOLATILE'))
-        motor_conn = writer.add_connection(spec.motor_topic, js_type, typestore=ts,
-                                           offered_qos_profiles=_qos('VOLATILE')) \
-            if spec.layout == 'split' else None
-        truth_conns = [writer.add_connection(f'/truth/{name}', ma_type, typestore=ts,
-                                             offered_qos_profiles=_qos('TRANSIENT_LOCAL'))
-                       for name in names] if spec.truth_topics else []
-        log, kind, index = _messages(stream)
-        serialize = ts.serialize_cdr
-        rul = None
-        for log_ns, c, k in zip(log.tolist(), kind.tolist(), index.tolist()):
+        volatile, latched = _qos('VOLATILE'), _qos('TRANSIENT_LOCAL')
+        conns = [writer.add_connection(spec.link_topic, js_type, typestore=ts,
+                                       offered_qos_profiles=volatile)]
+        if spec.layout == 'split':
+            conns.append(writer.add_connection(spec.motor_topic, js_type, typestore=ts,
+                                               offered_qos_profiles=volatile))
+        truth_conns = [writer.add_connection(f'/truth/{j.name}', ma_type, typestore=ts,
+                                             offered_qos_profiles=latched)
+                       for j in stream.joints] if spec.truth_topics else []
+        counts = {c.topic: 0 for c in conns + truth_conns}
+        log, kind, sample = _events(stream, kept)
+        for log_ns, c, k in zip(log.tolist(), kind.tolist(), sample.tolist()):
             if c == 2:
-                if rul is None or rul[0] != k:
-                    rul = (k, stream.remaining_life_h(k), stream.hours_at(k))
+                remaining, hours = stream.remaining_life_h(k), stream.hours_at(k)
                 for i, conn in enumerate(truth_conns):
-                    values = np.array([stream.link_stamp_ns[k] * 1e-9,
-                                       stream.lost_motion[k, i], stream.exposure[k, i],
-                                       rul[2][i], rul[1][i],
-                                       stream.joints[i].lost_motion_new_rad,
-                                       stream.joints[i].stiffness_nm_per_rad])
-                    writer.write(conn, log_ns, serialize(
-                        multi(layout=truth_layout, data=values), ma_type))
+                    writer.write(conn, log_ns, truth(i, k, remaining, hours))
+                    counts[conn.topic] += 1
                 continue
-            if c == 0:
-                conn, cols, msg_names, st = link_conn, link_cols, link_names, \
-                    stream.link_stamp_ns[k]
-            else:
-                conn, cols, msg_names, st = motor_conn, motor_cols, motor_names, \
-                    stream.motor_stamp_ns[k]
-            st = int(st)
-            msg = joint_state(
-                header=header(stamp=stamp(sec=st // 10 ** 9, nanosec=st % 10 ** 9),
-                              frame_id=''),
-                name=msg_names, position=cols[0][k],
-                velocity=empty if cols[1] is None else cols[1][k],
-                effort=empty if cols[2] is None else cols[2][k])
-            writer.write(conn, log_ns, serialize(msg, js_type))
+            cols, msg_names, stamp_ns = ((link_cols, link_names, stream.link_stamp_ns) if c == 0
+                                         else (motor_cols, motor_names, stream.motor_stamp_ns))
+            writer.write(conns[c], log_ns, joint_state(cols, msg_names, stamp_ns, k))
+            counts[conns[c].topic] += 1
         writer.close()
-        for conn in [link_conn, motor_conn] + truth_conns:
-            if conn is not None:
-                counts[conn.topic] = int(np.count_nonzero(
-                    kind == (0 if conn is link_conn else 1 if conn is motor_conn else 2)))
         if out.exists():
             shutil.rmtree(out)
         os.rename(tmp / out.name, out)
@@ -979,7 +985,7 @@ def write_bag(stream, out, overwrite=False):
     return counts
 
 
-def generate_bag(spec, out, overwrite=False):
+def generate_bag(spec, out, overwrite=False, generate=generate, write=write_bag):
     """
     Generate a recording and write it; return its truth.
 
@@ -991,6 +997,8 @@ def generate_bag(spec, out, overwrite=False):
         Bag directory to create.
     overwrite : bool
         Replace an existing ``out``.
+    generate, write : callable
+        The generator's :func:`generate` and :func:`write_bag` (default: this one's).
 
     Returns
     -------
@@ -999,7 +1007,7 @@ def generate_bag(spec, out, overwrite=False):
 
     """
     stream = generate(spec)
-    counts = write_bag(stream, out, overwrite=overwrite)
+    counts = write(stream, out, overwrite=overwrite)
     truth = stream.truth_json()
     truth.update(bag=str(out), messages=counts)
     return truth
@@ -1008,11 +1016,22 @@ def generate_bag(spec, out, overwrite=False):
 # --------------------------------------------------------------------------- CLI
 
 
-def _parser():
-    p = argparse.ArgumentParser(
-        prog='independent_generator.py',
-        description='Write a rosbag2 MCAP recording of RV-80E joints from a model independent '
-                    'of the twin, and print its truth.')
+def cli_parser(prog, description):
+    """
+    Return a parser with the options every generator takes (each adds its own).
+
+    Parameters
+    ----------
+    prog, description : str
+        The generator's script name and what it writes.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        ``--out``, ``--seed``, ``--kinds``, the time and layout options, ``--json``.
+
+    """
+    p = argparse.ArgumentParser(prog=prog, description=description)
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--seed', type=int, default=0, help='seed of every draw (default 0)')
     p.add_argument('--kinds', default='base,shoulder,forearm',
@@ -1026,9 +1045,6 @@ def _parser():
     start.add_argument('--start-fraction', type=float,
                        help="fraction of each joint's drawn life before the recording")
     p.add_argument('--rate-hz', type=float, help='controller rate (default: drawn, 100-1000 Hz)')
-    p.add_argument('--effort-noise', type=float,
-                   help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
-    p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     p.add_argument('--layout', choices=LAYOUTS, default='split',
                    help="'split': link and motor topics; 'combined': <joint>_motor entries")
     p.add_argument('--motor-angles', choices=('raw', 'output'), default='raw')
@@ -1040,6 +1056,61 @@ def _parser():
     p.add_argument('--motor-topic', default='/motor_states')
     p.add_argument('--overwrite', action='store_true', help='replace an existing --out')
     p.add_argument('--json', action='store_true', help='print the truth as JSON')
+    return p
+
+
+def cli_spec_options(args):
+    """Return the :class:`Spec` keywords of the options :func:`cli_parser` adds."""
+    return {'seed': args.seed, 'kinds': tuple(k.strip() for k in args.kinds.split(',')),
+            'hours': args.hours, 'aging_factor': args.aging_factor,
+            'start_hours': args.start_hours, 'start_fraction': args.start_fraction,
+            'rate_hz': args.rate_hz, 'layout': args.layout, 'motor_angles': args.motor_angles,
+            'effort_on': args.effort_on, 'velocity': not args.no_velocity,
+            'truth_topics': not args.no_truth_topics, 'link_topic': args.link_topic,
+            'motor_topic': args.motor_topic, 'stamp_jitter_us': args.stamp_jitter_us}
+
+
+def cli_run(args, spec, generate_bag=generate_bag):
+    """
+    Write the bag a command line asks for and print its truth; return the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options (``out``, ``overwrite``, ``json``).
+    spec : Spec
+        What to generate.
+    generate_bag : callable
+        The generator's :func:`generate_bag` (default: this one's).
+
+    Returns
+    -------
+    int
+        0, or 1 (``ERROR: <reason>`` on stderr) for invalid values.
+
+    """
+    try:
+        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
+    except GeneratorError as err:
+        print(f'ERROR: {err}', file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(truth, indent=1))
+    else:
+        for name, j in truth['joints'].items():
+            law = f" ({j['law']})" if 'law' in j else ''
+            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
+                  f"remaining life {j['remaining_life_end_h']:.0f} h{law}")
+    return 0
+
+
+def _parser():
+    p = cli_parser('independent_generator.py',
+                   'Write a rosbag2 MCAP recording of RV-80E joints from a model independent '
+                   'of the twin, and print its truth.')
+    p.add_argument('--effort-noise', type=float,
+                   help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
+    p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
 
@@ -1059,26 +1130,8 @@ def main(argv=None):
 
     """
     args = _parser().parse_args(argv)
-    spec = Spec(seed=args.seed, kinds=tuple(k.strip() for k in args.kinds.split(',')),
-                hours=args.hours, aging_factor=args.aging_factor,
-                start_hours=args.start_hours, start_fraction=args.start_fraction,
-                rate_hz=args.rate_hz, effort_noise_pct=args.effort_noise, law=args.law,
-                layout=args.layout, motor_angles=args.motor_angles, effort_on=args.effort_on,
-                velocity=not args.no_velocity, truth_topics=not args.no_truth_topics,
-                link_topic=args.link_topic, motor_topic=args.motor_topic,
-                stamp_jitter_us=args.stamp_jitter_us)
-    try:
-        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
-    except GeneratorError as err:
-        print(f'ERROR: {err}', file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(truth, indent=1))
-    else:
-        for name, j in truth['joints'].items():
-            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
-                  f"remaining life {j['remaining_life_end_h']:.0f} h ({j['law']})")
-    return 0
+    spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise, law=args.law)
+    return cli_run(args, spec)
 
 
 if __name__ == '__main__':

@@ -4,8 +4,8 @@ Third joint generator: RV-80E recordings from catalogue-style physics and a real
 
 A third source of truth, unlike both the twin's model and
 ``bench/independent_generator.py`` (it imports nothing from ``reducer_twin``;
-it borrows the second generator's constants, quality-of-service profiles and
-log-time helper). Every range below was fixed before the twin was run on it.
+it borrows the second generator's constants, log-time helper, bag writer and
+command line). Every range below was fixed before the twin was run on it.
 
 * **Torsional curve, catalogue style.** The twist under output torque ``T``
   is a soft zone plus a straight line: ``(W/2)*min(|T|/T1, 1)*sign(T) + T/k2``
@@ -70,15 +70,10 @@ Usage::
         [--layout split|combined] [--json]
 """
 
-import argparse
 from dataclasses import dataclass, replace
-import json
 import math
-import os
 from pathlib import Path
-import shutil
 import sys
-import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_generator as indep  # noqa: E402
@@ -816,241 +811,27 @@ def generate(spec):
 # --------------------------------------------------------------------------- the bag
 
 
-def _columns(stream):
-    """Return ``(link (position, velocity, effort), motor ..., link names, motor names)``."""
-    spec = stream.spec
-    names = [j.name for j in stream.joints]
-    motor_pos = stream.motor * (1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO)
-    motor_eff = stream.effort / RATIO
-    velocity = stream.velocity if spec.velocity else None
-    if spec.layout == 'split':
-        link = (stream.link, velocity, stream.effort if spec.effort_on == 'link' else None)
-        motor = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
-        return link, motor, names, names
-    nan = np.full(stream.link.shape, np.nan)
-    link = (np.hstack([stream.link, motor_pos]),
-            None if velocity is None else np.hstack([velocity, nan]),
-            np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
-            else np.hstack([nan, motor_eff]))
-    return link, None, names + [name + spec.motor_suffix for name in names], None
-
-
-def _events(stream):
-    """Return ``(log_ns, topic, sample)`` in receive order (topic 0 link, 1 motor, 2 truth)."""
-    n = len(stream.t)
-    index = [np.flatnonzero(stream.link_kept)]
-    logs = [stream.link_log_ns[index[0]]]
-    if stream.spec.layout == 'split':
-        index.append(np.flatnonzero(stream.motor_kept))
-        logs.append(stream.motor_log_ns[index[1]])
-    kinds = list(range(len(index)))
-    if stream.spec.truth_topics:
-        picks = np.unique(np.concatenate([
-            np.searchsorted(stream.t, np.arange(0.0, stream.t[-1], 1.0)), [n - 1]]))
-        index.append(picks)
-        logs.append(stream.link_log_ns[picks] + 1000)
-        kinds.append(2)
-    log = np.concatenate(logs)
-    kind = np.concatenate([np.full(len(x), c) for x, c in zip(index, kinds)])
-    sample = np.concatenate(index)
-    order = np.lexsort((kind, log))
-    return log[order], kind[order], sample[order]
-
-
 def write_bag(stream, out, overwrite=False):
-    """
-    Write the stream as a rosbag2 (version 9, MCAP) bag directory with rosbags.
-
-    Dropped messages are not written. The bag is written beside ``out`` under a
-    temporary name and renamed into place.
-
-    Parameters
-    ----------
-    stream : Stream
-        Generated samples.
-    out : str or Path
-        Bag directory to create.
-    overwrite : bool
-        Replace an existing ``out``.
-
-    Returns
-    -------
-    dict
-        Messages written per topic.
-
-    Raises
-    ------
-    GeneratorError
-        If ``out`` exists and ``overwrite`` is false.
-
-    """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import get_typestore, Stores
-
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise GeneratorError(f'--out {out} exists already; choose another path')
-    ts = get_typestore(Stores.ROS2_JAZZY)
-    js_type, ma_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray'
-    types = ts.types
-    spec = stream.spec
-    link_cols, motor_cols, link_names, motor_names = _columns(stream)
-    empty = np.empty(0, dtype=np.float64)
-    dim = types['std_msgs/msg/MultiArrayDimension'](
-        label=','.join(TRUTH_FIELDS), size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))
-    truth_layout = types['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0)
-
-    def joint_state(cols, msg_names, stamp_ns, k):
-        st = int(stamp_ns[k])
-        header = types['std_msgs/msg/Header'](
-            stamp=types['builtin_interfaces/msg/Time'](sec=st // 10 ** 9, nanosec=st % 10 ** 9),
-            frame_id='')
-        return ts.serialize_cdr(types[js_type](
-            header=header, name=msg_names, position=np.ascontiguousarray(cols[0][k]),
-            velocity=empty if cols[1] is None else np.ascontiguousarray(cols[1][k]),
-            effort=empty if cols[2] is None else np.ascontiguousarray(cols[2][k])), js_type)
-
-    def truth(i, k, remaining, hours):
-        values = np.array([stream.link_stamp_ns[k] * 1e-9, stream.lost_motion[k, i],
-                           stream.exposure[k, i], hours[i], remaining[i],
-                           stream.joints[i].lost_motion_new_rad,
-                           stream.joints[i].stiffness_nm_per_rad])
-        return ts.serialize_cdr(types[ma_type](layout=truth_layout, data=values), ma_type)
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=out.parent))
-    try:
-        writer = Writer(tmp / out.name, version=9, storage_plugin=StoragePlugin.MCAP)
-        writer.set_custom_data(AGING_KEY, repr(float(spec.aging_factor)))
-        writer.set_custom_data('third_generator.seed', str(spec.seed))
-        writer.open()
-        volatile, latched = indep._qos('VOLATILE'), indep._qos('TRANSIENT_LOCAL')
-        conns = [writer.add_connection(spec.link_topic, js_type, typestore=ts,
-                                       offered_qos_profiles=volatile)]
-        if spec.layout == 'split':
-            conns.append(writer.add_connection(spec.motor_topic, js_type, typestore=ts,
-                                               offered_qos_profiles=volatile))
-        truth_conns = [writer.add_connection(f'/truth/{j.name}', ma_type, typestore=ts,
-                                             offered_qos_profiles=latched)
-                       for j in stream.joints] if spec.truth_topics else []
-        counts = {c.topic: 0 for c in conns + truth_conns}
-        log, kind, sample = _events(stream)
-        for log_ns, c, k in zip(log.tolist(), kind.tolist(), sample.tolist()):
-            if c == 2:
-                remaining, hours = stream.remaining_life_h(k), stream.hours_at(k)
-                for i, conn in enumerate(truth_conns):
-                    writer.write(conn, log_ns, truth(i, k, remaining, hours))
-                    counts[conn.topic] += 1
-                continue
-            cols, msg_names, stamp_ns = ((link_cols, link_names, stream.link_stamp_ns) if c == 0
-                                         else (motor_cols, motor_names, stream.motor_stamp_ns))
-            writer.write(conns[c], log_ns, joint_state(cols, msg_names, stamp_ns, k))
-            counts[conns[c].topic] += 1
-        writer.close()
-        if out.exists():
-            shutil.rmtree(out)
-        os.rename(tmp / out.name, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return counts
+    """Write the stream without its dropped messages (:func:`independent_generator.write_bag`)."""
+    return indep.write_bag(stream, out, overwrite, kept=(stream.link_kept, stream.motor_kept),
+                           generator='third_generator')
 
 
 def generate_bag(spec, out, overwrite=False):
-    """
-    Generate a recording and write it; return its truth.
-
-    Parameters
-    ----------
-    spec : Spec
-        What to generate.
-    out : str or Path
-        Bag directory to create.
-    overwrite : bool
-        Replace an existing ``out``.
-
-    Returns
-    -------
-    dict
-        :meth:`Stream.truth_json` plus ``bag`` and ``messages`` (per topic).
-
-    """
-    stream = generate(spec)
-    counts = write_bag(stream, out, overwrite=overwrite)
-    truth = stream.truth_json()
-    truth.update(bag=str(out), messages=counts)
-    return truth
+    """Generate a recording and write it; return its truth (``indep.generate_bag``)."""
+    return indep.generate_bag(spec, out, overwrite, generate=generate, write=write_bag)
 
 
 # --------------------------------------------------------------------------- CLI
 
 
-def _parser():
-    p = argparse.ArgumentParser(
-        prog='third_generator.py',
-        description='Write a rosbag2 MCAP recording of RV-80E joints from catalogue-style '
-                    'physics unlike the twin and the independent generator; print its truth.')
-    p.add_argument('--out', required=True, help='bag directory to create')
-    p.add_argument('--seed', type=int, default=0, help='seed of every draw (default 0)')
-    p.add_argument('--kinds', default='base,shoulder,forearm',
-                   help=f'joint kinds, comma-separated, of {", ".join(KINDS)}')
-    p.add_argument('--hours', type=float, default=0.05,
-                   help='operating hours the recording spans (default 0.05)')
-    p.add_argument('--aging-factor', type=float, default=1.0,
-                   help='operating seconds per stream second (default 1)')
-    start = p.add_mutually_exclusive_group()
-    start.add_argument('--start-hours', type=float, help='operating hours before the recording')
-    start.add_argument('--start-fraction', type=float,
-                       help="fraction of each joint's drawn life before the recording")
-    p.add_argument('--rate-hz', type=float, help='controller rate (default: drawn, 100-1000 Hz)')
-    p.add_argument('--layout', choices=LAYOUTS, default='split',
-                   help="'split': link and motor topics; 'combined': <joint>_motor entries")
-    p.add_argument('--motor-angles', choices=('raw', 'output'), default='raw')
-    p.add_argument('--effort-on', choices=('link', 'motor'), default='link')
-    p.add_argument('--no-velocity', action='store_true', help='leave the velocity field empty')
-    p.add_argument('--no-truth-topics', action='store_true', help='no /truth/<joint> topics')
-    p.add_argument('--stamp-jitter-us', type=float, help='stamp jitter std (default drawn)')
-    p.add_argument('--link-topic', default='/joint_states')
-    p.add_argument('--motor-topic', default='/motor_states')
-    p.add_argument('--overwrite', action='store_true', help='replace an existing --out')
-    p.add_argument('--json', action='store_true', help='print the truth as JSON')
-    return p
-
-
 def main(argv=None):
-    """
-    Run the command line; return the exit status (0, 1 for invalid values).
-
-    Parameters
-    ----------
-    argv : list of str, optional
-        Arguments (default: ``sys.argv[1:]``).
-
-    Returns
-    -------
-    int
-        Exit status.
-
-    """
-    args = _parser().parse_args(argv)
-    spec = Spec(seed=args.seed, kinds=tuple(k.strip() for k in args.kinds.split(',')),
-                hours=args.hours, aging_factor=args.aging_factor,
-                start_hours=args.start_hours, start_fraction=args.start_fraction,
-                rate_hz=args.rate_hz, layout=args.layout, motor_angles=args.motor_angles,
-                effort_on=args.effort_on, velocity=not args.no_velocity,
-                truth_topics=not args.no_truth_topics, link_topic=args.link_topic,
-                motor_topic=args.motor_topic, stamp_jitter_us=args.stamp_jitter_us)
-    try:
-        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
-    except GeneratorError as err:
-        print(f'ERROR: {err}', file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(truth, indent=1))
-    else:
-        for name, j in truth['joints'].items():
-            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
-                  f"remaining life {j['remaining_life_end_h']:.0f} h")
-    return 0
+    """Run the command line: ``independent_generator``'s without ``--law``, ``--effort-noise``."""
+    args = indep.cli_parser(
+        'third_generator.py',
+        'Write a rosbag2 MCAP recording of RV-80E joints from catalogue-style physics unlike '
+        'the twin and the independent generator; print its truth.').parse_args(argv)
+    return indep.cli_run(args, Spec(**indep.cli_spec_options(args)), generate_bag)
 
 
 if __name__ == '__main__':
