@@ -618,9 +618,9 @@ class Spec:
 
 
 @dataclass
-class Stream:
+class Recording:
     """
-    The generated samples and their truth (before serialisation).
+    The samples and truth both generators compute (before serialisation).
 
     Attributes
     ----------
@@ -628,8 +628,6 @@ class Stream:
         The request.
     joints : list of JointTruth
         The drawn joints.
-    cycle : Cycle
-        The duty cycle.
     rate_hz : float
         Controller rate.
     jitter_s : float
@@ -639,12 +637,12 @@ class Stream:
     link_stamp_ns, motor_stamp_ns, link_log_ns, motor_log_ns : ndarray
         Header stamps and log (receive) times of the two streams.
     q, qd, torque, effort, link, motor, velocity, lost_motion, exposure : ndarray
-        Per sample and joint (samples, joints): the commanded output angle,
-        speed, transmitted torque, measured effort [N*m at the output], measured
-        link angle, measured motor angle (raw), measured link velocity, true
-        lost motion [rad] and exposure.
+        Per sample and joint (samples, joints): the output angle, its speed, the
+        transmitted torque, the measured effort [N*m at the output], the measured
+        link angle, the measured motor angle (raw), the measured link velocity,
+        the true lost motion [rad] and the exposure.
     exposure_rate : ndarray
-        Cycle-mean exposure rate per joint [1/s of operation].
+        The duty's mean exposure rate per joint [1/s of operation].
     exposure_life : ndarray
         Exposure at the end of life per joint.
     start_hours : ndarray
@@ -654,7 +652,6 @@ class Stream:
 
     spec: Spec
     joints: list
-    cycle: Cycle
     rate_hz: float
     jitter_s: float
     t: np.ndarray
@@ -680,8 +677,23 @@ class Stream:
         return self.start_hours + self.t[k] * self.spec.aging_factor / HOUR
 
     def remaining_life_h(self, k):
-        """Return each joint's operating hours from sample ``k`` to the limit, same duty [h]."""
+        """Return each joint's hours from sample ``k`` to the limit at the mean exposure rate."""
         return (self.exposure_life - self.exposure[k]) / (self.exposure_rate * HOUR)
+
+
+@dataclass
+class Stream(Recording):
+    """
+    This generator's samples and truth: a :class:`Recording` on a periodic cycle.
+
+    Attributes
+    ----------
+    cycle : Cycle
+        The duty cycle (its mean exposure rate is ``exposure_rate``).
+
+    """
+
+    cycle: Cycle
 
     def truth_json(self):
         """
@@ -728,7 +740,8 @@ class Stream:
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
-def _quantise(angle, bits):
+def quantise(angle, bits):
+    """Return ``angle`` [rad] rounded to the counts of a ``bits``-bit-per-turn encoder."""
     step = 2.0 * math.pi / 2 ** bits
     return np.round(angle / step) * step
 
@@ -737,6 +750,72 @@ def _log_times(rng, stamp_ns, base_s, mean_s):
     delay = base_s + rng.exponential(mean_s, stamp_ns.size)
     log = stamp_ns + np.round(delay * 1e9).astype(np.int64)
     return np.maximum.accumulate(log)
+
+
+def clock(spec, drawn_rate, drawn_jitter, delays, noise):
+    """
+    Return the sampling instants, header stamps and log times of the link and motor streams.
+
+    Parameters
+    ----------
+    spec : Spec
+        The request (its ``rate_hz``, ``stamp_jitter_us`` override the draws).
+    drawn_rate, drawn_jitter : float
+        Drawn controller rate [Hz] and stamp jitter [s].
+    delays : tuple of ndarray
+        ``(base, mean)`` delivery delays of the link and of the motor stream [s].
+    noise : numpy.random.Generator
+        The recording's noise stream (draws the jitter, then the delays).
+
+    Returns
+    -------
+    dict
+        The :class:`Recording` fields ``rate_hz``, ``jitter_s``, ``t``,
+        ``link_stamp_ns``, ``motor_stamp_ns``, ``link_log_ns``, ``motor_log_ns``.
+
+    """
+    rate = spec.rate_hz or drawn_rate
+    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
+    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
+    t = np.arange(n) / rate
+
+    def stamps():
+        clip = min(3.0 * jitter, 0.3 / rate)
+        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
+        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
+
+    link_stamp, motor_stamp = stamps(), stamps()
+    link_log = _log_times(noise, link_stamp, delays[0][0], delays[1][0])
+    motor_log = _log_times(noise, motor_stamp, delays[0][1], delays[1][1])
+    return {'rate_hz': rate, 'jitter_s': jitter, 't': t, 'link_stamp_ns': link_stamp,
+            'motor_stamp_ns': motor_stamp, 'link_log_ns': link_log, 'motor_log_ns': motor_log}
+
+
+def life_and_start(spec, joints, exposure_rate):
+    """
+    Return each joint's exposure at the limit and its operating hours at the first sample.
+
+    Parameters
+    ----------
+    spec : Spec
+        The request (``start_fraction`` of the drawn life or ``start_hours``).
+    joints : list
+        Drawn joints (``life_h``).
+    exposure_rate : ndarray
+        The duty's mean exposure rate per joint [1/s of operation].
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(exposure_life, start_hours)``.
+
+    """
+    e_life = exposure_rate * np.array([j.life_h for j in joints]) * HOUR
+    if spec.start_fraction is not None:
+        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
+    else:
+        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    return e_life, start_h
 
 
 def generate(spec):
@@ -766,30 +845,14 @@ def generate(spec):
     drawn_rate = float(rng.choice(RATES_HZ))
     drawn_jitter = rng.uniform(10e-6, 50e-6)
     delays = rng.uniform(50e-6, 300e-6, 2), rng.uniform(100e-6, 1e-3, 2)
-    rate = spec.rate_hz or drawn_rate
-    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
-    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
-    t = np.arange(n) / rate
     noise = _rng(spec.seed, 4)
-
-    def stamps():
-        clip = min(3.0 * jitter, 0.3 / rate)
-        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
-        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
-
-    link_stamp, motor_stamp = stamps(), stamps()
-    link_log = _log_times(noise, link_stamp, delays[0][0], delays[1][0])
-    motor_log = _log_times(noise, motor_stamp, delays[0][1], delays[1][1])
-    shape = (n, len(joints))
-    arrays = {name: np.empty(shape) for name in (
-        'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion',
-        'exposure')}
+    times = clock(spec, drawn_rate, drawn_jitter, delays, noise)
+    rate, t = times['rate_hz'], times['t']
+    n = len(t)
+    arrays = {name: np.empty((n, len(joints))) for name in (
+        'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion', 'exposure')}
     e_rate = np.array([cycle_exposure_rate(j, cycle) for j in joints])
-    e_life = e_rate * np.array([j.life_h for j in joints]) * HOUR
-    if spec.start_fraction is not None:
-        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
-    else:
-        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    e_life, start_h = life_and_start(spec, joints, e_rate)
     for i, j in enumerate(joints):
         q, qd, qdd = cycle.motion(j.waypoints_rad, t)
         torque = true_torque(j, q, qd, qdd)
@@ -800,8 +863,8 @@ def generate(spec):
         te = (-0.5 * lm * play_side(j, torque) - torque / j.stiffness_nm_per_rad
               + j.order1_rad * np.sin(q + j.order1_phase)
               + j.order2_rad * np.sin(2.0 * q + j.order2_phase))
-        link = _quantise(q + te + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
-                         j.link_bits)
+        link = quantise(q + te + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
+                        j.link_bits)
         motor_step = 2.0 * math.pi / 2 ** j.motor_bits
         motor = np.round((RATIO * q + j.motor_offset_rad) / motor_step
                          + noise.normal(0.0, j.motor_noise_rad / motor_step, n)) * motor_step
@@ -811,10 +874,8 @@ def generate(spec):
                             ('link', link), ('motor', motor), ('velocity', velocity),
                             ('lost_motion', lm), ('exposure', exposure)):
             arrays[name][:, i] = value
-    return Stream(spec=spec, joints=joints, cycle=cycle, rate_hz=rate, jitter_s=jitter, t=t,
-                  link_stamp_ns=link_stamp, motor_stamp_ns=motor_stamp, link_log_ns=link_log,
-                  motor_log_ns=motor_log, exposure_rate=e_rate, exposure_life=e_life,
-                  start_hours=start_h, **arrays)
+    return Stream(spec=spec, joints=joints, cycle=cycle, exposure_rate=e_rate,
+                  exposure_life=e_life, start_hours=start_h, **times, **arrays)
 
 
 # --------------------------------------------------------------------------- the bag

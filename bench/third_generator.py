@@ -4,8 +4,9 @@ Third joint generator: RV-80E recordings from catalogue-style physics and a real
 
 A third source of truth, unlike both the twin's model and
 ``bench/independent_generator.py`` (it imports nothing from ``reducer_twin``;
-it borrows the second generator's constants, log-time helper, bag writer and
-command line). Every range below was fixed before the twin was run on it.
+it borrows the second generator's constants, recording fields, sample clock,
+quantiser, bag writer and command line). Every range below was fixed before
+the twin was run on it.
 
 * **Torsional curve, catalogue style.** The twist under output torque ``T``
   is a soft zone plus a straight line: ``(W/2)*min(|T|/T1, 1)*sign(T) + T/k2``
@@ -587,70 +588,26 @@ class Spec(indep.Spec):
 
 
 @dataclass
-class Stream:
+class Stream(indep.Recording):
     """
-    The generated samples and their truth (before serialisation).
+    This generator's samples and truth: an ``independent_generator.Recording`` with drops.
+
+    Per controller cycle, ``q`` is the output angle the motor implies, ``effort``
+    what the drive reports and ``velocity`` the controller's difference of the
+    motor reading.
 
     Attributes
     ----------
-    spec : Spec
-        The request.
-    joints : list of JointTruth
-        The drawn joints.
     duty : Duty
         The moves.
-    rate_hz, jitter_s : float
-        Controller rate and stamp jitter.
-    t : ndarray
-        Controller cycle instants from the first sample [s].
-    link_stamp_ns, motor_stamp_ns, link_log_ns, motor_log_ns : ndarray
-        Header stamps and log times of every cycle's link and motor message.
     link_kept, motor_kept : ndarray of bool
         Messages that arrived (the others were dropped).
-    q, qd, torque, effort, link, motor, velocity, lost_motion, exposure : ndarray
-        Per cycle and joint: output angle implied by the motor, its speed, the
-        transmitted torque, the reported effort, the link and raw motor readings,
-        the velocity, the catalogue lost motion [rad] and the exposure.
-    exposure_rate, exposure_life : ndarray
-        Per joint: the duty's mean exposure rate [1/s of operation] and the
-        exposure at the limit.
-    start_hours : ndarray
-        Operating hours of each joint at the first sample.
 
     """
 
-    spec: Spec
-    joints: list
     duty: Duty
-    rate_hz: float
-    jitter_s: float
-    t: np.ndarray
-    link_stamp_ns: np.ndarray
-    motor_stamp_ns: np.ndarray
-    link_log_ns: np.ndarray
-    motor_log_ns: np.ndarray
     link_kept: np.ndarray
     motor_kept: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    torque: np.ndarray
-    effort: np.ndarray
-    link: np.ndarray
-    motor: np.ndarray
-    velocity: np.ndarray
-    lost_motion: np.ndarray
-    exposure: np.ndarray
-    exposure_rate: np.ndarray
-    exposure_life: np.ndarray
-    start_hours: np.ndarray
-
-    def hours_at(self, k):
-        """Return the operating hours of every joint at sample ``k``."""
-        return self.start_hours + self.t[k] * self.spec.aging_factor / HOUR
-
-    def remaining_life_h(self, k):
-        """Return each joint's hours from sample ``k`` to the limit at the mean exposure rate."""
-        return (self.exposure_life - self.exposure[k]) / (self.exposure_rate * HOUR)
 
     def end_of_life_h(self):
         """
@@ -721,31 +678,8 @@ class Stream:
                 'ratio': RATIO, 'joints': out}
 
 
-def _quantise(angle, bits):
-    step = 2.0 * math.pi / 2 ** bits
-    return np.round(angle / step) * step
-
-
 def generate(spec):
-    """
-    Draw the robot and compute every sample of the recording.
-
-    Parameters
-    ----------
-    spec : Spec
-        What to generate (validated here).
-
-    Returns
-    -------
-    Stream
-        Samples and truth.
-
-    Raises
-    ------
-    GeneratorError
-        If an option is out of range.
-
-    """
+    """Draw the robot and compute every sample (as ``independent_generator.generate``)."""
     spec.check()
     joints, e_rate = draw_robot(spec.seed, spec.kinds)
     rng = _rng(spec.seed, 3)
@@ -753,28 +687,14 @@ def generate(spec):
     drawn_jitter = rng.uniform(5e-6, 40e-6)
     drops = rng.uniform(0.0, 0.01, 2)
     delays = rng.uniform(50e-6, 300e-6, 2), rng.uniform(100e-6, 1e-3, 2)
-    rate = spec.rate_hz or drawn_rate
-    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
-    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
-    t = np.arange(n) / rate
     noise = _rng(spec.seed, 4)
-
-    def stamps():
-        clip = min(3.0 * jitter, 0.3 / rate)
-        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
-        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
-
-    link_stamp, motor_stamp = stamps(), stamps()
-    link_log = indep._log_times(noise, link_stamp, delays[0][0], delays[1][0])
-    motor_log = indep._log_times(noise, motor_stamp, delays[0][1], delays[1][1])
+    times = indep.clock(spec, drawn_rate, drawn_jitter, delays, noise)
+    rate, t = times['rate_hz'], times['t']
+    n = len(t)
     link_kept = noise.uniform(size=n) >= drops[0]
     motor_kept = (noise.uniform(size=n) >= drops[1]) if spec.layout == 'split' else link_kept
     duty = draw_duty(_rng(spec.seed, 2), joints, spec.duration_s)
-    e_life = e_rate * np.array([j.life_h for j in joints]) * HOUR
-    if spec.start_fraction is not None:
-        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
-    else:
-        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    e_life, start_h = indep.life_and_start(spec, joints, e_rate)
     arrays = {name: np.empty((n, len(joints))) for name in (
         'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion', 'exposure')}
     for i, j in enumerate(joints):
@@ -790,22 +710,21 @@ def generate(spec):
         torque_l = true_torque(j, q_l, qd_l, qdd_l, u_l)
         out = q_l - j.twist(torque_l, lm, dahl_state(j, torque_l)) \
             + j.mesh_error_rad * np.sin(PIN_COUNT * q_l + j.mesh_phase)
-        link = _quantise(out + j.eccentricity_rad * np.sin(out + j.eccentricity_phase)
-                         + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
-                         j.link_bits)
+        link = indep.quantise(out + j.eccentricity_rad * np.sin(out + j.eccentricity_phase)
+                              + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
+                              j.link_bits)
         shaft = RATIO * q + j.motor_offset_rad
-        motor = _quantise(shaft + j.motor_error_rad * np.sin(shaft + j.motor_error_phase),
-                          j.motor_bits)
+        motor = indep.quantise(shaft + j.motor_error_rad * np.sin(shaft + j.motor_error_phase),
+                               j.motor_bits)
         velocity = np.diff(motor, prepend=motor[:1]) * rate / RATIO
         effort = drive_torque(j, torque, qd, shaft) + noise.normal(0.0, j.effort_noise_nm, n)
         for name, value in (('q', q), ('qd', qd), ('torque', torque), ('effort', effort),
                             ('link', link), ('motor', motor), ('velocity', velocity),
                             ('lost_motion', lm), ('exposure', exposure)):
             arrays[name][:, i] = value
-    return Stream(spec=spec, joints=joints, duty=duty, rate_hz=rate, jitter_s=jitter, t=t,
-                  link_stamp_ns=link_stamp, motor_stamp_ns=motor_stamp, link_log_ns=link_log,
-                  motor_log_ns=motor_log, link_kept=link_kept, motor_kept=motor_kept,
-                  exposure_rate=e_rate, exposure_life=e_life, start_hours=start_h, **arrays)
+    return Stream(spec=spec, joints=joints, duty=duty, link_kept=link_kept,
+                  motor_kept=motor_kept, exposure_rate=e_rate, exposure_life=e_life,
+                  start_hours=start_h, **times, **arrays)
 
 
 # --------------------------------------------------------------------------- the bag
