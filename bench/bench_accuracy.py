@@ -318,14 +318,37 @@ def _window_ends(s, params, aging, link_kept=None, motor_kept=None):
     return rows, np.array(ends, dtype=int)
 
 
-def simulate_independent(truth, params):
-    """Run one independent-generator life through the TE extraction and window analysis."""
-    joints, _ = indep.draw_robot(truth.seed, (truth.kind,))
+def _generator_life(gen, truth, lives):
+    """
+    Generate one joint's life with a truth generator, ``truth.windows`` windows to its drawn life.
+
+    Parameters
+    ----------
+    gen : module
+        ``independent_generator`` or ``third_generator``.
+    truth : Truth
+        Seed, kind and windows.
+    lives : float
+        Length of the stream in drawn lives.
+
+    Returns
+    -------
+    tuple
+        ``(stream, life_h, aging)``: the stream (one joint, at :data:`RATE_HZ`, no truth
+        topics), the drawn life [h] and the aging factor.
+
+    """
+    joints, _ = gen.draw_robot(truth.seed, (truth.kind,))
     life_h = joints[0].life_h
     aging = life_h * HOUR / (truth.windows * WINDOW_S)
-    spec = indep.Spec(seed=truth.seed, kinds=(truth.kind,), hours=1.02 * life_h,
-                      aging_factor=aging, rate_hz=RATE_HZ, truth_topics=False)
-    s = indep.generate(spec)
+    spec = gen.Spec(seed=truth.seed, kinds=(truth.kind,), hours=lives * life_h,
+                    aging_factor=aging, rate_hz=RATE_HZ, truth_topics=False)
+    return gen.generate(spec), life_h, aging
+
+
+def simulate_independent(truth, params):
+    """Run one independent-generator life through the TE extraction and window analysis."""
+    s, life_h, aging = _generator_life(indep, truth, 1.02)
     rows, k = _window_ends(s, params, aging)
     exposure_op = s.exposure[:, 0] / s.exposure_rate[0]  # operating seconds since new
     nan = np.full(len(rows), np.nan)
@@ -341,12 +364,7 @@ def simulate_third(truth, params):
     crossing of the limit), not the drawn life at the duty's mean rate; the stream
     runs to 1.3 drawn lives so that the crossing is in it.
     """
-    joints, _ = third.draw_robot(truth.seed, (truth.kind,))
-    life_h = joints[0].life_h
-    aging = life_h * HOUR / (truth.windows * WINDOW_S)
-    spec = third.Spec(seed=truth.seed, kinds=(truth.kind,), hours=1.3 * life_h,
-                      aging_factor=aging, rate_hz=RATE_HZ, truth_topics=False)
-    s = third.generate(spec)
+    s, life_h, aging = _generator_life(third, truth, 1.3)
     rows, k = _window_ends(s, params, aging, s.link_kept, s.motor_kept)
     eol_h = float(s.end_of_life_h()[0])
     if not math.isfinite(eol_h):

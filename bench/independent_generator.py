@@ -618,9 +618,9 @@ class Spec:
 
 
 @dataclass
-class Stream:
+class Recording:
     """
-    The generated samples and their truth (before serialisation).
+    The samples and truth both generators compute (before serialisation).
 
     Attributes
     ----------
@@ -628,8 +628,6 @@ class Stream:
         The request.
     joints : list of JointTruth
         The drawn joints.
-    cycle : Cycle
-        The duty cycle.
     rate_hz : float
         Controller rate.
     jitter_s : float
@@ -639,12 +637,12 @@ class Stream:
     link_stamp_ns, motor_stamp_ns, link_log_ns, motor_log_ns : ndarray
         Header stamps and log (receive) times of the two streams.
     q, qd, torque, effort, link, motor, velocity, lost_motion, exposure : ndarray
-        Per sample and joint (samples, joints): the commanded output angle,
-        speed, transmitted torque, measured effort [N*m at the output], measured
-        link angle, measured motor angle (raw), measured link velocity, true
-        lost motion [rad] and exposure.
+        Per sample and joint (samples, joints): the output angle, its speed, the
+        transmitted torque, the measured effort [N*m at the output], the measured
+        link angle, the measured motor angle (raw), the measured link velocity,
+        the true lost motion [rad] and the exposure.
     exposure_rate : ndarray
-        Cycle-mean exposure rate per joint [1/s of operation].
+        The duty's mean exposure rate per joint [1/s of operation].
     exposure_life : ndarray
         Exposure at the end of life per joint.
     start_hours : ndarray
@@ -654,7 +652,6 @@ class Stream:
 
     spec: Spec
     joints: list
-    cycle: Cycle
     rate_hz: float
     jitter_s: float
     t: np.ndarray
@@ -680,8 +677,23 @@ class Stream:
         return self.start_hours + self.t[k] * self.spec.aging_factor / HOUR
 
     def remaining_life_h(self, k):
-        """Return each joint's operating hours from sample ``k`` to the limit, same duty [h]."""
+        """Return each joint's hours from sample ``k`` to the limit at the mean exposure rate."""
         return (self.exposure_life - self.exposure[k]) / (self.exposure_rate * HOUR)
+
+
+@dataclass
+class Stream(Recording):
+    """
+    This generator's samples and truth: a :class:`Recording` on a periodic cycle.
+
+    Attributes
+    ----------
+    cycle : Cycle
+        The duty cycle (its mean exposure rate is ``exposure_rate``).
+
+    """
+
+    cycle: Cycle
 
     def truth_json(self):
         """
@@ -728,7 +740,8 @@ class Stream:
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
-def _quantise(angle, bits):
+def quantise(angle, bits):
+    """Return ``angle`` [rad] rounded to the counts of a ``bits``-bit-per-turn encoder."""
     step = 2.0 * math.pi / 2 ** bits
     return np.round(angle / step) * step
 
@@ -737,6 +750,72 @@ def _log_times(rng, stamp_ns, base_s, mean_s):
     delay = base_s + rng.exponential(mean_s, stamp_ns.size)
     log = stamp_ns + np.round(delay * 1e9).astype(np.int64)
     return np.maximum.accumulate(log)
+
+
+def clock(spec, drawn_rate, drawn_jitter, delays, noise):
+    """
+    Return the sampling instants, header stamps and log times of the link and motor streams.
+
+    Parameters
+    ----------
+    spec : Spec
+        The request (its ``rate_hz``, ``stamp_jitter_us`` override the draws).
+    drawn_rate, drawn_jitter : float
+        Drawn controller rate [Hz] and stamp jitter [s].
+    delays : tuple of ndarray
+        ``(base, mean)`` delivery delays of the link and of the motor stream [s].
+    noise : numpy.random.Generator
+        The recording's noise stream (draws the jitter, then the delays).
+
+    Returns
+    -------
+    dict
+        The :class:`Recording` fields ``rate_hz``, ``jitter_s``, ``t``,
+        ``link_stamp_ns``, ``motor_stamp_ns``, ``link_log_ns``, ``motor_log_ns``.
+
+    """
+    rate = spec.rate_hz or drawn_rate
+    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
+    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
+    t = np.arange(n) / rate
+
+    def stamps():
+        clip = min(3.0 * jitter, 0.3 / rate)
+        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
+        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
+
+    link_stamp, motor_stamp = stamps(), stamps()
+    link_log = _log_times(noise, link_stamp, delays[0][0], delays[1][0])
+    motor_log = _log_times(noise, motor_stamp, delays[0][1], delays[1][1])
+    return {'rate_hz': rate, 'jitter_s': jitter, 't': t, 'link_stamp_ns': link_stamp,
+            'motor_stamp_ns': motor_stamp, 'link_log_ns': link_log, 'motor_log_ns': motor_log}
+
+
+def life_and_start(spec, joints, exposure_rate):
+    """
+    Return each joint's exposure at the limit and its operating hours at the first sample.
+
+    Parameters
+    ----------
+    spec : Spec
+        The request (``start_fraction`` of the drawn life or ``start_hours``).
+    joints : list
+        Drawn joints (``life_h``).
+    exposure_rate : ndarray
+        The duty's mean exposure rate per joint [1/s of operation].
+
+    Returns
+    -------
+    tuple of ndarray
+        ``(exposure_life, start_hours)``.
+
+    """
+    e_life = exposure_rate * np.array([j.life_h for j in joints]) * HOUR
+    if spec.start_fraction is not None:
+        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
+    else:
+        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    return e_life, start_h
 
 
 def generate(spec):
@@ -766,30 +845,14 @@ def generate(spec):
     drawn_rate = float(rng.choice(RATES_HZ))
     drawn_jitter = rng.uniform(10e-6, 50e-6)
     delays = rng.uniform(50e-6, 300e-6, 2), rng.uniform(100e-6, 1e-3, 2)
-    rate = spec.rate_hz or drawn_rate
-    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
-    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
-    t = np.arange(n) / rate
     noise = _rng(spec.seed, 4)
-
-    def stamps():
-        clip = min(3.0 * jitter, 0.3 / rate)
-        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
-        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
-
-    link_stamp, motor_stamp = stamps(), stamps()
-    link_log = _log_times(noise, link_stamp, delays[0][0], delays[1][0])
-    motor_log = _log_times(noise, motor_stamp, delays[0][1], delays[1][1])
-    shape = (n, len(joints))
-    arrays = {name: np.empty(shape) for name in (
-        'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion',
-        'exposure')}
+    times = clock(spec, drawn_rate, drawn_jitter, delays, noise)
+    rate, t = times['rate_hz'], times['t']
+    n = len(t)
+    arrays = {name: np.empty((n, len(joints))) for name in (
+        'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion', 'exposure')}
     e_rate = np.array([cycle_exposure_rate(j, cycle) for j in joints])
-    e_life = e_rate * np.array([j.life_h for j in joints]) * HOUR
-    if spec.start_fraction is not None:
-        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
-    else:
-        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    e_life, start_h = life_and_start(spec, joints, e_rate)
     for i, j in enumerate(joints):
         q, qd, qdd = cycle.motion(j.waypoints_rad, t)
         torque = true_torque(j, q, qd, qdd)
@@ -800,8 +863,8 @@ def generate(spec):
         te = (-0.5 * lm * play_side(j, torque) - torque / j.stiffness_nm_per_rad
               + j.order1_rad * np.sin(q + j.order1_phase)
               + j.order2_rad * np.sin(2.0 * q + j.order2_phase))
-        link = _quantise(q + te + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
-                         j.link_bits)
+        link = quantise(q + te + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
+                        j.link_bits)
         motor_step = 2.0 * math.pi / 2 ** j.motor_bits
         motor = np.round((RATIO * q + j.motor_offset_rad) / motor_step
                          + noise.normal(0.0, j.motor_noise_rad / motor_step, n)) * motor_step
@@ -811,10 +874,8 @@ def generate(spec):
                             ('link', link), ('motor', motor), ('velocity', velocity),
                             ('lost_motion', lm), ('exposure', exposure)):
             arrays[name][:, i] = value
-    return Stream(spec=spec, joints=joints, cycle=cycle, rate_hz=rate, jitter_s=jitter, t=t,
-                  link_stamp_ns=link_stamp, motor_stamp_ns=motor_stamp, link_log_ns=link_log,
-                  motor_log_ns=motor_log, exposure_rate=e_rate, exposure_life=e_life,
-                  start_hours=start_h, **arrays)
+    return Stream(spec=spec, joints=joints, cycle=cycle, exposure_rate=e_rate,
+                  exposure_life=e_life, start_hours=start_h, **times, **arrays)
 
 
 # --------------------------------------------------------------------------- the bag
@@ -830,29 +891,59 @@ def _qos(durability):
                 liveliness_lease_duration=infinite, avoid_ros_namespace_conventions=False)]
 
 
-def _messages(stream):
-    """Yield ``(topic, log_ns, k, kind)`` in receive order."""
+def _columns(stream):
+    """Return ``(link (position, velocity, effort), motor ..., link names, motor names)``."""
     spec = stream.spec
-    n = len(stream.t)
-    logs = [stream.link_log_ns]
-    kinds = [0]
+    names = [j.name for j in stream.joints]
+    motor_pos = stream.motor * (1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO)
+    motor_eff = stream.effort / RATIO
+    velocity = stream.velocity if spec.velocity else None
     if spec.layout == 'split':
-        logs.append(stream.motor_log_ns)
-        kinds.append(1)
-    if spec.truth_topics:
+        link = (stream.link, velocity, stream.effort if spec.effort_on == 'link' else None)
+        motor = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
+        return link, motor, names, names
+    nan = np.full(stream.link.shape, np.nan)
+    link = (np.hstack([stream.link, motor_pos]),
+            None if velocity is None else np.hstack([velocity, nan]),
+            np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
+            else np.hstack([nan, motor_eff]))
+    return link, None, names + [name + spec.motor_suffix for name in names], None
+
+
+def _events(stream, kept=None):
+    """
+    Return ``(log_ns, topic, sample)`` in receive order (topic 0 link, 1 motor, 2 truth).
+
+    Parameters
+    ----------
+    stream : Stream
+        Generated samples (``t``, ``link_log_ns``, ``motor_log_ns``, ``spec``).
+    kept : tuple of ndarray of bool, optional
+        ``(link, motor)``: the messages that arrived (default: every one).
+
+    """
+    n = len(stream.t)
+    kept = kept or (np.ones(n, dtype=bool),) * 2
+    index = [np.flatnonzero(kept[0])]
+    logs = [stream.link_log_ns[index[0]]]
+    if stream.spec.layout == 'split':
+        index.append(np.flatnonzero(kept[1]))
+        logs.append(stream.motor_log_ns[index[1]])
+    kinds = list(range(len(index)))
+    if stream.spec.truth_topics:
         picks = np.unique(np.concatenate([
             np.searchsorted(stream.t, np.arange(0.0, stream.t[-1], 1.0)), [n - 1]]))
+        index.append(picks)
         logs.append(stream.link_log_ns[picks] + 1000)
         kinds.append(2)
     log = np.concatenate(logs)
-    kind = np.concatenate([np.full(len(x), c) for x, c in zip(logs, kinds)])
-    index = np.concatenate([np.arange(n)] * (2 if spec.layout == 'split' else 1)
-                           + ([picks] if spec.truth_topics else []))
+    kind = np.concatenate([np.full(len(x), c) for x, c in zip(index, kinds)])
+    sample = np.concatenate(index)
     order = np.lexsort((kind, log))
-    return log[order], kind[order], index[order]
+    return log[order], kind[order], sample[order]
 
 
-def write_bag(stream, out, overwrite=False):
+def write_bag(stream, out, overwrite=False, kept=None, generator='independent_generator'):
     """
     Write the stream as a rosbag2 (version 9, MCAP) bag directory with rosbags.
 
@@ -861,11 +952,17 @@ def write_bag(stream, out, overwrite=False):
     Parameters
     ----------
     stream : Stream
-        Generated samples.
+        Generated samples (this generator's or one with the same fields, such
+        as ``third_generator.Stream``).
     out : str or Path
         Bag directory to create.
     overwrite : bool
         Replace an existing ``out``.
+    kept : tuple of ndarray of bool, optional
+        ``(link, motor)``: the messages that arrived; the others are not
+        written (default: every one; the combined layout uses ``link`` only).
+    generator : str
+        Name of the generator: the seed goes to ``custom_data`` as ``<generator>.seed``.
 
     Returns
     -------
@@ -885,92 +982,62 @@ def write_bag(stream, out, overwrite=False):
     if out.exists() and not overwrite:
         raise GeneratorError(f'--out {out} exists already; choose another path')
     ts = get_typestore(Stores.ROS2_JAZZY)
-    js_type = 'sensor_msgs/msg/JointState'
-    ma_type = 'std_msgs/msg/Float64MultiArray'
-    joint_state = ts.types[js_type]
-    header, stamp = ts.types['std_msgs/msg/Header'], ts.types['builtin_interfaces/msg/Time']
-    multi = ts.types[ma_type]
-    layout = ts.types['std_msgs/msg/MultiArrayLayout']
-    dim = ts.types['std_msgs/msg/MultiArrayDimension']
+    js_type, ma_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray'
+    types = ts.types
     spec = stream.spec
-    names = [j.name for j in stream.joints]
-    n_j = len(names)
+    link_cols, motor_cols, link_names, motor_names = _columns(stream)
     empty = np.empty(0, dtype=np.float64)
-    scale = 1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO
-    motor_pos = stream.motor * scale
-    motor_eff = stream.effort / RATIO
-    nan = np.full((len(stream.t), n_j), np.nan)
-    if spec.layout == 'split':
-        link_cols = (stream.link, stream.velocity if spec.velocity else None,
-                     stream.effort if spec.effort_on == 'link' else None)
-        motor_cols = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
-        link_names, motor_names = names, names
-    else:
-        both = names + [name + spec.motor_suffix for name in names]
-        link_cols = (np.hstack([stream.link, motor_pos]),
-                     np.hstack([stream.velocity, nan]) if spec.velocity else None,
-                     np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
-                     else np.hstack([nan, motor_eff]))
-        motor_cols, link_names, motor_names = None, both, None
-    link_cols = tuple(np.ascontiguousarray(c) if c is not None else None for c in link_cols)
-    if motor_cols is not None:
-        motor_cols = tuple(np.ascontiguousarray(c) if c is not None else None
-                           for c in motor_cols)
-    label = ','.join(TRUTH_FIELDS)
-    truth_layout = layout(dim=[dim(label=label, size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))],
-                          data_offset=0)
-    parent = out.parent
-    parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=parent))
-    counts = {}
+    dim = types['std_msgs/msg/MultiArrayDimension'](
+        label=','.join(TRUTH_FIELDS), size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))
+    truth_layout = types['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0)
+
+    def joint_state(cols, msg_names, stamp_ns, k):
+        st = int(stamp_ns[k])
+        header = types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=st // 10 ** 9, nanosec=st % 10 ** 9),
+            frame_id='')
+        return ts.serialize_cdr(types[js_type](
+            header=header, name=msg_names, position=np.ascontiguousarray(cols[0][k]),
+            velocity=empty if cols[1] is None else np.ascontiguousarray(cols[1][k]),
+            effort=empty if cols[2] is None else np.ascontiguousarray(cols[2][k])), js_type)
+
+    def truth(i, k, remaining, hours):
+        values = np.array([stream.link_stamp_ns[k] * 1e-9, stream.lost_motion[k, i],
+                           stream.exposure[k, i], hours[i], remaining[i],
+                           stream.joints[i].lost_motion_new_rad,
+                           stream.joints[i].stiffness_nm_per_rad])
+        return ts.serialize_cdr(types[ma_type](layout=truth_layout, data=values), ma_type)
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=out.parent))
     try:
         writer = Writer(tmp / out.name, version=9, storage_plugin=StoragePlugin.MCAP)
         writer.set_custom_data(AGING_KEY, repr(float(spec.aging_factor)))
-        writer.set_custom_data('independent_generator.seed', str(spec.seed))
+        writer.set_custom_data(f'{generator}.seed', str(spec.seed))
         writer.open()
-        link_conn = writer.add_connection(spec.link_topic, js_type, typestore=ts,
-                                          offered_qos_profiles=_qos('VOLATILE'))
-        motor_conn = writer.add_connection(spec.motor_topic, js_type, typestore=ts,
-                                           offered_qos_profiles=_qos('VOLATILE')) \
-            if spec.layout == 'split' else None
-        truth_conns = [writer.add_connection(f'/truth/{name}', ma_type, typestore=ts,
-                                             offered_qos_profiles=_qos('TRANSIENT_LOCAL'))
-                       for name in names] if spec.truth_topics else []
-        log, kind, index = _messages(stream)
-        serialize = ts.serialize_cdr
-        rul = None
-        for log_ns, c, k in zip(log.tolist(), kind.tolist(), index.tolist()):
+        volatile, latched = _qos('VOLATILE'), _qos('TRANSIENT_LOCAL')
+        conns = [writer.add_connection(spec.link_topic, js_type, typestore=ts,
+                                       offered_qos_profiles=volatile)]
+        if spec.layout == 'split':
+            conns.append(writer.add_connection(spec.motor_topic, js_type, typestore=ts,
+                                               offered_qos_profiles=volatile))
+        truth_conns = [writer.add_connection(f'/truth/{j.name}', ma_type, typestore=ts,
+                                             offered_qos_profiles=latched)
+                       for j in stream.joints] if spec.truth_topics else []
+        counts = {c.topic: 0 for c in conns + truth_conns}
+        log, kind, sample = _events(stream, kept)
+        for log_ns, c, k in zip(log.tolist(), kind.tolist(), sample.tolist()):
             if c == 2:
-                if rul is None or rul[0] != k:
-                    rul = (k, stream.remaining_life_h(k), stream.hours_at(k))
+                remaining, hours = stream.remaining_life_h(k), stream.hours_at(k)
                 for i, conn in enumerate(truth_conns):
-                    values = np.array([stream.link_stamp_ns[k] * 1e-9,
-                                       stream.lost_motion[k, i], stream.exposure[k, i],
-                                       rul[2][i], rul[1][i],
-                                       stream.joints[i].lost_motion_new_rad,
-                                       stream.joints[i].stiffness_nm_per_rad])
-                    writer.write(conn, log_ns, serialize(
-                        multi(layout=truth_layout, data=values), ma_type))
+                    writer.write(conn, log_ns, truth(i, k, remaining, hours))
+                    counts[conn.topic] += 1
                 continue
-            if c == 0:
-                conn, cols, msg_names, st = link_conn, link_cols, link_names, \
-                    stream.link_stamp_ns[k]
-            else:
-                conn, cols, msg_names, st = motor_conn, motor_cols, motor_names, \
-                    stream.motor_stamp_ns[k]
-            st = int(st)
-            msg = joint_state(
-                header=header(stamp=stamp(sec=st // 10 ** 9, nanosec=st % 10 ** 9),
-                              frame_id=''),
-                name=msg_names, position=cols[0][k],
-                velocity=empty if cols[1] is None else cols[1][k],
-                effort=empty if cols[2] is None else cols[2][k])
-            writer.write(conn, log_ns, serialize(msg, js_type))
+            cols, msg_names, stamp_ns = ((link_cols, link_names, stream.link_stamp_ns) if c == 0
+                                         else (motor_cols, motor_names, stream.motor_stamp_ns))
+            writer.write(conns[c], log_ns, joint_state(cols, msg_names, stamp_ns, k))
+            counts[conns[c].topic] += 1
         writer.close()
-        for conn in [link_conn, motor_conn] + truth_conns:
-            if conn is not None:
-                counts[conn.topic] = int(np.count_nonzero(
-                    kind == (0 if conn is link_conn else 1 if conn is motor_conn else 2)))
         if out.exists():
             shutil.rmtree(out)
         os.rename(tmp / out.name, out)
@@ -979,7 +1046,7 @@ def write_bag(stream, out, overwrite=False):
     return counts
 
 
-def generate_bag(spec, out, overwrite=False):
+def generate_bag(spec, out, overwrite=False, generate=generate, write=write_bag):
     """
     Generate a recording and write it; return its truth.
 
@@ -991,6 +1058,8 @@ def generate_bag(spec, out, overwrite=False):
         Bag directory to create.
     overwrite : bool
         Replace an existing ``out``.
+    generate, write : callable
+        The generator's :func:`generate` and :func:`write_bag` (default: this one's).
 
     Returns
     -------
@@ -999,7 +1068,7 @@ def generate_bag(spec, out, overwrite=False):
 
     """
     stream = generate(spec)
-    counts = write_bag(stream, out, overwrite=overwrite)
+    counts = write(stream, out, overwrite=overwrite)
     truth = stream.truth_json()
     truth.update(bag=str(out), messages=counts)
     return truth
@@ -1008,11 +1077,22 @@ def generate_bag(spec, out, overwrite=False):
 # --------------------------------------------------------------------------- CLI
 
 
-def _parser():
-    p = argparse.ArgumentParser(
-        prog='independent_generator.py',
-        description='Write a rosbag2 MCAP recording of RV-80E joints from a model independent '
-                    'of the twin, and print its truth.')
+def cli_parser(prog, description):
+    """
+    Return a parser with the options every generator takes (each adds its own).
+
+    Parameters
+    ----------
+    prog, description : str
+        The generator's script name and what it writes.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        ``--out``, ``--seed``, ``--kinds``, the time and layout options, ``--json``.
+
+    """
+    p = argparse.ArgumentParser(prog=prog, description=description)
     p.add_argument('--out', required=True, help='bag directory to create')
     p.add_argument('--seed', type=int, default=0, help='seed of every draw (default 0)')
     p.add_argument('--kinds', default='base,shoulder,forearm',
@@ -1026,9 +1106,6 @@ def _parser():
     start.add_argument('--start-fraction', type=float,
                        help="fraction of each joint's drawn life before the recording")
     p.add_argument('--rate-hz', type=float, help='controller rate (default: drawn, 100-1000 Hz)')
-    p.add_argument('--effort-noise', type=float,
-                   help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
-    p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     p.add_argument('--layout', choices=LAYOUTS, default='split',
                    help="'split': link and motor topics; 'combined': <joint>_motor entries")
     p.add_argument('--motor-angles', choices=('raw', 'output'), default='raw')
@@ -1040,6 +1117,61 @@ def _parser():
     p.add_argument('--motor-topic', default='/motor_states')
     p.add_argument('--overwrite', action='store_true', help='replace an existing --out')
     p.add_argument('--json', action='store_true', help='print the truth as JSON')
+    return p
+
+
+def cli_spec_options(args):
+    """Return the :class:`Spec` keywords of the options :func:`cli_parser` adds."""
+    return {'seed': args.seed, 'kinds': tuple(k.strip() for k in args.kinds.split(',')),
+            'hours': args.hours, 'aging_factor': args.aging_factor,
+            'start_hours': args.start_hours, 'start_fraction': args.start_fraction,
+            'rate_hz': args.rate_hz, 'layout': args.layout, 'motor_angles': args.motor_angles,
+            'effort_on': args.effort_on, 'velocity': not args.no_velocity,
+            'truth_topics': not args.no_truth_topics, 'link_topic': args.link_topic,
+            'motor_topic': args.motor_topic, 'stamp_jitter_us': args.stamp_jitter_us}
+
+
+def cli_run(args, spec, generate_bag=generate_bag):
+    """
+    Write the bag a command line asks for and print its truth; return the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed options (``out``, ``overwrite``, ``json``).
+    spec : Spec
+        What to generate.
+    generate_bag : callable
+        The generator's :func:`generate_bag` (default: this one's).
+
+    Returns
+    -------
+    int
+        0, or 1 (``ERROR: <reason>`` on stderr) for invalid values.
+
+    """
+    try:
+        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
+    except GeneratorError as err:
+        print(f'ERROR: {err}', file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(truth, indent=1))
+    else:
+        for name, j in truth['joints'].items():
+            law = f" ({j['law']})" if 'law' in j else ''
+            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
+                  f"remaining life {j['remaining_life_end_h']:.0f} h{law}")
+    return 0
+
+
+def _parser():
+    p = cli_parser('independent_generator.py',
+                   'Write a rosbag2 MCAP recording of RV-80E joints from a model independent '
+                   'of the twin, and print its truth.')
+    p.add_argument('--effort-noise', type=float,
+                   help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
+    p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
 
@@ -1059,26 +1191,8 @@ def main(argv=None):
 
     """
     args = _parser().parse_args(argv)
-    spec = Spec(seed=args.seed, kinds=tuple(k.strip() for k in args.kinds.split(',')),
-                hours=args.hours, aging_factor=args.aging_factor,
-                start_hours=args.start_hours, start_fraction=args.start_fraction,
-                rate_hz=args.rate_hz, effort_noise_pct=args.effort_noise, law=args.law,
-                layout=args.layout, motor_angles=args.motor_angles, effort_on=args.effort_on,
-                velocity=not args.no_velocity, truth_topics=not args.no_truth_topics,
-                link_topic=args.link_topic, motor_topic=args.motor_topic,
-                stamp_jitter_us=args.stamp_jitter_us)
-    try:
-        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
-    except GeneratorError as err:
-        print(f'ERROR: {err}', file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(truth, indent=1))
-    else:
-        for name, j in truth['joints'].items():
-            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
-                  f"remaining life {j['remaining_life_end_h']:.0f} h ({j['law']})")
-    return 0
+    spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise, law=args.law)
+    return cli_run(args, spec)
 
 
 if __name__ == '__main__':

@@ -4,8 +4,9 @@ Third joint generator: RV-80E recordings from catalogue-style physics and a real
 
 A third source of truth, unlike both the twin's model and
 ``bench/independent_generator.py`` (it imports nothing from ``reducer_twin``;
-it borrows the second generator's constants, quality-of-service profiles and
-log-time helper). Every range below was fixed before the twin was run on it.
+it borrows the second generator's constants, recording fields, sample clock,
+quantiser, bag writer and command line). Every range below was fixed before
+the twin was run on it.
 
 * **Torsional curve, catalogue style.** The twist under output torque ``T``
   is a soft zone plus a straight line: ``(W/2)*min(|T|/T1, 1)*sign(T) + T/k2``
@@ -70,15 +71,10 @@ Usage::
         [--layout split|combined] [--json]
 """
 
-import argparse
 from dataclasses import dataclass, replace
-import json
 import math
-import os
 from pathlib import Path
-import shutil
 import sys
-import tempfile
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import independent_generator as indep  # noqa: E402
@@ -592,70 +588,26 @@ class Spec(indep.Spec):
 
 
 @dataclass
-class Stream:
+class Stream(indep.Recording):
     """
-    The generated samples and their truth (before serialisation).
+    This generator's samples and truth: an ``independent_generator.Recording`` with drops.
+
+    Per controller cycle, ``q`` is the output angle the motor implies, ``effort``
+    what the drive reports and ``velocity`` the controller's difference of the
+    motor reading.
 
     Attributes
     ----------
-    spec : Spec
-        The request.
-    joints : list of JointTruth
-        The drawn joints.
     duty : Duty
         The moves.
-    rate_hz, jitter_s : float
-        Controller rate and stamp jitter.
-    t : ndarray
-        Controller cycle instants from the first sample [s].
-    link_stamp_ns, motor_stamp_ns, link_log_ns, motor_log_ns : ndarray
-        Header stamps and log times of every cycle's link and motor message.
     link_kept, motor_kept : ndarray of bool
         Messages that arrived (the others were dropped).
-    q, qd, torque, effort, link, motor, velocity, lost_motion, exposure : ndarray
-        Per cycle and joint: output angle implied by the motor, its speed, the
-        transmitted torque, the reported effort, the link and raw motor readings,
-        the velocity, the catalogue lost motion [rad] and the exposure.
-    exposure_rate, exposure_life : ndarray
-        Per joint: the duty's mean exposure rate [1/s of operation] and the
-        exposure at the limit.
-    start_hours : ndarray
-        Operating hours of each joint at the first sample.
 
     """
 
-    spec: Spec
-    joints: list
     duty: Duty
-    rate_hz: float
-    jitter_s: float
-    t: np.ndarray
-    link_stamp_ns: np.ndarray
-    motor_stamp_ns: np.ndarray
-    link_log_ns: np.ndarray
-    motor_log_ns: np.ndarray
     link_kept: np.ndarray
     motor_kept: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    torque: np.ndarray
-    effort: np.ndarray
-    link: np.ndarray
-    motor: np.ndarray
-    velocity: np.ndarray
-    lost_motion: np.ndarray
-    exposure: np.ndarray
-    exposure_rate: np.ndarray
-    exposure_life: np.ndarray
-    start_hours: np.ndarray
-
-    def hours_at(self, k):
-        """Return the operating hours of every joint at sample ``k``."""
-        return self.start_hours + self.t[k] * self.spec.aging_factor / HOUR
-
-    def remaining_life_h(self, k):
-        """Return each joint's hours from sample ``k`` to the limit at the mean exposure rate."""
-        return (self.exposure_life - self.exposure[k]) / (self.exposure_rate * HOUR)
 
     def end_of_life_h(self):
         """
@@ -726,31 +678,8 @@ class Stream:
                 'ratio': RATIO, 'joints': out}
 
 
-def _quantise(angle, bits):
-    step = 2.0 * math.pi / 2 ** bits
-    return np.round(angle / step) * step
-
-
 def generate(spec):
-    """
-    Draw the robot and compute every sample of the recording.
-
-    Parameters
-    ----------
-    spec : Spec
-        What to generate (validated here).
-
-    Returns
-    -------
-    Stream
-        Samples and truth.
-
-    Raises
-    ------
-    GeneratorError
-        If an option is out of range.
-
-    """
+    """Draw the robot and compute every sample (as ``independent_generator.generate``)."""
     spec.check()
     joints, e_rate = draw_robot(spec.seed, spec.kinds)
     rng = _rng(spec.seed, 3)
@@ -758,28 +687,14 @@ def generate(spec):
     drawn_jitter = rng.uniform(5e-6, 40e-6)
     drops = rng.uniform(0.0, 0.01, 2)
     delays = rng.uniform(50e-6, 300e-6, 2), rng.uniform(100e-6, 1e-3, 2)
-    rate = spec.rate_hz or drawn_rate
-    jitter = drawn_jitter if spec.stamp_jitter_us is None else spec.stamp_jitter_us * 1e-6
-    n = max(int(math.floor(spec.duration_s * rate + 1e-6)) + 1, 2)
-    t = np.arange(n) / rate
     noise = _rng(spec.seed, 4)
-
-    def stamps():
-        clip = min(3.0 * jitter, 0.3 / rate)
-        j = np.clip(noise.normal(0.0, 1.0, n) * jitter, -clip, clip) if jitter > 0 else 0.0
-        return START_S * 10 ** 9 + np.round((t + j) * 1e9).astype(np.int64)
-
-    link_stamp, motor_stamp = stamps(), stamps()
-    link_log = indep._log_times(noise, link_stamp, delays[0][0], delays[1][0])
-    motor_log = indep._log_times(noise, motor_stamp, delays[0][1], delays[1][1])
+    times = indep.clock(spec, drawn_rate, drawn_jitter, delays, noise)
+    rate, t = times['rate_hz'], times['t']
+    n = len(t)
     link_kept = noise.uniform(size=n) >= drops[0]
     motor_kept = (noise.uniform(size=n) >= drops[1]) if spec.layout == 'split' else link_kept
     duty = draw_duty(_rng(spec.seed, 2), joints, spec.duration_s)
-    e_life = e_rate * np.array([j.life_h for j in joints]) * HOUR
-    if spec.start_fraction is not None:
-        start_h = np.array([spec.start_fraction * j.life_h for j in joints])
-    else:
-        start_h = np.full(len(joints), spec.start_hours or 0.0)
+    e_life, start_h = indep.life_and_start(spec, joints, e_rate)
     arrays = {name: np.empty((n, len(joints))) for name in (
         'q', 'qd', 'torque', 'effort', 'link', 'motor', 'velocity', 'lost_motion', 'exposure')}
     for i, j in enumerate(joints):
@@ -795,262 +710,47 @@ def generate(spec):
         torque_l = true_torque(j, q_l, qd_l, qdd_l, u_l)
         out = q_l - j.twist(torque_l, lm, dahl_state(j, torque_l)) \
             + j.mesh_error_rad * np.sin(PIN_COUNT * q_l + j.mesh_phase)
-        link = _quantise(out + j.eccentricity_rad * np.sin(out + j.eccentricity_phase)
-                         + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
-                         j.link_bits)
+        link = indep.quantise(out + j.eccentricity_rad * np.sin(out + j.eccentricity_phase)
+                              + j.link_offset_rad + noise.normal(0.0, j.link_noise_rad, n),
+                              j.link_bits)
         shaft = RATIO * q + j.motor_offset_rad
-        motor = _quantise(shaft + j.motor_error_rad * np.sin(shaft + j.motor_error_phase),
-                          j.motor_bits)
+        motor = indep.quantise(shaft + j.motor_error_rad * np.sin(shaft + j.motor_error_phase),
+                               j.motor_bits)
         velocity = np.diff(motor, prepend=motor[:1]) * rate / RATIO
         effort = drive_torque(j, torque, qd, shaft) + noise.normal(0.0, j.effort_noise_nm, n)
         for name, value in (('q', q), ('qd', qd), ('torque', torque), ('effort', effort),
                             ('link', link), ('motor', motor), ('velocity', velocity),
                             ('lost_motion', lm), ('exposure', exposure)):
             arrays[name][:, i] = value
-    return Stream(spec=spec, joints=joints, duty=duty, rate_hz=rate, jitter_s=jitter, t=t,
-                  link_stamp_ns=link_stamp, motor_stamp_ns=motor_stamp, link_log_ns=link_log,
-                  motor_log_ns=motor_log, link_kept=link_kept, motor_kept=motor_kept,
-                  exposure_rate=e_rate, exposure_life=e_life, start_hours=start_h, **arrays)
+    return Stream(spec=spec, joints=joints, duty=duty, link_kept=link_kept,
+                  motor_kept=motor_kept, exposure_rate=e_rate, exposure_life=e_life,
+                  start_hours=start_h, **times, **arrays)
 
 
 # --------------------------------------------------------------------------- the bag
 
 
-def _columns(stream):
-    """Return ``(link (position, velocity, effort), motor ..., link names, motor names)``."""
-    spec = stream.spec
-    names = [j.name for j in stream.joints]
-    motor_pos = stream.motor * (1.0 if spec.motor_angles == 'raw' else 1.0 / RATIO)
-    motor_eff = stream.effort / RATIO
-    velocity = stream.velocity if spec.velocity else None
-    if spec.layout == 'split':
-        link = (stream.link, velocity, stream.effort if spec.effort_on == 'link' else None)
-        motor = (motor_pos, None, motor_eff if spec.effort_on == 'motor' else None)
-        return link, motor, names, names
-    nan = np.full(stream.link.shape, np.nan)
-    link = (np.hstack([stream.link, motor_pos]),
-            None if velocity is None else np.hstack([velocity, nan]),
-            np.hstack([stream.effort, nan]) if spec.effort_on == 'link'
-            else np.hstack([nan, motor_eff]))
-    return link, None, names + [name + spec.motor_suffix for name in names], None
-
-
-def _events(stream):
-    """Return ``(log_ns, topic, sample)`` in receive order (topic 0 link, 1 motor, 2 truth)."""
-    n = len(stream.t)
-    index = [np.flatnonzero(stream.link_kept)]
-    logs = [stream.link_log_ns[index[0]]]
-    if stream.spec.layout == 'split':
-        index.append(np.flatnonzero(stream.motor_kept))
-        logs.append(stream.motor_log_ns[index[1]])
-    kinds = list(range(len(index)))
-    if stream.spec.truth_topics:
-        picks = np.unique(np.concatenate([
-            np.searchsorted(stream.t, np.arange(0.0, stream.t[-1], 1.0)), [n - 1]]))
-        index.append(picks)
-        logs.append(stream.link_log_ns[picks] + 1000)
-        kinds.append(2)
-    log = np.concatenate(logs)
-    kind = np.concatenate([np.full(len(x), c) for x, c in zip(index, kinds)])
-    sample = np.concatenate(index)
-    order = np.lexsort((kind, log))
-    return log[order], kind[order], sample[order]
-
-
 def write_bag(stream, out, overwrite=False):
-    """
-    Write the stream as a rosbag2 (version 9, MCAP) bag directory with rosbags.
-
-    Dropped messages are not written. The bag is written beside ``out`` under a
-    temporary name and renamed into place.
-
-    Parameters
-    ----------
-    stream : Stream
-        Generated samples.
-    out : str or Path
-        Bag directory to create.
-    overwrite : bool
-        Replace an existing ``out``.
-
-    Returns
-    -------
-    dict
-        Messages written per topic.
-
-    Raises
-    ------
-    GeneratorError
-        If ``out`` exists and ``overwrite`` is false.
-
-    """
-    from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import get_typestore, Stores
-
-    out = Path(out)
-    if out.exists() and not overwrite:
-        raise GeneratorError(f'--out {out} exists already; choose another path')
-    ts = get_typestore(Stores.ROS2_JAZZY)
-    js_type, ma_type = 'sensor_msgs/msg/JointState', 'std_msgs/msg/Float64MultiArray'
-    types = ts.types
-    spec = stream.spec
-    link_cols, motor_cols, link_names, motor_names = _columns(stream)
-    empty = np.empty(0, dtype=np.float64)
-    dim = types['std_msgs/msg/MultiArrayDimension'](
-        label=','.join(TRUTH_FIELDS), size=len(TRUTH_FIELDS), stride=len(TRUTH_FIELDS))
-    truth_layout = types['std_msgs/msg/MultiArrayLayout'](dim=[dim], data_offset=0)
-
-    def joint_state(cols, msg_names, stamp_ns, k):
-        st = int(stamp_ns[k])
-        header = types['std_msgs/msg/Header'](
-            stamp=types['builtin_interfaces/msg/Time'](sec=st // 10 ** 9, nanosec=st % 10 ** 9),
-            frame_id='')
-        return ts.serialize_cdr(types[js_type](
-            header=header, name=msg_names, position=np.ascontiguousarray(cols[0][k]),
-            velocity=empty if cols[1] is None else np.ascontiguousarray(cols[1][k]),
-            effort=empty if cols[2] is None else np.ascontiguousarray(cols[2][k])), js_type)
-
-    def truth(i, k, remaining, hours):
-        values = np.array([stream.link_stamp_ns[k] * 1e-9, stream.lost_motion[k, i],
-                           stream.exposure[k, i], hours[i], remaining[i],
-                           stream.joints[i].lost_motion_new_rad,
-                           stream.joints[i].stiffness_nm_per_rad])
-        return ts.serialize_cdr(types[ma_type](layout=truth_layout, data=values), ma_type)
-
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f'.{out.name}.', dir=out.parent))
-    try:
-        writer = Writer(tmp / out.name, version=9, storage_plugin=StoragePlugin.MCAP)
-        writer.set_custom_data(AGING_KEY, repr(float(spec.aging_factor)))
-        writer.set_custom_data('third_generator.seed', str(spec.seed))
-        writer.open()
-        volatile, latched = indep._qos('VOLATILE'), indep._qos('TRANSIENT_LOCAL')
-        conns = [writer.add_connection(spec.link_topic, js_type, typestore=ts,
-                                       offered_qos_profiles=volatile)]
-        if spec.layout == 'split':
-            conns.append(writer.add_connection(spec.motor_topic, js_type, typestore=ts,
-                                               offered_qos_profiles=volatile))
-        truth_conns = [writer.add_connection(f'/truth/{j.name}', ma_type, typestore=ts,
-                                             offered_qos_profiles=latched)
-                       for j in stream.joints] if spec.truth_topics else []
-        counts = {c.topic: 0 for c in conns + truth_conns}
-        log, kind, sample = _events(stream)
-        for log_ns, c, k in zip(log.tolist(), kind.tolist(), sample.tolist()):
-            if c == 2:
-                remaining, hours = stream.remaining_life_h(k), stream.hours_at(k)
-                for i, conn in enumerate(truth_conns):
-                    writer.write(conn, log_ns, truth(i, k, remaining, hours))
-                    counts[conn.topic] += 1
-                continue
-            cols, msg_names, stamp_ns = ((link_cols, link_names, stream.link_stamp_ns) if c == 0
-                                         else (motor_cols, motor_names, stream.motor_stamp_ns))
-            writer.write(conns[c], log_ns, joint_state(cols, msg_names, stamp_ns, k))
-            counts[conns[c].topic] += 1
-        writer.close()
-        if out.exists():
-            shutil.rmtree(out)
-        os.rename(tmp / out.name, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
-    return counts
+    """Write the stream without its dropped messages (:func:`independent_generator.write_bag`)."""
+    return indep.write_bag(stream, out, overwrite, kept=(stream.link_kept, stream.motor_kept),
+                           generator='third_generator')
 
 
 def generate_bag(spec, out, overwrite=False):
-    """
-    Generate a recording and write it; return its truth.
-
-    Parameters
-    ----------
-    spec : Spec
-        What to generate.
-    out : str or Path
-        Bag directory to create.
-    overwrite : bool
-        Replace an existing ``out``.
-
-    Returns
-    -------
-    dict
-        :meth:`Stream.truth_json` plus ``bag`` and ``messages`` (per topic).
-
-    """
-    stream = generate(spec)
-    counts = write_bag(stream, out, overwrite=overwrite)
-    truth = stream.truth_json()
-    truth.update(bag=str(out), messages=counts)
-    return truth
+    """Generate a recording and write it; return its truth (``indep.generate_bag``)."""
+    return indep.generate_bag(spec, out, overwrite, generate=generate, write=write_bag)
 
 
 # --------------------------------------------------------------------------- CLI
 
 
-def _parser():
-    p = argparse.ArgumentParser(
-        prog='third_generator.py',
-        description='Write a rosbag2 MCAP recording of RV-80E joints from catalogue-style '
-                    'physics unlike the twin and the independent generator; print its truth.')
-    p.add_argument('--out', required=True, help='bag directory to create')
-    p.add_argument('--seed', type=int, default=0, help='seed of every draw (default 0)')
-    p.add_argument('--kinds', default='base,shoulder,forearm',
-                   help=f'joint kinds, comma-separated, of {", ".join(KINDS)}')
-    p.add_argument('--hours', type=float, default=0.05,
-                   help='operating hours the recording spans (default 0.05)')
-    p.add_argument('--aging-factor', type=float, default=1.0,
-                   help='operating seconds per stream second (default 1)')
-    start = p.add_mutually_exclusive_group()
-    start.add_argument('--start-hours', type=float, help='operating hours before the recording')
-    start.add_argument('--start-fraction', type=float,
-                       help="fraction of each joint's drawn life before the recording")
-    p.add_argument('--rate-hz', type=float, help='controller rate (default: drawn, 100-1000 Hz)')
-    p.add_argument('--layout', choices=LAYOUTS, default='split',
-                   help="'split': link and motor topics; 'combined': <joint>_motor entries")
-    p.add_argument('--motor-angles', choices=('raw', 'output'), default='raw')
-    p.add_argument('--effort-on', choices=('link', 'motor'), default='link')
-    p.add_argument('--no-velocity', action='store_true', help='leave the velocity field empty')
-    p.add_argument('--no-truth-topics', action='store_true', help='no /truth/<joint> topics')
-    p.add_argument('--stamp-jitter-us', type=float, help='stamp jitter std (default drawn)')
-    p.add_argument('--link-topic', default='/joint_states')
-    p.add_argument('--motor-topic', default='/motor_states')
-    p.add_argument('--overwrite', action='store_true', help='replace an existing --out')
-    p.add_argument('--json', action='store_true', help='print the truth as JSON')
-    return p
-
-
 def main(argv=None):
-    """
-    Run the command line; return the exit status (0, 1 for invalid values).
-
-    Parameters
-    ----------
-    argv : list of str, optional
-        Arguments (default: ``sys.argv[1:]``).
-
-    Returns
-    -------
-    int
-        Exit status.
-
-    """
-    args = _parser().parse_args(argv)
-    spec = Spec(seed=args.seed, kinds=tuple(k.strip() for k in args.kinds.split(',')),
-                hours=args.hours, aging_factor=args.aging_factor,
-                start_hours=args.start_hours, start_fraction=args.start_fraction,
-                rate_hz=args.rate_hz, layout=args.layout, motor_angles=args.motor_angles,
-                effort_on=args.effort_on, velocity=not args.no_velocity,
-                truth_topics=not args.no_truth_topics, link_topic=args.link_topic,
-                motor_topic=args.motor_topic, stamp_jitter_us=args.stamp_jitter_us)
-    try:
-        truth = generate_bag(spec, args.out, overwrite=args.overwrite)
-    except GeneratorError as err:
-        print(f'ERROR: {err}', file=sys.stderr)
-        return 1
-    if args.json:
-        print(json.dumps(truth, indent=1))
-    else:
-        for name, j in truth['joints'].items():
-            print(f"{name} ({j['kind']}): lost motion {j['lost_motion_end_arcmin']:.3f} arcmin, "
-                  f"remaining life {j['remaining_life_end_h']:.0f} h")
-    return 0
+    """Run the command line: ``independent_generator``'s without ``--law``, ``--effort-noise``."""
+    args = indep.cli_parser(
+        'third_generator.py',
+        'Write a rosbag2 MCAP recording of RV-80E joints from catalogue-style physics unlike '
+        'the twin and the independent generator; print its truth.').parse_args(argv)
+    return indep.cli_run(args, Spec(**indep.cli_spec_options(args)), generate_bag)
 
 
 if __name__ == '__main__':

@@ -3,24 +3,17 @@ bench/independent_generator.py: real rosbag2 bags with a truth the twin's model 
 
 Every bag is read back with rosbags and with the mcap library; the truth is checked
 against the drawn ranges and against the recorded samples themselves (the lost motion is
-measured back from the bag's encoders, the effort noise from its efforts).
+measured back from the bag's encoders, the effort noise from its efforts). What both
+generators promise (no import of the twin, every controller form, the command line) is
+specified once in test_generators.py; ``split_bag`` and ``split_read`` come from conftest.py.
 """
 
-import ast
-import json
 import math
-from pathlib import Path
-import subprocess
-import sys
 
-from bench_scripts import BENCH, load
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+from bench_scripts import load
 import numpy as np
 import pytest
-from rosbags.highlevel import AnyReader
 from rosbags.interfaces import QosDurability, QosReliability
-from rosbags.typesys import get_typestore, Stores
 import yaml
 
 gen = load('independent_generator')
@@ -29,49 +22,6 @@ JOINT_STATE = 'sensor_msgs/msg/JointState'
 MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
 # 40 s of stream at 250 Hz: 10 001 samples per topic, several duty cycles.
 SHORT = {'seed': 5, 'hours': 40.0 / 3600.0, 'rate_hz': 250.0, 'start_fraction': 0.3}
-
-
-def _read_rosbags(path):
-    """Return {topic: (connection, [(log_ns, message), ...])} read with rosbags."""
-    out = {}
-    with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
-        for con in reader.connections:
-            out[con.topic] = (con, [])
-        for con, log_ns, raw in reader.messages():
-            out[con.topic][1].append((log_ns, reader.deserialize(raw, con.msgtype)))
-    return out
-
-
-@pytest.fixture(scope='module')
-def split_bag(tmp_path_factory):
-    """Write a split-layout bag; return (path, stream, truth)."""
-    path = tmp_path_factory.mktemp('gen') / 'robot'
-    spec = gen.Spec(**SHORT)
-    stream = gen.generate(spec)
-    counts = gen.write_bag(stream, path)
-    truth = stream.truth_json()
-    truth['messages'] = counts
-    return path, stream, truth
-
-
-@pytest.fixture(scope='module')
-def split_read(split_bag):
-    """Read the split bag back with rosbags."""
-    return _read_rosbags(split_bag[0])
-
-
-def test_the_generator_imports_nothing_from_the_twin():
-    tree = ast.parse((BENCH / 'independent_generator.py').read_text())
-    modules = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    modules |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not {m for m in modules if m.split('.')[0] in ('reducer_twin', 'msg_adapters')}
-    code = ('import sys, tempfile; sys.path.insert(0, sys.argv[1]); import independent_generator '
-            'as g; g.generate_bag(g.Spec(hours=2 / 3600, rate_hz=100), tempfile.mkdtemp() + '
-            "'/b'); print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('reducer_twin', 'msg_adapters')))")
-    done = subprocess.run([sys.executable, '-c', code, str(BENCH)], capture_output=True,
-                          text=True, check=True)
-    assert done.stdout.strip() == '[]'
 
 
 def test_rosbags_reads_the_declared_topics_types_counts_and_qos(split_bag, split_read):
@@ -94,24 +44,15 @@ def test_rosbags_reads_the_declared_topics_types_counts_and_qos(split_bag, split
     assert float(meta['custom_data'][gen.AGING_KEY]) == 1.0
 
 
-def test_the_mcap_library_reads_every_message_with_its_qos(split_bag):
+def test_the_mcap_library_reads_every_message_with_its_qos(split_bag, mcap_reader):
     path, stream, truth = split_bag
-    (mcap_file,) = path.glob('*.mcap')
-    with open(mcap_file, 'rb') as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        summary = reader.get_summary()
-        channels = {c.id: c for c in summary.channels.values()}
-        counts = {channels[i].topic: c
-                  for i, c in summary.statistics.channel_message_counts.items()}
-        assert counts == truth['messages']
-        for channel in channels.values():
-            qos = yaml.safe_load(channel.metadata['offered_qos_profiles'])
-            assert qos[0]['reliability'] == 'reliable'
-            assert summary.schemas[channel.schema_id].encoding == 'ros2msg'
-        link = []
-        for _, channel, _, msg in reader.iter_decoded_messages(topics=['/joint_states']):
-            link.append(msg.position)
-    np.testing.assert_array_equal(np.array(link), stream.link)
+    counts, channels, link = mcap_reader(path, '/joint_states')
+    assert counts == truth['messages']
+    for channel, schema in channels:
+        qos = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+        assert qos[0]['reliability'] == 'reliable'
+        assert schema.encoding == 'ros2msg'
+    np.testing.assert_array_equal(link, stream.link)
 
 
 def test_messages_carry_the_generated_samples_in_receive_order(split_bag, split_read):
@@ -136,39 +77,6 @@ def test_stamps_are_jittered_by_the_drawn_amount_and_encoders_sample_on_the_cloc
         offset = (stamp - gen.START_S * 10 ** 9) * 1e-9 - stream.t
         np.testing.assert_allclose(np.std(offset), stream.jitter_s, rtol=0.05)
     assert not np.array_equal(stream.link_stamp_ns, stream.motor_stamp_ns)
-
-
-@pytest.mark.parametrize('layout,motor_angles,effort_on,velocity', [
-    ('combined', 'raw', 'link', True),
-    ('combined', 'output', 'motor', False),
-    ('split', 'output', 'motor', False),
-])
-def test_every_controller_form_is_written_as_asked(tmp_path, layout, motor_angles, effort_on,
-                                                   velocity):
-    spec = gen.Spec(seed=2, hours=3.0 / 3600.0, rate_hz=100.0, layout=layout,
-                    motor_angles=motor_angles, effort_on=effort_on, velocity=velocity)
-    stream = gen.generate(spec)
-    gen.write_bag(stream, tmp_path / 'b')
-    read = _read_rosbags(tmp_path / 'b')
-    scale = 1.0 if motor_angles == 'raw' else 1.0 / gen.RATIO
-    link = [m for _, m in read['/joint_states'][1]]
-    nan = np.full_like(stream.link, np.nan)
-    if layout == 'combined':
-        assert '/motor_states' not in read
-        assert list(link[0].name) == ['joint_1', 'joint_2', 'joint_3', 'joint_1_motor',
-                                      'joint_2_motor', 'joint_3_motor']
-        pos = np.array([m.position for m in link])
-        np.testing.assert_array_equal(pos, np.hstack([stream.link, stream.motor * scale]))
-        effort = np.array([m.effort for m in link])
-        want = np.hstack([stream.effort, nan] if effort_on == 'link'
-                         else [nan, stream.effort / gen.RATIO])
-        np.testing.assert_array_equal(effort, want)
-    else:
-        motor = [m for _, m in read['/motor_states'][1]]
-        np.testing.assert_array_equal([m.position for m in motor], stream.motor * scale)
-        np.testing.assert_array_equal([m.effort for m in motor], stream.effort / gen.RATIO)
-        assert all(len(m.effort) == 0 for m in link)
-    assert all((len(m.velocity) > 0) == velocity for m in link)
 
 
 def test_the_same_seed_draws_the_same_units_and_options_never_change_them():
@@ -226,13 +134,14 @@ def test_lost_motion_grows_monotonically_from_new_to_the_limit_at_the_drawn_life
         assert np.all(np.diff(slope) < 0)
 
 
-def test_aged_recording_truth_follows_its_law_and_the_remaining_life_its_hours(tmp_path):
+def test_aged_recording_truth_follows_its_law_and_the_remaining_life_its_hours(tmp_path,
+                                                                               rosbags_reader):
     # 1500 operating hours in 60 s of stream at 200 Hz, from 10 % of the life.
     spec = gen.Spec(seed=4, hours=1500.0, aging_factor=1500.0 * 3600.0 / 60.0, rate_hz=200.0,
                     start_fraction=0.1)
     stream = gen.generate(spec)
     gen.write_bag(stream, tmp_path / 'b')
-    read = _read_rosbags(tmp_path / 'b')
+    read = rosbags_reader(tmp_path / 'b')
     meta = yaml.safe_load((tmp_path / 'b' / 'metadata.yaml').read_text())
     aging = float(meta['rosbag2_bagfile_information']['custom_data'][gen.AGING_KEY])
     assert aging == pytest.approx(90_000.0)
@@ -305,47 +214,3 @@ def test_a_lightly_loaded_joint_rests_at_zero_torque_on_the_side_of_its_last_mov
     np.testing.assert_allclose(np.abs(side), j.play_memory, atol=1e-12)
     if j.play_memory > 0:
         assert side.min() < 0 < side.max()
-
-
-def test_the_cli_writes_the_bag_and_prints_its_truth(tmp_path):
-    out = tmp_path / 'bag'
-    done = subprocess.run([sys.executable, str(BENCH / 'independent_generator.py'), '--out',
-                           str(out), '--seed', '9', '--hours', str(5 / 3600), '--rate-hz', '125',
-                           '--kinds', 'base,forearm', '--json'],
-                          capture_output=True, text=True, check=True)
-    truth = json.loads(done.stdout)
-    assert set(truth['joints']) == {'joint_1', 'joint_2'}
-    assert truth['joints']['joint_1']['kind'] == 'base'
-    for key in ('lost_motion_new_arcmin', 'stiffness_nm_per_arcmin', 'law', 'law_exponent',
-                'lost_motion_end_arcmin', 'remaining_life_end_h'):
-        assert key in truth['joints']['joint_2']
-    assert truth['messages']['/joint_states'] == 626 and (out / 'metadata.yaml').exists()
-    assert [p.name for p in tmp_path.iterdir()] == ['bag']
-
-
-@pytest.mark.parametrize('args,named', [
-    (['--hours', '-1'], '--hours'),
-    (['--aging-factor', '0'], '--aging-factor'),
-    (['--kinds', 'base,elbowx'], '--kinds'),
-    (['--rate-hz', '0.5'], '--rate-hz'),
-    (['--effort-noise', '60'], '--effort-noise'),
-    (['--start-fraction', '-0.1'], '--start-fraction'),
-    (['--hours', '100000'], '--hours'),
-])
-def test_bad_options_give_one_error_line_and_exit_1(tmp_path, args, named):
-    done = subprocess.run([sys.executable, str(BENCH / 'independent_generator.py'), '--out',
-                           str(tmp_path / 'b'), *args], capture_output=True, text=True)
-    assert done.returncode == 1 and done.stdout == ''
-    (line,) = done.stderr.splitlines()
-    assert line.startswith('ERROR: ') and named in line and 'got' in line
-    assert not (tmp_path / 'b').exists()
-
-
-def test_an_existing_out_is_refused_and_left_untouched(tmp_path):
-    out = tmp_path / 'b'
-    out.mkdir()
-    (out / 'keep').write_text('x')
-    done = subprocess.run([sys.executable, str(BENCH / 'independent_generator.py'), '--out',
-                           str(out), '--hours', str(1 / 3600)], capture_output=True, text=True)
-    assert done.returncode == 1 and 'exists' in done.stderr
-    assert [p.name for p in out.iterdir()] == ['keep']

@@ -6,22 +6,14 @@ lost motion (width of the torsional curve at +-3 % rated torque, at the middle o
 the hysteresis loop, without the elastic windup) measured back from the recorded
 encoders, the growth law's end at 3 arcmin, the direction-dependent efficiency
 measured back from the recorded efforts, a duty that does not repeat, dropped
-messages; every bag is read back with rosbags and with the mcap library.
+messages; every bag is read back with rosbags and with the mcap library. What both
+generators promise (no import of the twin, every controller form, the command line) is
+specified once in test_generators.py; ``split_bag`` and ``split_read`` come from conftest.py.
 """
 
-import ast
-import json
-from pathlib import Path
-import subprocess
-import sys
-
-from bench_scripts import BENCH, load
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
+from bench_scripts import load
 import numpy as np
 import pytest
-from rosbags.highlevel import AnyReader
-from rosbags.typesys import get_typestore, Stores
 import yaml
 
 gen = load('third_generator')
@@ -31,48 +23,6 @@ ARCMIN = gen.ARCMIN
 # constant over the recording).
 SHORT = {'seed': 11, 'kinds': ('base', 'shoulder', 'forearm'), 'hours': 60.0 / 3600.0,
          'rate_hz': 250.0, 'start_fraction': 0.5}
-
-
-def _read_rosbags(path):
-    """Return {topic: (connection, [(log_ns, message), ...])} read with rosbags."""
-    out = {}
-    with AnyReader([Path(path)], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
-        for con in reader.connections:
-            out[con.topic] = (con, [])
-        for con, log_ns, raw in reader.messages():
-            out[con.topic][1].append((log_ns, reader.deserialize(raw, con.msgtype)))
-    return out
-
-
-@pytest.fixture(scope='module')
-def split_bag(tmp_path_factory):
-    """Write a split-layout bag; return (path, stream, truth)."""
-    path = tmp_path_factory.mktemp('gen3') / 'robot'
-    stream = gen.generate(gen.Spec(**SHORT))
-    counts = gen.write_bag(stream, path)
-    truth = stream.truth_json()
-    truth['messages'] = counts
-    return path, stream, truth
-
-
-@pytest.fixture(scope='module')
-def split_read(split_bag):
-    """Read the split bag back with rosbags."""
-    return _read_rosbags(split_bag[0])
-
-
-def test_the_generator_imports_nothing_from_the_twin():
-    tree = ast.parse((BENCH / 'third_generator.py').read_text())
-    modules = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
-    modules |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert not {m for m in modules if m.split('.')[0] in ('reducer_twin', 'msg_adapters')}
-    code = ('import sys, tempfile; sys.path.insert(0, sys.argv[1]); import third_generator '
-            'as g; g.generate_bag(g.Spec(hours=2 / 3600, rate_hz=100), tempfile.mkdtemp() + '
-            "'/b'); print(sorted(m for m in sys.modules if m.split('.')[0] in "
-            "('reducer_twin', 'msg_adapters')))")
-    done = subprocess.run([sys.executable, '-c', code, str(BENCH)], capture_output=True,
-                          text=True, check=True)
-    assert done.stdout.strip() == '[]'
 
 
 def test_the_catalogue_lost_motion_is_the_curve_width_at_3_percent_without_windup():
@@ -235,53 +185,11 @@ def test_rosbags_reads_the_declared_topics_with_the_drops_the_truth_counts(split
                                truth['joints']['joint_2']['lost_motion_end_arcmin'], rtol=1e-12)
 
 
-def test_the_mcap_library_reads_every_message(split_bag):
+def test_the_mcap_library_reads_every_message(split_bag, mcap_reader):
     path, stream, truth = split_bag
-    (mcap_file,) = path.glob('*.mcap')
-    with open(mcap_file, 'rb') as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        summary = reader.get_summary()
-        channels = {c.id: c for c in summary.channels.values()}
-        counts = {channels[i].topic: c
-                  for i, c in summary.statistics.channel_message_counts.items()}
-        assert counts == truth['messages']
-        motor = [msg.position for _, _, _, msg in
-                 reader.iter_decoded_messages(topics=['/motor_states'])]
-    np.testing.assert_array_equal(np.array(motor), stream.motor[stream.motor_kept])
-
-
-@pytest.mark.parametrize('layout,motor_angles,effort_on,velocity', [
-    ('combined', 'raw', 'link', True),
-    ('combined', 'output', 'motor', False),
-    ('split', 'output', 'motor', False),
-])
-def test_every_controller_form_is_written_as_asked(tmp_path, layout, motor_angles, effort_on,
-                                                   velocity):
-    spec = gen.Spec(seed=2, hours=3.0 / 3600.0, rate_hz=100.0, layout=layout,
-                    motor_angles=motor_angles, effort_on=effort_on, velocity=velocity)
-    stream = gen.generate(spec)
-    gen.write_bag(stream, tmp_path / 'b')
-    read = _read_rosbags(tmp_path / 'b')
-    scale = 1.0 if motor_angles == 'raw' else 1.0 / gen.RATIO
-    link = [m for _, m in read['/joint_states'][1]]
-    kept = stream.link_kept
-    if layout == 'combined':
-        assert '/motor_states' not in read
-        np.testing.assert_array_equal(kept, stream.motor_kept)
-        assert list(link[0].name) == ['joint_1', 'joint_2', 'joint_3', 'joint_1_motor',
-                                      'joint_2_motor', 'joint_3_motor']
-        pos = np.array([m.position for m in link])
-        np.testing.assert_array_equal(pos, np.hstack([stream.link, stream.motor * scale])[kept])
-        effort = np.array([m.effort for m in link])[:, 3 if effort_on == 'motor' else 0]
-        want = stream.effort[kept, 0] / (gen.RATIO if effort_on == 'motor' else 1.0)
-        np.testing.assert_array_equal(effort, want)
-    else:
-        motor = [m for _, m in read['/motor_states'][1]]
-        mk = stream.motor_kept
-        np.testing.assert_array_equal([m.position for m in motor], stream.motor[mk] * scale)
-        np.testing.assert_array_equal([m.effort for m in motor], stream.effort[mk] / gen.RATIO)
-        assert all(len(m.effort) == 0 for m in link)
-    assert all((len(m.velocity) > 0) == velocity for m in link)
+    counts, _, motor = mcap_reader(path, '/motor_states')
+    assert counts == truth['messages']
+    np.testing.assert_array_equal(motor, stream.motor[stream.motor_kept])
 
 
 def test_the_same_seed_draws_the_same_recording_and_options_never_change_the_units():
@@ -321,50 +229,7 @@ def test_drawn_truths_span_the_stated_ranges():
     assert np.all(rates > 0.0)
 
 
-def test_the_cli_writes_the_bag_and_prints_its_truth(tmp_path):
-    out = tmp_path / 'bag'
-    done = subprocess.run([sys.executable, str(BENCH / 'third_generator.py'), '--out',
-                           str(out), '--seed', '9', '--hours', str(5 / 3600), '--rate-hz', '125',
-                           '--kinds', 'base,forearm', '--json'],
-                          capture_output=True, text=True, check=True)
-    truth = json.loads(done.stdout)
-    assert set(truth['joints']) == {'joint_1', 'joint_2'}
-    assert truth['joints']['joint_1']['kind'] == 'base'
-    for key in ('lost_motion_new_arcmin', 'knee_torque_pct', 'hysteresis_arcmin',
-                'efficiency', 'lost_motion_end_arcmin', 'remaining_life_end_h'):
-        assert key in truth['joints']['joint_2']
-    assert truth['messages']['/joint_states'] == 626 - truth['dropped_link']
-    assert [p.name for p in tmp_path.iterdir()] == ['bag']
-
-
-@pytest.mark.parametrize('args,named', [
-    (['--hours', '-1'], '--hours'),
-    (['--aging-factor', '0'], '--aging-factor'),
-    (['--kinds', 'base,elbowx'], '--kinds'),
-    (['--rate-hz', '0.5'], '--rate-hz'),
-    (['--start-fraction', '-0.1'], '--start-fraction'),
-    (['--hours', '100000'], '--hours'),
-])
-def test_bad_options_give_one_error_line_and_exit_1(tmp_path, args, named):
-    done = subprocess.run([sys.executable, str(BENCH / 'third_generator.py'), '--out',
-                           str(tmp_path / 'b'), *args], capture_output=True, text=True)
-    assert done.returncode == 1 and done.stdout == ''
-    (line,) = done.stderr.splitlines()
-    assert line.startswith('ERROR: ') and named in line and 'got' in line
-    assert not (tmp_path / 'b').exists()
-
-
 @pytest.mark.parametrize('option', [{'law': 'linear'}, {'effort_noise_pct': 2.0}])
 def test_options_this_generator_draws_itself_are_refused(option):
     with pytest.raises(gen.GeneratorError, match='not an option'):
         gen.generate(gen.Spec(hours=1 / 3600, **option))
-
-
-def test_an_existing_out_is_refused_and_left_untouched(tmp_path):
-    out = tmp_path / 'b'
-    out.mkdir()
-    (out / 'keep').write_text('x')
-    done = subprocess.run([sys.executable, str(BENCH / 'third_generator.py'), '--out',
-                           str(out), '--hours', str(1 / 3600)], capture_output=True, text=True)
-    assert done.returncode == 1 and 'exists' in done.stderr
-    assert [p.name for p in out.iterdir()] == ['keep']
