@@ -598,7 +598,14 @@ class WorkerBacks:
         self.terminate()
 
     def terminate(self):
-        """Stop the worker at once (after an error)."""
+        """
+        Stop the worker at once (after an error).
+
+        Work still queued for it is dropped: the queue's feeder thread would
+        otherwise wait at exit to write it into a pipe nobody reads (the
+        analysing process hung on a full disk with the worker gone).
+        """
+        self._inbox.cancel_join_thread()
         if self._proc.is_alive():
             self._proc.terminate()
             self._proc.join(timeout=5)
