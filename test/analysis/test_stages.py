@@ -10,7 +10,7 @@ def test_a_worker_stopped_after_an_error_lets_the_analysing_process_exit():
     # message) while more work for it may still be queued. That work is dropped: the
     # queue must not keep the process waiting at exit to write it into a pipe nobody
     # reads (it hung on a 3 MB tmpfs before).
-    script = textwrap.dedent('''
+    script = textwrap.dedent("""
         import numpy as np
         from reducer_twin.analysis.stages import WorkerBacks
         backs = WorkerBacks()
@@ -19,7 +19,7 @@ def test_a_worker_stopped_after_an_error_lets_the_analysing_process_exit():
             backs.submit('joint_1', 'windows', [np.zeros(65536)])
         backs.terminate()
         print('exited')
-    ''')
+    """)
     result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,
                             timeout=120)
     assert result.returncode == 0, result.stderr
