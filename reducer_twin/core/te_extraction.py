@@ -852,7 +852,6 @@ class WindowAnalyzer:
         self._fric_dir = np.zeros(2)
         self.coulomb_friction = 0.0
         self.viscous_friction = 0.0
-        self.load_friction = 0.0
         try:
             lo, hi = (float(v) for v in bin_range)
         except (TypeError, ValueError):
@@ -1252,18 +1251,10 @@ class WindowAnalyzer:
         explained, by least squares pooled over recent windows
         (``friction_memory_windows``), as the rigid-body load (a constant,
         ``cos``/``sin`` of the output angle and of twice it, the output
-        acceleration) plus Coulomb ``Fc·tanh(omega/omega_s)``, load-dependent
-        Coulomb ``Fl·|L|·tanh(omega/omega_s)`` and viscous ``Fv·omega``
-        friction; ``Fc``, ``Fl`` and ``Fv`` (each at least 0, 0 while not
+        acceleration) plus Coulomb ``Fc·tanh(omega/omega_s)`` and viscous
+        ``Fv·omega`` friction; ``Fc`` and ``Fv`` (each at least 0, 0 while not
         identifiable: a joint that never reversed) are subtracted when they
-        amount to :data:`_FRICTION_FLOOR` of rated torque or more. ``Fl`` is the
-        gearing's efficiency as a motor current sees it (``T/eta`` driving,
-        ``T·eta`` back-driven: a loss of about ``(1 - eta)·|T|`` in the direction
-        of motion), which a constant ``Fc`` cannot stand for: fitted as one, it
-        is taken out at zero load too and moves the torque at every reversal by
-        several times the lost-motion test torque. ``L`` is the rigid-body load
-        of a first fit of the same windows without it (noise-free; the effort
-        itself would carry the friction into its own regressor). Velocity-
+        amount to :data:`_FRICTION_FLOOR` of rated torque or more. Velocity-
         proportional drag downstream of the mesh (cables, seals of the link)
         is taken out with ``Fv`` too, although the reducer carries it: the
         effort cannot tell the two apart, so the caller treats a sample whose
@@ -1294,7 +1285,7 @@ class WindowAnalyzer:
         accel = np.where(inner, (_shifted(speed_s, half) - _shifted(speed_s, -half))
                          / np.maximum(_shifted(t, half) - _shifted(t, -half), 1e-12), 0.0)
         # The regressors written in place: [1, cos, sin, cos 2theta, sin 2theta, accel,
-        # Coulomb shape, speed, load times the Coulomb shape].
+        # Coulomb shape, speed].
         x = np.empty((_FRICTION_TERMS, n))
         x[0] = 1.0
         (x[2], x[1]), (x[4], x[3]) = harmonics[1], harmonics[2]
@@ -1304,40 +1295,28 @@ class WindowAnalyzer:
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
         taken = np.zeros((starts.size, 3))
-        bounds = list(zip(starts.tolist(), ends.tolist()))
-        load = np.zeros(n)
-        for first in (True, False):
-            np.multiply(load, coulomb_shape, out=x[8])
-            pooled = self._pooled_friction_sums(x, effort_s, speed, use, starts, ends)
-            # Every window's fit at once (the same LAPACK call per window as one at a time).
-            betas, idents = _solve_identifiable_many(*(np.array([p[j] for p in pooled])
-                                                       for j in range(3)))
-            if first:   # the rigid-body load of this first fit, for the load-dependent term
-                for k, (a, b) in enumerate(bounds):
-                    if idents[k][:6].all():
-                        np.abs(betas[k][:6] @ x[:6, a:b], out=load[a:b])
-        for k, (a, b) in enumerate(bounds):
+        pooled = self._pooled_friction_sums(x, effort_s, speed, use, starts, ends)
+        # Every window's fit at once (the same LAPACK call per window as one at a time).
+        betas, idents = _solve_identifiable_many(*(np.array([p[j] for p in pooled])
+                                                   for j in range(3)))
+        for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
             (self._fric_n, self._fric_r, self._fric_e, self._fric_yy, self._fric_m,
              self._fric_dir) = pooled[k]
             beta, ident = betas[k], idents[k]
-            fc, fv, fl = self._significant_friction(beta, ident)
+            fc, fv = self._significant_friction(beta, ident)
             self.coulomb_friction, self.viscous_friction = fc, fv
-            self.load_friction = fl
             # The effort as the fit explains it, where its acceleration is whole (the
             # window's edges keep NaN); less the friction taken out, as the torque is.
             model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
             rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
-            # The load-dependent part counts as Coulomb friction at the window's RMS load.
-            coulomb = fc + fl * float(np.sqrt(np.mean(load[a:b] ** 2))) if fl else fc
-            taken[k] = (coulomb, fv, rms_speed)
-            if not (fc or fv or fl):
+            taken[k] = (fc, fv, rms_speed)
+            if not (fc or fv):
                 continue    # nothing significant to take out
-            typical = coulomb + fv * rms_speed
+            typical = fc + fv * rms_speed
             if typical >= _FRICTION_FLOOR * self.rated_torque:
-                loss = (fc + fl * load[a:b]) * coulomb_shape[a:b] + fv * speed[a:b]
-                out[a:b] = torque[a:b] - loss
+                out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
                 drag[a:b] = fv * speed[a:b]
-                model[a:b] -= loss
+                model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
             else:
                 taken[k, :2] = 0.0
         return out, drag, model, taken
@@ -1416,21 +1395,21 @@ class WindowAnalyzer:
         return out, band * np.sqrt(gain)
 
     def _significant_friction(self, beta, ident):
-        """Coulomb, viscous and load-dependent friction of the fit, 0 unless 3 se above 0."""
+        """Coulomb and viscous friction of the pooled fit, 0 unless 3 standard errors above 0."""
         free = self._fric_m - np.count_nonzero(ident)
         # Both directions of motion, each in a fifth of the samples: otherwise the sign of
         # the speed is a constant and Coulomb friction cannot be told from the load.
         if free <= 0 or self._fric_dir.min() < 0.2 * self._fric_m:
-            return 0.0, 0.0, 0.0
+            return 0.0, 0.0
         rss = self._fric_yy - 2.0 * beta @ self._fric_r + beta @ self._fric_n @ beta
         idx = np.flatnonzero(ident)
         try:
             cov = np.linalg.inv(self._fric_n[np.ix_(idx, idx)]) * max(rss, 0.0) / free
         except np.linalg.LinAlgError:
-            return 0.0, 0.0, 0.0
+            return 0.0, 0.0
         se = dict(zip(idx.tolist(), np.sqrt(np.maximum(np.diag(cov), 0.0)).tolist()))
         out = []
-        for j in (6, 7, 8):
+        for j in (6, 7):
             value = float(beta[j]) if ident[j] else 0.0
             out.append(value if value > 3.0 * se.get(j, math.inf) else 0.0)
         return tuple(out)
@@ -2001,8 +1980,8 @@ RMS speed] for which the pooled fit restarts: its flank groups were formed with 
 _POOL_JUMP = 0.01
 """Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
 
-_FRICTION_TERMS = 9
-"""Regressors of the friction identification (load: 6, Coulomb, viscous, load-dependent)."""
+_FRICTION_TERMS = 8
+"""Regressors of the friction identification (load: 6, Coulomb, viscous)."""
 
 _FRICTION_SPEED = 0.01
 """Speed [rad/s] over which Coulomb friction changes sign (``tanh(omega/omega_s)``)."""

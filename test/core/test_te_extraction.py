@@ -558,35 +558,12 @@ def test_friction_the_effort_carries_is_identified_and_taken_out_of_the_torque()
                                                            rel=0.05)
 
 
-def test_a_motor_current_through_a_gearing_of_efficiency_eta_reads_the_lost_motion_right():
-    # A motor current pays the gearing's losses: the effort is T/eta while the motor
-    # drives the load and T*eta while the load drives the motor, a loss of (1 - eta) of
-    # the load in the direction of motion. Read as a constant Coulomb friction it is
-    # taken out at zero load too and moves the torque at every reversal by several times
-    # the lost-motion test torque.
-    cfg = SimConfig(load='gravity', load_torque_nm=470.0, effort_noise_nm=7.8,
-                    rate_hz=500.0, initial_wear_m=10e-6, aging_factor=0.0, exact_mesh=False,
-                    seed=4)
-    b = JointSimulator(PARAMS, cfg).step(60000)
-    eta = 0.8
-    driving = b.effort * b.link_velocity > 0.0
-    effort = np.where(driving, b.effort / eta, b.effort * eta)
-    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO, max_gap_s=0.05)
-    analyzer = WindowAnalyzer(PARAMS)
-    feats = analyzer.update(stream, effort, b.link_velocity) + analyzer.flush()
-    assert 0.5 * (1.0 - eta) < analyzer.load_friction < 1.5 * (1.0 / eta - 1.0)
-    lm = np.array([f.lost_motion for f in feats])
-    assert np.median(lm[np.isfinite(lm)]) == pytest.approx(lost_motion(10e-6, PARAMS),
-                                                           rel=0.05)
-
-
 def test_no_friction_is_taken_out_of_an_effort_without_friction():
     _, b = simulated(samples=30000)
     analyzer = WindowAnalyzer(PARAMS)
     stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
     analyzer.update(stream, b.effort, b.link_velocity)
     assert analyzer.coulomb_friction < 0.005 * PARAMS.rating.rated_torque
-    assert analyzer.load_friction < 0.005
 
 
 # -- reducers unlike the model ------------------------------------------------------------------
