@@ -1090,7 +1090,7 @@ class WearEstimator:
         log_model = _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
                                - 0.5 * (z - zc) ** 2 / v)
         since = self._growth.windows - snap['windows']
-        growth = self._growth.rolled_back(self._recent_terms[len(self._recent) - since:],
+        growth = self._growth.rolled_back(self._recent_terms[len(self._recent_terms) - since:],
                                           snap['growth_exposure'])
         lw, mean, var = growth.predictive(at, R)
         log_trend = _logsumexp(lw - 0.5 * np.log(var) - 0.5 * (z - mean) ** 2 / var)
