@@ -166,9 +166,36 @@ class RosHarness:
     def call(self, client, request, timeout=10.0):
         """Call a service through ``client`` and return its response."""
         self.spin_until(client.service_is_ready, timeout, what=f'service {client.srv_name}')
-        future = client.call_async(request)
-        self.spin_until(future.done, timeout, what=f'a response of {client.srv_name}')
-        return future.result()
+        return self.ask(lambda: client.call_async(request), f'a response of {client.srv_name}')
+
+    def ask(self, send, what, timeout=30.0, resend_s=5.0):
+        """
+        Send a service request until it is answered; return the response.
+
+        A server is "ready" once its request reader matched the client, which can be
+        before its response writer matched the client's reader: DDS then drops that
+        first response. Each request asked here is idempotent, so it is sent again
+        every ``resend_s`` until one answer arrives.
+
+        Parameters
+        ----------
+        send : callable
+            Sends the request and returns its future.
+        what : str
+            What is awaited, named when ``timeout`` passes without an answer.
+        timeout : float
+            Wall-time limit over all attempts [s].
+        resend_s : float
+            Wait for one answer before the request is sent again [s].
+
+        """
+        end = time.monotonic() + timeout
+        while True:
+            future = send()
+            if self.spin_until(future.done, min(resend_s, max(end - time.monotonic(), 0.0))):
+                return future.result()
+            if time.monotonic() > end:
+                pytest.fail(f'timed out after {timeout:g} s waiting for {what}')
 
     @staticmethod
     def statuses(messages, name):

@@ -76,16 +76,17 @@ def test_a_bad_value_set_on_a_running_program_is_rejected_and_the_old_value_stay
         ros.spin_until(lambda: client.services_are_ready(), timeout=30.0,
                        what=f'the parameter services of {name}')
 
-        def call(future):
-            ros.spin_until(future.done, timeout=10.0, what='a parameter service response')
-            return future.result()
+        def get():
+            return ros.ask(lambda: client.get_parameters(['life.warn_s', 'life.error_s']),
+                           'a get_parameters response').values
 
-        before = call(client.get_parameters(['life.warn_s', 'life.error_s'])).values
+        before = get()
         # error_s above warn_s: each value is in range, the pair is not.
-        result = call(client.set_parameters([Parameter('life.error_s', value=1e9)])).results
+        result = ros.ask(lambda: client.set_parameters([Parameter('life.error_s', value=1e9)]),
+                         'a set_parameters response').results
         assert not result[0].successful
         assert 'must not exceed life.warn_s' in result[0].reason
-        after = call(client.get_parameters(['life.warn_s', 'life.error_s'])).values
+        after = get()
         assert [v.double_value for v in after] == [v.double_value for v in before]
         assert proc.poll() is None, 'the program keeps running'
     finally:
