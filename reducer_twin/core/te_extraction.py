@@ -796,7 +796,10 @@ class WindowAnalyzer:
         Length of the centred moving average applied to the effort inside
         each window before it is binned [s] (0: none). A motor-current torque
         estimate carries white noise of a few % of rated torque; the
-        reducer's torque changes with the robot's dynamics, far slower.
+        reducer's torque changes with the robot's dynamics, far slower. The
+        average is lengthened where the effort is noisier than it can quiet
+        (:meth:`WindowAnalyzer._quiet_half`), up to
+        :data:`_SMOOTHING_MAX_S`.
     sign_sigmas : float
         Samples whose smoothed torque lies within this many standard
         deviations of its noise from zero take no part in the hysteresis:
@@ -1145,7 +1148,7 @@ class WindowAnalyzer:
         if self.friction:
             torque, drag, model, taken = self._friction(torque, t, harmonics, speed, win,
                                                         starts, ends, half)
-        torque, band = self._smooth_torque(torque, half, win, starts, ends)
+        torque, band = self._smooth_torque(torque, half, t, model, win, starts, ends)
         if model is not None:
             torque, band = self._toward_model(torque, band, model, win, starts)
         # Viscous friction of the motor side and drag of the link both follow the speed;
@@ -1414,7 +1417,7 @@ class WindowAnalyzer:
             out.append(value if value > 3.0 * se.get(j, math.inf) else 0.0)
         return tuple(out)
 
-    def _smooth_torque(self, torque, half, win, starts, ends):
+    def _smooth_torque(self, torque, half, t, model, win, starts, ends):
         """
         Centred moving average of the effort inside each window, and its noise band.
 
@@ -1424,7 +1427,8 @@ class WindowAnalyzer:
         samples. Samples whose smoothed torque is within ``sign_sigmas`` of
         that noise from zero (or from the torque with the viscous friction
         left in) are ambiguous: their flank is unknown. ``half`` is the
-        average's half-width in samples (:meth:`_smoothing_half`).
+        average's half-width in samples (:meth:`_smoothing_half`), lengthened
+        for a noisy effort by :meth:`_quiet_half`.
 
         Returns
         -------
@@ -1433,10 +1437,75 @@ class WindowAnalyzer:
             both like ``torque``.
 
         """
-        smooth, count = _window_mean(torque, half, win, starts, ends)
         sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
                                          starts, ends - 2) / math.sqrt(1.5)
+        half = self._quiet_half(sigma, half, t, model)
+        smooth, count = _window_mean(torque, half, win, starts, ends)
         return smooth, self.sign_sigmas * sigma[win] / np.sqrt(count)
+
+    def _quiet_half(self, sigma, half, t, model):
+        """
+        Half-width of the torque average that quiets the effort's noise beside the test torque.
+
+        The smoothed torque places each sample in its ``|T|`` bin and flank. Where
+        its noise ``sigma/sqrt(m)`` is a sizeable part of the lost-motion test
+        torque, samples near it land in the wrong bins and flanks: the flank
+        levels no longer follow the true torque, and on a joint whose load
+        follows its position (a base rotation: accelerating at one end of a move,
+        braking at the other) the harmonics of the output angle take up part of
+        the lost motion. Measured on a base rotation with an effort noise of 2 %
+        of rated torque at 1 kHz and a 0.03 s average: 6.5 % low, 11 % low in its
+        last windows, 1 % with the true torque. The average is lengthened until
+        its noise is :data:`_SMOOTHING_NOISE` of the test torque, but no longer
+        than half the time the load takes to pass the test torque (an average
+        over the passage mixes the two flanks: a 0.15 s average read an
+        unloaded joint whose load passes it in 17 ms 12 % low) nor than
+        :data:`_SMOOTHING_MAX_S`. The passage is timed on the rigid-body load
+        of :meth:`_friction` (noise-free); without it the average keeps
+        ``half``.
+
+        Parameters
+        ----------
+        sigma : ndarray
+            Noise of the raw effort per window [N·m].
+        half : int
+            Half-width of the ``torque_smoothing_s`` average [samples].
+        t : ndarray
+            Stamps of the samples [s].
+        model : ndarray or None
+            The rigid-body load as :meth:`_friction` explains the effort [N·m].
+
+        Returns
+        -------
+        int
+            Half-width [samples], at least ``half``.
+
+        """
+        noise = float(np.median(sigma)) if sigma.size else 0.0
+        if half <= 0 or model is None or not noise > 0.0:
+            return half
+        samples = (noise / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
+        period = float(np.median(np.diff(t)))
+        size = np.abs(model)
+        near = np.flatnonzero((size > 0.5 * self.takeup_torque)
+                              & (size < 1.5 * self.takeup_torque))
+        # The slope over the average's own span: the load model carries the noise of the
+        # speed (its acceleration and drag terms), which a slope between neighbours
+        # multiplies.
+        lag = 2 * half
+        near = near[(near >= lag) & (near < model.size - lag)]
+        if not period > 0.0 or near.size == 0:
+            return half
+        with np.errstate(invalid='ignore'):
+            slope = (np.abs(model[near + lag] - model[near - lag])
+                     / (t[near + lag] - t[near - lag]))
+        slope = slope[np.isfinite(slope)]
+        if slope.size == 0:
+            return half
+        passage = self.takeup_torque / max(float(np.median(slope)), 1e-12)
+        longest = min(0.5 * passage, _SMOOTHING_MAX_S)
+        return max(half, min(math.ceil(0.5 * (samples - 1.0)),
+                             int(0.5 * longest / period)))
 
     def _smoothing_half(self, t):
         """Half-width in samples of the ``torque_smoothing_s`` average at the stamps' rate."""
@@ -1976,6 +2045,12 @@ _POOL_FRICTION_JUMP = 0.01
 Change of the friction taken out of the effort [fraction of rated torque, at the window's
 RMS speed] for which the pooled fit restarts: its flank groups were formed with another torque.
 """
+
+_SMOOTHING_NOISE = 0.1
+"""Noise of the smoothed torque, as a fraction of the lost-motion test torque, sought."""
+
+_SMOOTHING_MAX_S = 0.15
+"""Longest torque average [s] (five times the default ``torque_smoothing_s``)."""
 
 _POOL_JUMP = 0.01
 """Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""

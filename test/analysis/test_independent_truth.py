@@ -103,6 +103,22 @@ def test_the_pooled_fit_restarts_once_the_friction_of_an_unloaded_joint_is_known
     assert observed == pytest.approx(stream.lost_motion[-1, 0], rel=0.07)
 
 
+def test_a_noisy_effort_on_a_slowly_loaded_joint_is_averaged_longer_not_read_low():
+    # Seed 2000's base rotation: inertia and drag, its load passes the lost-motion test
+    # torque in about 0.4 s. At an effort noise of 2 % of rated torque the 0.03 s average
+    # left a noise of 0.3 times the test torque: samples near it fell into the wrong bins
+    # and flanks, and the harmonics of the output angle (the base accelerates at one end
+    # of a move and brakes at the other) took up part of the lost motion: 6.5 % low over
+    # the recording, 12 % in its last ten windows (1 % with the noise-free torque). The
+    # average is lengthened until its noise is a tenth of the test torque, within half
+    # the load's passage (a fast reversal keeps the short one: test_te_extraction).
+    stream, _, windows = bench_recording(2000, 0)
+    lm = np.array([w.lost_motion for w in windows])
+    truth = stream.lost_motion[-1, 0]
+    assert np.nanmedian(lm) == pytest.approx(truth, rel=0.04)
+    assert np.nanmedian(lm[-10:]) == pytest.approx(truth, rel=0.07)
+
+
 def test_a_joint_whose_windows_rarely_hold_both_signs_of_a_load_is_read_in_most_windows():
     # Seed 2005's forearm at 400 Hz: its torque changes sign once per move, so most 2.5 s
     # windows meet a load under one sign only. 2 of 60 windows gave a lost motion and the
@@ -120,7 +136,10 @@ def test_a_forearm_at_100_hz_reads_its_lost_motion_near_the_test_torque(seed):
     # speed, so each flank of the bins below 10 % of rated torque held 5-20 samples, under
     # the 20 a flank needed: the lost motion was extrapolated from 15 % of rated torque on
     # and read 4 % high (31) and 6 % low (2023; 9 % at 2 % noise). A flank below 200 Hz
-    # needs the samples of the same stream time, 10 at 100 Hz.
+    # needs the samples of the same stream time, 10 at 100 Hz. The median of 15 windows
+    # scatters by about 1 % (windows +-3-6 %): seed 31 read +0.9 % over 150 s and +2.1 %
+    # over 300 s with a 0.03 s torque average, +2.2 % and +1.4 % with the lengthened one
+    # (+0.8 % over 600 s with either), so the bound is 3 %, not 2 %.
     start = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
     stream = gen.generate(gen.Spec(seed=seed, kinds=('base', 'shoulder', 'forearm'),
                                    hours=150.0 / 3600.0, start_fraction=start,
@@ -133,7 +152,7 @@ def test_a_forearm_at_100_hz_reads_its_lost_motion_near_the_test_torque(seed):
     near = [w.hysteresis_torque.min() < 0.1 * gen.RATED_TORQUE_NM for w in observed]
     assert len(observed) >= 12 and np.mean(near) >= 0.4
     assert np.median([w.lost_motion for w in observed]) == pytest.approx(
-        stream.lost_motion[-1, 2], rel=0.02)
+        stream.lost_motion[-1, 2], rel=0.03)
 
 
 @pytest.mark.parametrize('seed', (44, 46))
