@@ -890,6 +890,7 @@ class WindowAnalyzer:
         self.ignored_samples = 0
         self.clock_resets = 0
         self.samples_without_effort = 0
+        self.largest_effort = 0.0
         self.derived_velocity = 0
         self.samples_seen = 0
         self.windows_emitted = 0
@@ -978,6 +979,8 @@ class WindowAnalyzer:
             new = {'t': t, 'te': pick(stream.te), 'theta': pick(stream.output_angle),
                    'torque': pick(effort), 'speed': pick(velocity), 'dt': dt,
                    'gap': gap.astype(float)}
+            self.largest_effort = max(self.largest_effort,
+                                      float(np.max(np.abs(new['torque']))))
             self._buf = {k: np.concatenate([self._buf[k], new[k]]) if self._buf[k].size
                          else new[k] for k in _BUFFER}
             self._aliased = True
@@ -1017,6 +1020,14 @@ class WindowAnalyzer:
         if math.isfinite(rate) and rate < LOW_RATE_HZ:
             return (f'{rate:.0f} Hz: too few samples per torque reversal in '
                     f'{self.windows_emitted} windows')
+        if self.largest_effort < self.edges[0]:
+            # Nothing reaches the lowest torque bin: a joint that carries no load, or an
+            # effort in other units (a motor torque taken for the output torque).
+            return (f'the effort on {effort_source} stays within +-{self.largest_effort:.3g} '
+                    f'N*m in {self.windows_emitted} windows, below the {self.edges[0]:.3g} N*m '
+                    f'({100.0 * self.edges[0] / self.rated_torque:.0f} % of the rated torque) '
+                    'from which the lost motion is read: a joint without load, or an effort '
+                    'in other units (a motor torque: set motor_effort_units to motor)')
         return (f'no torque reversal at equal |T| above the effort noise in '
                 f'{self.windows_emitted} windows (the joint did not reverse under load)')
 

@@ -537,6 +537,28 @@ def test_a_joint_that_never_reverses_under_load_is_reported_as_such():
     assert 'no torque reversal' in analyzer.not_observed_reason()
 
 
+def test_an_effort_too_small_to_read_is_named_as_such_not_as_a_joint_without_reversals():
+    # A motor torque reported beside motor angles divided by the ratio is taken for the
+    # output torque: the effort is 1/ratio of it and never reaches the lowest torque bin.
+    # The twin said "the joint did not reverse under load", which sends the engineer to
+    # the robot's motion instead of the effort's units.
+    _, b = simulated(samples=8000)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, b.effort / RATIO, b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_emitted >= 1 and analyzer.windows_observed == 0
+    reason = analyzer.not_observed_reason('/arm/joint_states')
+    assert reason.startswith('the effort on /arm/joint_states stays within +-')
+    assert 'below the 15.7 N*m (2 % of the rated torque)' in reason
+    assert 'motor_effort_units' in reason
+    # The same effort in output torque is read.
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, b.effort, b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
+
+
 def test_friction_the_effort_carries_is_identified_and_taken_out_of_the_torque():
     # A motor current also pays the motor's and first stage's friction, which the cycloid
     # mesh does not transmit (on the independent generator's unloaded joints it made the

@@ -1,0 +1,48 @@
+"""
+reducer-twin analyze on recordings of the third generator (bench/third_generator.py).
+
+The generator's physics is unlike the twin's (its figures are printed by
+``bench/bench_accuracy.py --generators third``); here, what the twin says about a
+controller form that hides the torque: a motor torque on the ``<joint>_motor`` entries
+beside motor angles divided by the ratio.
+"""
+
+import json
+import subprocess
+import sys
+
+from bench_scripts import load
+import pytest
+
+gen = load('third_generator')
+
+
+@pytest.mark.slow
+def test_a_motor_torque_taken_for_the_output_torque_is_named_and_the_setting_reads_it(
+        tmp_path):
+    # With the motor angles divided by the ratio, 'auto' takes the motor entries' effort
+    # for output torque; a motor torque is then 1/ratio of it and never reaches the
+    # lowest torque bin. Each joint is "not observed" (exit 3) with a reason naming the
+    # effort and the setting, not a joint that "did not reverse under load"; with
+    # motor_effort_units: motor the same bag is read.
+    spec = gen.Spec(seed=5, kinds=('shoulder', 'forearm'), hours=60.0 / 3600.0,
+                    rate_hz=250.0, start_fraction=0.5, layout='combined',
+                    motor_angles='output', effort_on='motor')
+    gen.generate_bag(spec, tmp_path / 'bag')
+
+    def analyze(out, *extra):
+        return subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
+                               str(tmp_path / 'bag'), '--out', str(tmp_path / out), '--json',
+                               *extra], capture_output=True, text=True)
+
+    done = analyze('auto')
+    assert done.returncode == 3, done.stderr[-500:]
+    for name, joint in json.loads(done.stdout)['joints'].items():
+        assert not joint['observed'], name
+        assert 'stays within' in joint['reason'], joint['reason']
+        assert 'motor_effort_units' in joint['reason']
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_effort_units: motor\n')
+    done = analyze('motor', '--config', str(config))
+    assert done.returncode == 0, done.stderr[-500:]
+    assert all(j['observed'] for j in json.loads(done.stdout)['joints'].values())
