@@ -847,9 +847,10 @@ class WindowAnalyzer:
         self._friction_memory = math.exp(-1.0 / _finite(
             'friction_memory_windows', friction_memory_windows, 'windows', '> 0',
             lambda v: v > 0.0))
-        self._fric_n = np.zeros((_FRICTION_TERMS, _FRICTION_TERMS))
-        self._fric_r = np.zeros(_FRICTION_TERMS)
-        self._fric_e = np.zeros(_FRICTION_TERMS)
+        self._fric_n = np.zeros((_FRICTION_SUMS, _FRICTION_SUMS))
+        self._fric_r = np.zeros(_FRICTION_SUMS)
+        self._fric_e = np.zeros(_FRICTION_SUMS)
+        self.efficiency = 1.0
         self._fric_yy = 0.0
         self._fric_m = 0.0
         self._fric_dir = np.zeros(2)
@@ -1309,39 +1310,107 @@ class WindowAnalyzer:
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
         taken = np.zeros((starts.size, 3))
-        pooled = self._pooled_friction_sums(x, effort_s, speed, use, starts, ends)
-        # Every window's fit at once (the same LAPACK call per window as one at a time).
-        betas, idents = _solve_identifiable_many(*(np.array([p[j] for p in pooled])
-                                                   for j in range(3)))
+        # The drive's efficiency: the load regressors also times the share of the
+        # Coulomb shape where the effort drives the load and where it is driven back.
+        moving = np.abs(coulomb_shape)
+        power = effort_s * speed
+        driving, back = np.where(power > 0.0, moving, 0.0), np.where(power < 0.0, moving, 0.0)
+        # Gathered as rows of x.T: the values and (Fortran) layout of x[:, used], whose
+        # column-by-column gather takes about 1.5 times as long.
+        used = np.flatnonzero(use)
+        x_used = np.take(x.T, used, axis=0).T
+        z = np.concatenate([x_used[:6], x_used[:6] * driving[used], x_used[:6] * back[used],
+                            x_used[6:]])
+        pooled = self._pooled_friction_sums(z, effort_s[used], speed[used], used, starts, ends)
+        sums = [np.array([p[j] for p in pooled]) for j in range(4)]
+        betas, idents, etas, picked = self._efficiency_fits(
+            *sums, np.array([p[4] for p in pooled]) / (2 * half + 1))
         for k, (a, b) in enumerate(zip(starts.tolist(), ends.tolist())):
             (self._fric_n, self._fric_r, self._fric_e, self._fric_yy, self._fric_m,
              self._fric_dir) = pooled[k]
-            beta, ident = betas[k], idents[k]
-            fc, fv = self._significant_friction(beta, ident)
+            beta, ident, eta = betas[k], idents[k], float(etas[k])
+            fc, fv = self._significant_friction(beta, ident, picked[0][k], picked[1][k])
             self.coulomb_friction, self.viscous_friction = fc, fv
-            # The effort as the fit explains it, where its acceleration is whole (the
-            # window's edges keep NaN); less the friction taken out, as the torque is.
-            model[a:b] = np.where(inner[a:b], beta @ x[:, a:b], np.nan)
+            self.efficiency = eta
+            # The rigid-body load as the fit explains the effort, where its acceleration
+            # is whole (the window's edges keep NaN).
+            model[a:b] = np.where(inner[a:b], beta[:6] @ x[:6, a:b], np.nan)
             rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
-            taken[k] = (fc, fv, rms_speed)
-            if not (fc or fv):
-                continue    # nothing significant to take out
+            gain = 1.0 + (1.0 / eta - 1.0) * driving[a:b] - (1.0 - eta) * back[a:b]
+            # The efficiency counts as Coulomb friction at the window's RMS load when the
+            # pool decides whether the torque moved.
+            loss = 0.5 * (1.0 / eta - eta) * float(np.sqrt(np.nanmean(model[a:b] ** 2))) \
+                if eta < 1.0 else 0.0
+            taken[k] = (fc + (loss if np.isfinite(loss) else 0.0), fv, rms_speed)
             typical = fc + fv * rms_speed
-            if typical >= _FRICTION_FLOOR * self.rated_torque:
-                out[a:b] = torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]
-                drag[a:b] = fv * speed[a:b]
-                model[a:b] -= fc * coulomb_shape[a:b] + fv * speed[a:b]
-            else:
-                taken[k, :2] = 0.0
+            if typical < _FRICTION_FLOOR * self.rated_torque:
+                fc = fv = 0.0
+                taken[k, :2] = (loss if np.isfinite(loss) else 0.0, 0.0)
+            if not (fc or fv or eta < 1.0):
+                continue    # nothing significant to take out
+            out[a:b] = (torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]) / gain
+            drag[a:b] = fv * speed[a:b] / gain
         return out, drag, model, taken
 
-    def _pooled_friction_sums(self, x, effort, speed, use, starts, ends):
+    def _efficiency_fits(self, normal, rhs, energy, yy, samples):
+        """
+        Fit the friction at the efficiency of :data:`_EFFICIENCIES` that explains the effort.
+
+        A drive reports ``T/eta`` while it drives the load and ``T*eta`` while the load
+        drives it back: the load regressors ``x`` become ``x*(1 + (1/eta - 1)*D -
+        (1 - eta)*B)`` (``D``, ``B`` the Coulomb shape where the smoothed effort and the
+        speed have the same or opposite signs), a linear map of the pooled sums of
+        ``[x, x*D, x*B, Coulomb shape, speed]``, per window (on its pool). One below 1
+        is taken where it lowers the residual by more than 9 residual variances
+        (three standard errors of one more parameter) over the independent samples
+        (``samples``: the smoothed effort's residuals are correlated over its averaging
+        length); otherwise the effort is read as before (a constant Coulomb friction).
+
+        Returns
+        -------
+        tuple
+            Coefficients and identifiable masks of the fits at the chosen efficiency
+            (``(W, 8)``), the efficiency per window and the normal equations and
+            right-hand sides (for :meth:`_significant_friction`).
+
+        """
+        maps = []
+        for eta in _EFFICIENCIES:
+            m = np.zeros((_FRICTION_TERMS, _FRICTION_SUMS))
+            m[:6, :6] = np.eye(6)
+            m[:6, 6:12] = (1.0 / eta - 1.0) * np.eye(6)
+            m[:6, 12:18] = -(1.0 - eta) * np.eye(6)
+            m[6, 18] = m[7, 19] = 1.0
+            maps.append(m)
+        maps = np.array(maps)                                     # (E, 8, 20)
+        # The residual at every efficiency, per window (energy-scaled, a small ridge
+        # where a regressor is not identifiable: only to rank the efficiencies).
+        # (W, E, 8, 8) by stacked products: each window's the same whatever the batch.
+        n_all = maps[None] @ normal[:, None] @ maps.transpose(0, 2, 1)[None]
+        r_all = (maps[None] @ rhs[:, None, :, None])[..., 0]
+        energy_all = np.einsum('weii->wei', n_all)
+        scale = 1.0 / np.sqrt(np.maximum(energy_all, 1e-300))
+        a = n_all * scale[..., :, None] * scale[..., None, :] + 1e-9 * np.eye(_FRICTION_TERMS)
+        b_all = np.linalg.solve(a, (r_all * scale)[..., None])[..., 0] * scale
+        rss = (yy[:, None] - 2.0 * np.einsum('wei,wei->we', b_all, r_all)
+               + np.einsum('wei,weij,wej->we', b_all, n_all, b_all))
+        best = np.argmin(rss, axis=1)
+        pick = np.arange(best.size)
+        free = np.maximum(samples - _FRICTION_TERMS, 1.0)
+        take = (best > 0) & (rss[:, 0] - rss[pick, best] > 9.0 * rss[pick, best] / free)
+        best = np.where(take, best, 0)
+        n_e, r_e = n_all[pick, best], r_all[pick, best]
+        betas, idents = _solve_identifiable_many(n_e, r_e, energy_all[pick, best])
+        return betas, idents, np.asarray(_EFFICIENCIES)[best], (n_e, r_e)
+
+    def _pooled_friction_sums(self, x_used, y_used, speed_used, used, starts, ends):
         """
         Return the friction fit's pooled sums after each window, from the last batch's.
 
-        Each window adds the normal equations of its samples in ``use`` to the sums
-        forgotten by ``friction_memory_windows``; the sums do not depend on the fits, so
-        they are formed first and the fits solved together.
+        Each window adds the normal equations of its samples (regressors ``x_used``,
+        effort ``y_used`` and speed ``speed_used`` at the sample indices ``used``) to
+        the sums forgotten by ``friction_memory_windows``; the sums do not depend on the
+        fits, so they are formed first and the fits solved together.
 
         Returns
         -------
@@ -1351,11 +1420,7 @@ class WindowAnalyzer:
             ``_fric_dir`` stand after it.
 
         """
-        used = np.flatnonzero(use)
         lo, hi = np.searchsorted(used, starts).tolist(), np.searchsorted(used, ends).tolist()
-        # Gathered as rows of x.T: the values and (Fortran) layout of x[:, used], whose
-        # column-by-column gather takes about 1.5 times as long.
-        x_used, y_used, speed_used = np.take(x.T, used, axis=0).T, effort[used], speed[used]
         memory = self._friction_memory
         n, r, e = self._fric_n, self._fric_r, self._fric_e
         yy, m, direction = self._fric_yy, self._fric_m, self._fric_dir
@@ -1408,17 +1473,17 @@ class WindowAnalyzer:
         out = np.where(ok, model + gain * np.where(ok, diff, 0.0), torque)
         return out, band * np.sqrt(gain)
 
-    def _significant_friction(self, beta, ident):
+    def _significant_friction(self, beta, ident, normal, rhs):
         """Coulomb and viscous friction of the pooled fit, 0 unless 3 standard errors above 0."""
         free = self._fric_m - np.count_nonzero(ident)
         # Both directions of motion, each in a fifth of the samples: otherwise the sign of
         # the speed is a constant and Coulomb friction cannot be told from the load.
         if free <= 0 or self._fric_dir.min() < 0.2 * self._fric_m:
             return 0.0, 0.0
-        rss = self._fric_yy - 2.0 * beta @ self._fric_r + beta @ self._fric_n @ beta
+        rss = self._fric_yy - 2.0 * beta @ rhs + beta @ normal @ beta
         idx = np.flatnonzero(ident)
         try:
-            cov = np.linalg.inv(self._fric_n[np.ix_(idx, idx)]) * max(rss, 0.0) / free
+            cov = np.linalg.inv(normal[np.ix_(idx, idx)]) * max(rss, 0.0) / free
         except np.linalg.LinAlgError:
             return 0.0, 0.0
         se = dict(zip(idx.tolist(), np.sqrt(np.maximum(np.diag(cov), 0.0)).tolist()))
@@ -2068,6 +2133,12 @@ _POOL_JUMP = 0.01
 
 _FRICTION_TERMS = 8
 """Regressors of the friction identification (load: 6, Coulomb, viscous)."""
+
+_FRICTION_SUMS = 20
+"""Pooled regressors: the load's six, times the driving and driven-back shares, then 2."""
+
+_EFFICIENCIES = (1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.65)
+"""Efficiencies of the drive weighed by the friction fit (1: a constant Coulomb friction)."""
 
 _FRICTION_SPEED = 0.01
 """Speed [rad/s] over which Coulomb friction changes sign (``tanh(omega/omega_s)``)."""
