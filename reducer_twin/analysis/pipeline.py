@@ -931,6 +931,7 @@ class _Run:
             else:
                 self._split(link_clean, motor_clean, link, chunk[plan.motor_topic])
             self._drain(self.backs.poll())
+            self.out.writer.start_writeback()   # the final fsync then has little to wait for
         for _, joint in self.order:
             front = self.fronts[joint]
             if plan.motor_topic is not None:

@@ -147,6 +147,21 @@ def _covariance_root(P):
         return vecs * np.sqrt(np.maximum(vals, 0.0))
 
 
+def _covariance_roots(covs):
+    """
+    Return :func:`_covariance_root` of each of a stack of covariances, shape (Q, m, m).
+
+    One batched Cholesky factorisation (the same LAPACK call per matrix); where one of
+    them is only semidefinite, each goes through :func:`_covariance_root`.
+    """
+    covs = np.asarray(covs, dtype=float)
+    sym = 0.5 * (covs + np.swapaxes(covs, -1, -2))
+    try:
+        return np.linalg.cholesky(sym)
+    except np.linalg.LinAlgError:
+        return np.array([_covariance_root(P) for P in covs])
+
+
 def limit_wear(params, limit=LOST_MOTION_LIMIT):
     """
     Wear at which the lost motion reaches ``limit`` [m].
@@ -210,9 +225,9 @@ def event_state(wear, params, limit=LOST_MOTION_LIMIT, baseline=0.0):
 
 
 def _event_state(curve, lost_motion, limit, baseline):
-    """Event state of a unit of offset ``baseline`` [m] at ``lost_motion`` [rad]."""
-    lm_new = float(curve(baseline))
-    es = np.clip(1.0 - (lost_motion - lm_new) / max(limit - lm_new, 1e-12), 0.0, 1.0)
+    """Event state of a unit of offset ``baseline`` [m] at ``lost_motion`` [rad] (arrays too)."""
+    lm_new = curve(baseline)
+    es = np.clip(1.0 - (lost_motion - lm_new) / np.maximum(limit - lm_new, 1e-12), 0.0, 1.0)
     return float(es) if np.ndim(es) == 0 else es
 
 
@@ -349,10 +364,11 @@ def _trend_times(trends, limit, duty_rate, normal, follow):
 
     """
     mean = np.array([np.asarray(tr.mean, dtype=float) for tr in trends])
-    roots = np.array([_covariance_root(np.asarray(tr.cov, dtype=float)).T for tr in trends])
-    beta, k, g = (draws[follow] for draws in _sampled_states(mean, roots, normal))
-    exposure = np.broadcast_to(np.array([float(tr.exposure) for tr in trends])[:, None],
-                               follow.shape)[follow]
+    roots = np.swapaxes(_covariance_roots([tr.cov for tr in trends]), 1, 2)
+    # Only the draws that follow the law: (estimate, draw) of each, in the order of follow.
+    rows, cols = np.nonzero(follow)
+    beta, k, g = _sampled_states(mean[rows], roots[rows], normal[cols], paired=True)
+    exposure = np.array([float(tr.exposure) for tr in trends])[rows]
     g = np.clip(g, EXPONENTS[0], EXPONENTS[-1])
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         ratio = (limit - beta) / k
@@ -499,11 +515,16 @@ def remaining_lives(queries, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_
     _check_limit(curve, limit)  # the limit must lie inside the model's table
     out = [None] * len(queries)
     live = []
-    for i, (x, P) in enumerate(checked):
-        wear_mean, baseline = max(float(x[0]), 0.0), float(x[2])
-        w_lim = float(wear_at_lost_motion(limit, baseline, curve))
-        lm = unit_lost_motion(wear_mean, baseline, curve)
-        es = _event_state(curve, lm, limit, baseline)
+    if not queries:
+        return out
+    # Where each estimate stands (wear limit, lost motion, event state), all at once.
+    means = np.array([x for x, _ in checked])
+    wear_means, baselines = np.maximum(means[:, 0], 0.0), means[:, 2]
+    w_lims = wear_at_lost_motion(limit, baselines, curve).tolist()
+    lms = unit_lost_motion(wear_means, baselines, curve)
+    states = _event_state(curve, lms, limit, baselines).tolist()
+    standing = zip(wear_means.tolist(), w_lims, lms.tolist(), states)
+    for i, (wear_mean, w_lim, lm, es) in enumerate(standing):
         met = bool(lm >= limit)
         if wear_mean >= w_lim or met:
             zeros = np.zeros(n_samples) if keep_samples else None
@@ -563,7 +584,7 @@ def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, c
     count of times beyond the horizon.
     """
     x = np.array([s[0] for s in states])
-    roots = np.array([_covariance_root(s[1]).T for s in states])
+    roots = np.swapaxes(_covariance_roots([s[1] for s in states]), 1, 2)
     rate = np.array([float(q.duty_rate) for q in queries])[:, None]
     rel_std = np.array([float(q.duty_rate_rel_std) for q in queries])[:, None]
     drift = np.array([float(q.rate_drift) for q in queries])
@@ -594,7 +615,7 @@ def _sampled_times(queries, states, p_trends, params, limit, horizon_s, draws, c
     return t, np.count_nonzero(t > horizon_s, axis=1)
 
 
-def _sampled_states(mean, roots, normal):
+def _sampled_states(mean, roots, normal, paired=False):
     """
     Draws ``mean + normal·root`` of several queries, one array per state component.
 
@@ -605,27 +626,33 @@ def _sampled_states(mean, roots, normal):
     roots : ndarray, shape (Q, m, m)
         Each query's transposed covariance root (``rootᵀ·root`` the covariance).
     normal : ndarray, shape (n, m)
-        Standard-normal draws, common to the queries.
+        Standard-normal draws, common to the queries; with ``paired``, shape (Q, m):
+        one draw per query (row ``q`` of ``normal`` belongs to query ``q``).
+    paired : bool
+        One draw per query instead of every draw for every query.
 
     Returns
     -------
     list of ndarray
-        ``m`` arrays of shape (Q, n): component ``j`` of every query's draws.
+        ``m`` arrays of shape (Q, n) (``paired``: (Q,)): component ``j`` of every
+        query's draws.
 
     Notes
     -----
     Each component is the mean plus ``m`` products of a draw column with the roots'
     entries (whole-array passes over every query): the stacked ``(n, m)·(m, m)``
     products take five times as long for a few queries of thousands of draws, and no
-    BLAS call means no BLAS threads spinning beside a worker process.
+    BLAS call means no BLAS threads spinning beside a worker process. A paired draw
+    gets the same products, in the same order, as in the whole array.
 
     """
     columns = np.ascontiguousarray(normal.T)
+    pick = (lambda a: a) if paired else (lambda a: a[:, None])
     out = []
     for j in range(mean.shape[1]):
-        total = mean[:, j, None] + roots[:, 0, j, None] * columns[0]
+        total = pick(mean[:, j]) + pick(roots[:, 0, j]) * columns[0]
         for i in range(1, columns.shape[0]):
-            total += roots[:, i, j, None] * columns[i]
+            total += pick(roots[:, i, j]) * columns[i]
         out.append(total)
     return out
 

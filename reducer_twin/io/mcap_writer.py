@@ -24,6 +24,7 @@ import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
 from reducer_twin.io.mcap_array_writer import _Topic, message_times, TopicBook
 from reducer_twin.io.mcap_format import DEFAULT_CHUNK_SIZE, PROFILE
+from reducer_twin.io.outputs import start_writeback
 from reducer_twin.io.rosbag2_metadata import (
     bag_metadata, DEFAULT_QOS, dump_yaml, parse_qos_profiles)
 from reducer_twin.msg_adapters import ros_schemas
@@ -266,6 +267,12 @@ class LibraryMcapWriter(TopicBook):
         finally:
             self.discard()
         return self.file_summary()
+
+    def start_writeback(self):
+        """Hand what was written so far to the kernel and let it start writing it out."""
+        self._check_open()
+        self._file.flush()
+        start_writeback(self._file.fileno())
 
     def discard(self):
         """Close the file without finishing it (after an error; the caller removes it)."""

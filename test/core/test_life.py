@@ -177,6 +177,29 @@ def test_estimates_sampled_together_get_the_answers_each_gets_alone(params, rate
     assert together[1].limit_reached and not together[0].limit_reached
 
 
+def test_estimates_of_a_unit_with_its_own_offset_sampled_together_get_their_own_answers(
+        params, rated_rate):
+    # The estimator's states: [w, ln s, b] with a positive definite covariance (factorised
+    # as one stack), one of them following a growth law.
+    def unit(wear_m, baseline_m, rho):
+        x = np.array([wear_m, 0.1, baseline_m])
+        sd = np.array([0.5e-6, 0.2, 0.3e-6])
+        corr = np.array([[1.0, rho, 0.2], [rho, 1.0, 0.0], [0.2, 0.0, 1.0]])
+        return x, corr * np.outer(sd, sd)
+    draws = LifeDraws.draw(2000)
+    queries = [LifeQuery(unit(4e-6, 1e-6, 0.3), rated_rate, 0.1, 1e-9),
+               LifeQuery(unit(8e-6, -1e-6, -0.5), rated_rate, 0.2, 0.0, trend_state(0.3, 1.2)),
+               LifeQuery(unit(2e-6, 0.0, 0.0), 0.5 * rated_rate)]
+    together = remaining_lives(queries, params, draws=draws, keep_samples=True)
+    for query, life in zip(queries, together):
+        alone = remaining_life(query.state, query.duty_rate, params,
+                               duty_rate_rel_std=query.duty_rate_rel_std,
+                               rate_drift=query.rate_drift, trend=query.trend, draws=draws,
+                               keep_samples=True)
+        assert life == alone
+        np.testing.assert_array_equal(life.samples, alone.samples)
+
+
 def test_draws_of_another_sample_count_are_refused(params, rated_rate):
     with pytest.raises(InvalidParameter, match='draws hold 1000 samples'):
         remaining_life(state(5e-6), rated_rate, params, draws=LifeDraws.draw(1000))
