@@ -156,6 +156,19 @@ def test_draws_made_before_give_the_prediction_of_drawing_from_the_same_source(
         np.testing.assert_array_equal(drawn_before.samples, drawn_here.samples)
 
 
+def assert_together_as_alone(queries, params, draws):
+    """Assess ``queries`` at once; each answer must be exactly that of its own call."""
+    together = remaining_lives(queries, params, draws=draws, keep_samples=True)
+    for query, life in zip(queries, together):
+        alone = remaining_life(query.state, query.duty_rate, params,
+                               duty_rate_rel_std=query.duty_rate_rel_std,
+                               rate_drift=query.rate_drift, trend=query.trend, draws=draws,
+                               keep_samples=True)
+        assert life == alone
+        np.testing.assert_array_equal(life.samples, alone.samples)
+    return together
+
+
 def test_estimates_sampled_together_get_the_answers_each_gets_alone(params, rated_rate):
     # One reducer's windows, assessed at once: worn out, certain, drifting, following a
     # growth law, with the duty uncertain; each answer is exactly the one of its own call.
@@ -166,14 +179,7 @@ def test_estimates_sampled_together_get_the_answers_each_gets_alone(params, rate
                LifeQuery(state(1e-6, log_scale_sd=0.6), rated_rate, 0.0, 1e-9),
                LifeQuery(state(5e-6), 0.0),
                LifeQuery(state(2e-6), rated_rate, 0.1, 0.0, trend_state(1.0, 0.7))]
-    together = remaining_lives(queries, params, draws=draws, keep_samples=True)
-    for query, life in zip(queries, together):
-        alone = remaining_life(query.state, query.duty_rate, params,
-                               duty_rate_rel_std=query.duty_rate_rel_std,
-                               rate_drift=query.rate_drift, trend=query.trend, draws=draws,
-                               keep_samples=True)
-        assert life == alone
-        np.testing.assert_array_equal(life.samples, alone.samples)
+    together = assert_together_as_alone(queries, params, draws)
     assert together[1].limit_reached and not together[0].limit_reached
 
 
@@ -190,14 +196,7 @@ def test_estimates_of_a_unit_with_its_own_offset_sampled_together_get_their_own_
     queries = [LifeQuery(unit(4e-6, 1e-6, 0.3), rated_rate, 0.1, 1e-9),
                LifeQuery(unit(8e-6, -1e-6, -0.5), rated_rate, 0.2, 0.0, trend_state(0.3, 1.2)),
                LifeQuery(unit(2e-6, 0.0, 0.0), 0.5 * rated_rate)]
-    together = remaining_lives(queries, params, draws=draws, keep_samples=True)
-    for query, life in zip(queries, together):
-        alone = remaining_life(query.state, query.duty_rate, params,
-                               duty_rate_rel_std=query.duty_rate_rel_std,
-                               rate_drift=query.rate_drift, trend=query.trend, draws=draws,
-                               keep_samples=True)
-        assert life == alone
-        np.testing.assert_array_equal(life.samples, alone.samples)
+    assert_together_as_alone(queries, params, draws)
 
 
 def test_draws_of_another_sample_count_are_refused(params, rated_rate):
