@@ -1332,20 +1332,22 @@ class WindowAnalyzer:
             fc, fv = self._significant_friction(beta, ident, picked[0][k], picked[1][k])
             self.coulomb_friction, self.viscous_friction = fc, fv
             self.efficiency = eta
-            # The rigid-body load as the fit explains the effort, where its acceleration
-            # is whole (the window's edges keep NaN).
-            model[a:b] = np.where(inner[a:b], beta[:6] @ x[:6, a:b], np.nan)
+            load = beta[:6] @ x[:6, a:b]
             rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
             gain = 1.0 + (1.0 / eta - 1.0) * driving[a:b] - (1.0 - eta) * back[a:b]
             # The efficiency counts as Coulomb friction at the window's RMS load when the
             # pool decides whether the torque moved.
-            loss = 0.5 * (1.0 / eta - eta) * float(np.sqrt(np.nanmean(model[a:b] ** 2))) \
+            loss = 0.5 * (1.0 / eta - eta) * float(np.sqrt(np.mean(load ** 2))) \
                 if eta < 1.0 else 0.0
-            taken[k] = (fc + (loss if np.isfinite(loss) else 0.0), fv, rms_speed)
-            typical = fc + fv * rms_speed
-            if typical < _FRICTION_FLOOR * self.rated_torque:
+            taken[k] = (fc + loss, fv, rms_speed)
+            if fc + fv * rms_speed < _FRICTION_FLOOR * self.rated_torque:
                 fc = fv = 0.0
-                taken[k, :2] = (loss if np.isfinite(loss) else 0.0, 0.0)
+                taken[k, :2] = (loss, 0.0)
+            # The effort as the fit explains it, where its acceleration is whole (the
+            # window's edges keep NaN), taken as the torque is: its friction terms less
+            # what is taken out, the efficiency divided out of all.
+            rest = ((beta[6] - fc) * coulomb_shape[a:b] + (beta[7] - fv) * speed[a:b]) / gain
+            model[a:b] = np.where(inner[a:b], load + rest, np.nan)
             if not (fc or fv or eta < 1.0):
                 continue    # nothing significant to take out
             out[a:b] = (torque[a:b] - fc * coulomb_shape[a:b] - fv * speed[a:b]) / gain
