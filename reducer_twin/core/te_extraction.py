@@ -1155,12 +1155,13 @@ class WindowAnalyzer:
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
         drag = model = taken = None
-        half = self._smoothing_half(t)
+        period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        half = self._smoothing_half(period)
         harmonics = self._harmonics(buf['theta'])
         if self.friction:
             torque, drag, model, taken = self._friction(torque, t, harmonics, speed, win,
                                                         starts, ends, half)
-        torque, band = self._smooth_torque(torque, half, t, model, win, starts, ends)
+        torque, band = self._smooth_torque(torque, half, t, period, model, win, starts, ends)
         if model is not None:
             torque, band = self._toward_model(torque, band, model, win, starts)
         # Viscous friction of the motor side and drag of the link both follow the speed;
@@ -1376,15 +1377,7 @@ class WindowAnalyzer:
             right-hand sides (for :meth:`_significant_friction`).
 
         """
-        maps = []
-        for eta in _EFFICIENCIES:
-            m = np.zeros((_FRICTION_TERMS, _FRICTION_SUMS))
-            m[:6, :6] = np.eye(6)
-            m[:6, 6:12] = (1.0 / eta - 1.0) * np.eye(6)
-            m[:6, 12:18] = -(1.0 - eta) * np.eye(6)
-            m[6, 18] = m[7, 19] = 1.0
-            maps.append(m)
-        maps = np.array(maps)                                     # (E, 8, 20)
+        maps = _EFFICIENCY_MAPS
         # The residual at every efficiency, per window (energy-scaled, a small ridge
         # where a regressor is not identifiable: only to rank the efficiencies).
         # (W, E, 8, 8) by stacked products: each window's the same whatever the batch.
@@ -1495,7 +1488,7 @@ class WindowAnalyzer:
             out.append(value if value > 3.0 * se.get(j, math.inf) else 0.0)
         return tuple(out)
 
-    def _smooth_torque(self, torque, half, t, model, win, starts, ends):
+    def _smooth_torque(self, torque, half, t, period, model, win, starts, ends):
         """
         Centred moving average of the effort inside each window, and its noise band.
 
@@ -1517,11 +1510,11 @@ class WindowAnalyzer:
         """
         sigma = 1.4826 * _window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
                                          starts, ends - 2) / math.sqrt(1.5)
-        half = self._quiet_half(sigma, half, t, model)
+        half = self._quiet_half(sigma, half, t, period, model)
         smooth, count = _window_mean(torque, half, win, starts, ends)
         return smooth, self.sign_sigmas * sigma[win] / np.sqrt(count)
 
-    def _quiet_half(self, sigma, half, t, model):
+    def _quiet_half(self, sigma, half, t, period, model):
         """
         Half-width of the torque average that quiets the effort's noise beside the test torque.
 
@@ -1532,7 +1525,7 @@ class WindowAnalyzer:
         follows its position (a base rotation: accelerating at one end of a move,
         braking at the other) the harmonics of the output angle take up part of
         the lost motion. Measured on a base rotation with an effort noise of 2 %
-        of rated torque at 1 kHz and a 0.03 s average: 6.5 % low, 11 % low in its
+        of rated torque at 1 kHz and a 0.03 s average: 6.5 % low, 12 % low in its
         last windows, 1 % with the true torque. The average is lengthened until
         its noise is :data:`_SMOOTHING_NOISE` of the test torque, but no longer
         than half the time the load takes to pass the test torque (an average
@@ -1550,6 +1543,8 @@ class WindowAnalyzer:
             Half-width of the ``torque_smoothing_s`` average [samples].
         t : ndarray
             Stamps of the samples [s].
+        period : float
+            Their median step [s].
         model : ndarray or None
             The rigid-body load as :meth:`_friction` explains the effort [N·m].
 
@@ -1563,7 +1558,6 @@ class WindowAnalyzer:
         if half <= 0 or model is None or not noise > 0.0:
             return half
         samples = (noise / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
-        period = float(np.median(np.diff(t)))
         size = np.abs(model)
         near = np.flatnonzero((size > 0.5 * self.takeup_torque)
                               & (size < 1.5 * self.takeup_torque))
@@ -1585,9 +1579,8 @@ class WindowAnalyzer:
         return max(half, min(math.ceil(0.5 * (samples - 1.0)),
                              int(0.5 * longest / period)))
 
-    def _smoothing_half(self, t):
-        """Half-width in samples of the ``torque_smoothing_s`` average at the stamps' rate."""
-        period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    def _smoothing_half(self, period):
+        """Half-width in samples of the ``torque_smoothing_s`` average at a stamp step [s]."""
         return int(round(0.5 * self.torque_smoothing_s / period)) if period > 0 else 0
 
     def _bins(self, z, torque):
@@ -2141,6 +2134,21 @@ _FRICTION_SUMS = 20
 
 _EFFICIENCIES = (1.0, 0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.65)
 """Efficiencies of the drive weighed by the friction fit (1: a constant Coulomb friction)."""
+
+
+def _efficiency_maps():
+    """Map the pooled sums' regressors to the friction fit's at each efficiency, (E, 8, 20)."""
+    eye = np.eye(6)
+    maps = np.zeros((len(_EFFICIENCIES), _FRICTION_TERMS, _FRICTION_SUMS))
+    for m, eta in zip(maps, _EFFICIENCIES):
+        m[:6, :6] = eye
+        m[:6, 6:12] = (1.0 / eta - 1.0) * eye
+        m[:6, 12:18] = -(1.0 - eta) * eye
+        m[6, 18] = m[7, 19] = 1.0
+    return maps
+
+
+_EFFICIENCY_MAPS = _efficiency_maps()
 
 _FRICTION_SPEED = 0.01
 """Speed [rad/s] over which Coulomb friction changes sign (``tanh(omega/omega_s)``)."""

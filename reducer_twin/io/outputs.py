@@ -22,6 +22,7 @@ Every directory the commands write (a derived or simulated bag, a report) goes t
 import ctypes
 import errno
 import fcntl
+import functools
 import os
 from pathlib import Path
 import re
@@ -316,7 +317,9 @@ def exchange(a, b):
     raise OSError(code, os.strerror(code), str(a))
 
 
+@functools.lru_cache(maxsize=None)
 def _sync_file_range():
+    """Return libc's ``sync_file_range`` (looked up once), or None where there is none."""
     try:
         func = ctypes.CDLL(None, use_errno=True).sync_file_range
     except (OSError, AttributeError):
