@@ -220,10 +220,11 @@ def test_a_window_whose_reversal_fell_into_its_neighbour_reads_the_pooled_flanks
     # Windows of 2 s cut a slow cycle so that some meet their loads under one sign only:
     # 4 of 15 windows had no lost motion. The pool's flank lines (recent windows, this one
     # included) complete their bins, both flanks from the same samples.
+    # The first window is read before the friction can be told from the load: none.
     _, b = simulated(wear=10e-6, samples=30000)
     lm = np.array([f.lost_motion for f in analyse(b)])
-    assert np.isfinite(lm).all() and lm.size == 15
-    np.testing.assert_allclose(lm, lost_motion(10e-6, PARAMS), rtol=0.03)
+    assert np.isfinite(lm[1:]).all() and lm.size == 15
+    np.testing.assert_allclose(lm[1:], lost_motion(10e-6, PARAMS), rtol=0.03)
 
 
 def test_hysteresis_widths_follow_the_model_at_the_true_wear():
@@ -557,6 +558,35 @@ def test_an_effort_too_small_to_read_is_named_as_such_not_as_a_joint_without_rev
     analyzer.update(stream, b.effort, b.link_velocity)
     analyzer.flush()
     assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
+
+
+def test_no_lost_motion_is_read_before_the_friction_can_be_told_from_the_load():
+    # A motor current carries the motor's friction, which gives the torque near a reversal
+    # the sign of the motion; until the joint has moved both ways (a fifth of the samples
+    # each) the fit cannot take it out. Read then, the independent generator's first
+    # windows were 0.28 arcmin off at the 90th percentile (0.10 once the friction was known).
+    _, b = simulated(samples=2200)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, b.effort, b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_friction_unknown == 1 and analyzer.windows_observed == 0
+    assert analyzer.not_observed_reason().startswith(
+        'the friction in the effort could not yet be told from the load')
+    # Once the joint has moved both ways, its windows are read.
+    _, b = simulated(samples=4400)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, b.effort, b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
+    # An effort declared free of friction (friction=False: a torque sensor) is read at once.
+    _, b = simulated(samples=2200)
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, friction=False)
+    analyzer.update(stream, b.effort, b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_friction_unknown == 0 and analyzer.windows_observed == 1
 
 
 def test_friction_the_effort_carries_is_identified_and_taken_out_of_the_torque():
