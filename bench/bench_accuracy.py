@@ -416,6 +416,18 @@ def window_bias(run, params):
     return float(np.median((z - window_truth(run, params))[sel])) if sel.any() else math.nan
 
 
+def first_window_error(run, params):
+    """
+    Return the error of a unit's first usable window [rad] (NaN where there is none).
+
+    The window that anchors the as-built lost motion and the growth law's start, read
+    while the window analysis has seen least of the joint.
+    """
+    z = run.records[:, TE_FEATURES.fields.index('lost_motion_rad')]
+    first = np.flatnonzero(np.isfinite(z))[:1]
+    return float((z - window_truth(run, params))[first][0]) if first.size else math.nan
+
+
 def with_true_lost_motion(run, params, noise=0.02 * ARCMIN, seed=0):
     """
     Return the run with each usable window's lost motion replaced by the truth.
@@ -578,12 +590,20 @@ def report_case(name, results, unit_name):
           f'{_pct(np.quantile(abs_rel, 0.9))}; mean {np.mean(cat["err"]) * scale:+.3f} {unit}, '
           f'{_pct(np.mean(cat["err"] < 0))} below truth; inside +-2 sd '
           f'{_pct(np.mean(cat["nees"] <= 4.0))}')
-    bias = np.array([r['bias'] for r in results if 'bias' in r])
-    bias = bias[np.isfinite(bias)]
-    if bias.size:
+    bias = np.array([r.get('bias', math.nan) for r in results])
+    seen = np.isfinite(bias)
+    if seen.any():
         print(f'  window lost-motion bias per unit (median error at 25-75 % of life): RMS '
-              f'{np.sqrt(np.mean(bias ** 2)) / ARCMIN:.3f} arcmin, 90th pct |.| '
-              f'{np.quantile(np.abs(bias), 0.9) / ARCMIN:.3f} arcmin (fit_bias_std 0.05)')
+              f'{np.sqrt(np.mean(bias[seen] ** 2)) / ARCMIN:.3f} arcmin, 90th pct |.| '
+              f'{np.quantile(np.abs(bias[seen]), 0.9) / ARCMIN:.3f} arcmin (fit_bias_std 0.05); '
+              'largest: ' + ', '.join(
+                  f'{results[i]["label"]} {bias[i] / ARCMIN:+.3f}'
+                  for i in np.argsort(-np.where(seen, np.abs(bias), -1.0))[:3] if seen[i]))
+    first = np.abs([r.get('first', math.nan) for r in results])
+    first = first[np.isfinite(first)]
+    if first.size:
+        print(f"  a unit's first usable window: |error| median {np.median(first) / ARCMIN:.3f}, "
+              f'90th pct {np.quantile(first, 0.9) / ARCMIN:.3f} arcmin')
     print(f'  NEES mean {np.mean(cat["nees"]):.2f} (median {np.median(cat["nees"]):.2f}) '
           f'[0.5, 2]; NIS mean {np.mean(cat["nis"]):.2f} (median {np.median(cat["nis"]):.2f}, '
           f'{cat["nis"].size} updates)')
@@ -660,7 +680,9 @@ def main(argv=None):
         for truth in truths:
             run = generate(truth, params, args.cache)
             results.append(evaluate(run, estimate(run, params, config)))
-            results[-1]['bias'] = window_bias(run, params)
+            results[-1].update(bias=window_bias(run, params),
+                               first=first_window_error(run, params),
+                               label=f'{truth.kind or truth.generator} {truth.seed}')
             if args.oracle:
                 exact = with_true_lost_motion(run, params)
                 oracle.append(evaluate(exact, estimate(exact, params, config)))

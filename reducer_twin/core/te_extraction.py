@@ -1216,8 +1216,8 @@ class WindowAnalyzer:
             # Measured on the independent generator (seeds 1-2): 41 of 61 units read their
             # first lost motion before the friction was known; windows read then were off
             # by 0.04 arcmin median, 0.28 at the 90th percentile, first windows read after
-            # by 0.01 and 0.10. Withheld, a unit's first lost motion is off by 0.11 arcmin
-            # at the 90th percentile instead of 0.31 (seeds 1-4).
+            # by 0.01 and 0.10. Withheld (bench_accuracy, seeds 1-4), a unit's first usable
+            # window's error at the 90th percentile went from 0.22-0.55 to 0.09-0.14 arcmin.
             withheld = unknown & (usable.sum(axis=1) >= self.min_bins)
             self.windows_friction_unknown += int(withheld.sum())
             usable &= ~unknown[:, None]

@@ -560,32 +560,30 @@ def test_an_effort_too_small_to_read_is_named_as_such_not_as_a_joint_without_rev
     assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
 
 
+def analyzed(batch, **kw):
+    """Return the analyzer after a whole simulated batch (stamps taken as exact)."""
+    stream = compute_te(batch.t, batch.motor_angle, batch.t, batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, **kw)
+    analyzer.update(stream, batch.effort, batch.link_velocity)
+    analyzer.flush()
+    return analyzer
+
+
 def test_no_lost_motion_is_read_before_the_friction_can_be_told_from_the_load():
     # A motor current carries the motor's friction, which gives the torque near a reversal
     # the sign of the motion; until the joint has moved both ways (a fifth of the samples
     # each) the fit cannot take it out. Read then, the independent generator's first
     # windows were 0.28 arcmin off at the 90th percentile (0.10 once the friction was known).
-    _, b = simulated(samples=2200)
-    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
-    analyzer = WindowAnalyzer(PARAMS)
-    analyzer.update(stream, b.effort, b.link_velocity)
-    analyzer.flush()
+    first = simulated(samples=2200)[1]
+    analyzer = analyzed(first)
     assert analyzer.windows_friction_unknown == 1 and analyzer.windows_observed == 0
     assert analyzer.not_observed_reason().startswith(
         'the friction in the effort could not yet be told from the load')
     # Once the joint has moved both ways, its windows are read.
-    _, b = simulated(samples=4400)
-    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
-    analyzer = WindowAnalyzer(PARAMS)
-    analyzer.update(stream, b.effort, b.link_velocity)
-    analyzer.flush()
+    analyzer = analyzed(simulated(samples=4400)[1])
     assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
     # An effort declared free of friction (friction=False: a torque sensor) is read at once.
-    _, b = simulated(samples=2200)
-    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
-    analyzer = WindowAnalyzer(PARAMS, friction=False)
-    analyzer.update(stream, b.effort, b.link_velocity)
-    analyzer.flush()
+    analyzer = analyzed(first, friction=False)
     assert analyzer.windows_friction_unknown == 0 and analyzer.windows_observed == 1
 
 
