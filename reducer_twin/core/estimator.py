@@ -140,8 +140,9 @@ The project's own simulator biases its windows by 0.007-0.012 arcmin RMS, and
 there the interval is too wide: coverage 97-99 %, NEES 0.14-0.17. With the
 prior set to that bias (0.008 arcmin, an oracle): NEES 0.32-0.34, coverage
 94-98 %; told besides that the unit is new (the used hypothesis of a reducer
-met without state widens the wear's sd): NEES 0.53-0.82, coverage 93-98 %,
-the rest of the width being the rate's.
+met without state widens the wear's sd): NEES 0.53-0.82, coverage 93-98 %;
+and without the rate's drift (``log_rate_scale_noise_density = 0``; that
+simulator's rate is constant): coverage 87-89 %.
 """
 
 from dataclasses import asdict, dataclass, fields
