@@ -71,6 +71,9 @@ def estimator_status(stage, rejected, live=None):
     values = {'wear_um': m_to_um(est.wear), 'wear_std_um': m_to_um(est.wear_std),
               'rate_scale': est.rate_scale, 'updates': est.updates,
               'rejected_updates': est.rejected, 'replayed_windows': stage.skipped_replays,
+              # How the windows scatter against their reported sd (the ratio of variances
+              # the observation noise is scaled by): well above 1, a noisy effort.
+              'window_noise_scale': est.noise_scale,
               'rejected_messages': rejected,
               'state_writes_failed': writer.failures if writer else 0,
               'state_writes_recovered': writer.recoveries if writer else 0,

@@ -198,6 +198,25 @@ def test_a_restarted_node_continues_the_estimate_and_skips_the_window_it_saw(
     same_estimate(est.latest(est.wear, records[19]['window_end_s']), offline(records[:20]))
 
 
+def test_the_diagnostics_say_how_the_windows_scatter_against_their_reported_sd(
+        ros, tmp_path, records):
+    est = Estimator(ros, tmp_path)
+    est.send(records[:12])
+    est.latest(est.wear, records[11]['window_end_s'])
+    learnt = est.node.stage.estimator.noise_scale
+    assert learnt != 1.0, 'twelve windows teach the noise scale something'
+    status = None
+
+    def reported():
+        nonlocal status
+        found = ros.statuses(est.diagnostics, f'reducer_twin: {est.joint} wear estimator')
+        status = found[-1] if found else None
+        return status is not None and ros.key_values(status).get('updates') == '12'
+
+    ros.spin_until(reported, what='a diagnostics status after the twelfth window')
+    assert float(ros.key_values(status)['window_noise_scale']) == pytest.approx(learnt, rel=1e-4)
+
+
 def test_a_corrupt_state_file_falls_back_to_the_backup_copy(ros, tmp_path, records):
     est = Estimator(ros, tmp_path)
     est.send(records[:5])
