@@ -53,10 +53,12 @@ error and ``ρ`` learnt from the innovations
 ``ρ`` that puts the median of the differences of the last
 :data:`NOISE_MEMORY` successive innovations, normalised, at the median of
 χ²₁ (a bias the model misses cancels in them, so it is not taken for
-noise), shrunk towards 1 while few are known and kept within a factor 25
-either way (:data:`NOISE_SCALE_RANGE`). The
-fit's standard error understates the window-to-window scatter about
-twofold, and the factor differs between joints and duties. The noise ``v`` is Student-t with
+noise; each difference weighted by what it says about ``ρ``), shrunk
+towards 1 while few are known and kept within a factor 25 either way
+(:data:`NOISE_SCALE_RANGE`). The fit's standard error may understate the
+window-to-window scatter (a noisy effort: ``ρ`` up to 25) or overstate it
+(its shape allowance is common to a unit's windows: ``ρ`` 0.02-0.4 on the
+model's simulator), and the factor differs between joints and duties. The noise ``v`` is Student-t with
 ``ν = robust_dof``: a single bad window moves the estimate little, and no
 observation is thrown away (Roth, Özkan & Gustafsson 2013: the update uses
 ``R·max(1, (ν + d²)/(ν + 1))`` with ``d²`` the normalised innovation). A
