@@ -58,10 +58,11 @@ towards 1 while few are known and kept within a factor 25 either way
 (:data:`NOISE_SCALE_RANGE`). The fit's standard error may understate the
 window-to-window scatter (a noisy effort: ``ρ`` up to 25) or overstate it
 (its shape allowance is common to a unit's windows: ``ρ`` 0.02-0.4 on the
-model's simulator), and the factor differs between joints and duties. The noise ``v`` is Student-t with
-``ν = robust_dof``: a single bad window moves the estimate little, and no
-observation is thrown away (Roth, Özkan & Gustafsson 2013: the update uses
-``R·max(1, (ν + d²)/(ν + 1))`` with ``d²`` the normalised innovation). A
+model's simulator), and the factor differs between joints and duties. The
+noise ``v`` is Student-t with ``ν = robust_dof``: a single bad window moves
+the estimate little, and no observation is thrown away (Roth, Özkan &
+Gustafsson 2013: the update uses ``R·max(1, (ν + d²)/(ν + 1))`` with ``d²``
+the normalised innovation). A
 window whose wear fit sits on the table's lower bound says only that the fit
 found no clearance beyond a new nominal unit: a unit built tighter, or (far
 more often on real data) a poor fit. Such a window is counted as censored and
