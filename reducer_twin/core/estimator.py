@@ -930,9 +930,9 @@ class WearEstimator:
         with the weight ``(ρs/(V + ρs))²``, ``s = σ_k² + σ_(k-1)²`` and ``V``
         its predicted part (a weighted median, the weights at ``ρ = 1``, then
         at the ``ρ`` they gave; their sum is the differences' effective
-        number): where the prediction is far less
-        certain than the window (a reducer's first windows) the difference
-        says next to nothing about ``ρ``. The estimate is shrunk
+        number): where the prediction is far less certain than the window (a
+        reducer's first windows) the difference says next to nothing about
+        ``ρ``. The estimate is shrunk
         towards 1 in log with the weight of :data:`NOISE_PRIOR_WINDOWS`
         innovations and kept in :data:`NOISE_SCALE_RANGE`: a trend the model
         misses for long raises the differences too, and must not drown the data
@@ -945,7 +945,7 @@ class WearEstimator:
         v2 = v[1:] + v[:-1]
         s22 = s2[1:] + s2[:-1]
         # d²/(V + ρ·σ²) exceeds the χ²₁ median exactly while ρ is below
-        # (d²/median - V)/σ²: the ρ that puts the median there is their median.
+        # (d²/median - V)/σ²: the ρ that puts the median there is their (weighted) median.
         limits = (d2 / _CHI2_1_MEDIAN - v2) / s22
         order = np.argsort(limits)
         rho = 1.0
