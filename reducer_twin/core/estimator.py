@@ -57,7 +57,7 @@ noise; each difference weighted by what it says about ``ρ``), shrunk
 towards 1 while few are known and kept within a factor 25 either way
 (:data:`NOISE_SCALE_RANGE`). The fit's standard error may understate the
 window-to-window scatter (a noisy effort: ``ρ`` up to 25) or overstate it
-(its shape allowance is common to a unit's windows: ``ρ`` 0.02-0.4 on the
+(its shape allowance is common to a unit's windows: ``ρ`` 0.05-0.9 on the
 model's simulator), and the factor differs between joints and duties. The
 noise ``v`` is Student-t with ``ν = robust_dof``: a single bad window moves
 the estimate little, and no observation is thrown away (Roth, Özkan &
@@ -136,7 +136,7 @@ recording at one wear cannot walk the pair along their ridge.
 Measured (``bench/bench_accuracy.py``, README Figures): ``c`` cannot be told
 from ``b`` within a life, so its prior (``fit_bias_std``, 0.05 arcmin) sets
 the width left in the wear and the remaining life. 72 windows over 60 % of
-a life at 0.03 arcmin scatter, without a prior, determine ``c`` to 0.06-0.09
+a life at 0.03 arcmin scatter, without a prior, determine ``c`` to 0.056-0.089
 arcmin: no better than the prior. The prior fits the independent generator
 (per-unit bias 0.035-0.055 arcmin RMS; P10-P90 coverage 76-85 %, seeds 1-4).
 The project's own simulator biases its windows by 0.007-0.012 arcmin RMS, and
@@ -194,9 +194,10 @@ Bounds of the learnt noise scale ``ρ``: the reported sd is trusted within a fac
 
 The ceiling keeps a trend the model misses from drowning the data in noise. The floor
 was 0.5 until measured: the window fit's reported sd overstates the window-to-window
-scatter on many units (bench_accuracy: every unit of the model generator and half the
-observed units of the independent one sat on 0.5; the scatter itself gave 0.02-0.4: the
-reported sd carries the fit's shape allowance, an error common to a unit's windows). With
+scatter on many units (bench_accuracy prints the learnt value: 0.05-0.9 on the model
+generator, median 0.10-0.19; 0.05-7.4 on the independent one, median 0.37-0.87, seeds
+1-2: the reported sd carries the fit's shape allowance, an error common to a unit's
+windows). With
 0.5, R was up to 10x too large: the model generator's NIS mean 0.26 (median 0.08), the
 independent generator's P10-P90 coverage 81-88 % (seeds 1-4). With the floor at 1/25 (and
 the differences weighted, :attr:`WearEstimator.noise_scale`): NIS 0.84-0.85 on the model
@@ -948,12 +949,12 @@ class WearEstimator:
         # (d²/median - V)/σ²: the ρ that puts the median there is their (weighted) median.
         limits = (d2 / _CHI2_1_MEDIAN - v2) / s22
         order = np.argsort(limits)
+        limits, v2, s22 = limits[order], v2[order], s22[order]
         rho = 1.0
         for _ in range(2):   # the weights at ρ = 1, then at the ρ they gave
-            weight = (rho * s22 / (v2 + rho * s22)) ** 2
-            cum = np.cumsum(weight[order])
+            cum = np.cumsum((rho * s22 / (v2 + rho * s22)) ** 2)
             n = float(cum[-1])
-            rho = float(limits[order][np.searchsorted(cum, 0.5 * n)])
+            rho = float(limits[np.searchsorted(cum, 0.5 * n)])
             rho = min(max(rho, NOISE_SCALE_RANGE[0]), NOISE_SCALE_RANGE[1])
         return math.exp(n * math.log(rho) / (n + NOISE_PRIOR_WINDOWS))
 

@@ -1356,7 +1356,7 @@ class WindowAnalyzer:
         # Written row by row into one C-ordered array: the per-window products below read
         # contiguous rows (a Fortran-ordered gather joined by concatenate took 14x longer).
         used = np.flatnonzero(use)
-        z = np.empty((3 * 6 + _FRICTION_TERMS - 6, used.size))
+        z = np.empty((_FRICTION_SUMS, used.size))
         np.take(x[:6], used, axis=1, out=z[:6])
         np.multiply(z[:6], driving[used], out=z[6:12])
         np.multiply(z[:6], back[used], out=z[12:18])

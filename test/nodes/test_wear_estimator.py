@@ -103,6 +103,11 @@ class Estimator:
                                      LATE_JOINER_QOS)
         return _Records(messages)
 
+    def status(self, predicate=lambda s: True):
+        """Spin until a /diagnostics status of this estimator satisfies ``predicate``."""
+        name = f'reducer_twin: {self.joint} wear estimator'
+        return self.ros.wait_status(self.diagnostics, name, predicate)
+
     def send(self, recs):
         """Publish te_features records one by one; spin until the node stepped each."""
         for rec in recs:
@@ -205,15 +210,7 @@ def test_the_diagnostics_say_how_the_windows_scatter_against_their_reported_sd(
     est.latest(est.wear, records[11]['window_end_s'])
     learnt = est.node.stage.estimator.noise_scale
     assert learnt != 1.0, 'twelve windows teach the noise scale something'
-    status = None
-
-    def reported():
-        nonlocal status
-        found = ros.statuses(est.diagnostics, f'reducer_twin: {est.joint} wear estimator')
-        status = found[-1] if found else None
-        return status is not None and ros.key_values(status).get('updates') == '12'
-
-    ros.spin_until(reported, what='a diagnostics status after the twelfth window')
+    status = est.status(lambda s: ros.key_values(s)['updates'] == '12')
     assert float(ros.key_values(status)['window_noise_scale']) == pytest.approx(learnt, rel=1e-4)
 
 
@@ -225,15 +222,7 @@ def test_a_corrupt_state_file_falls_back_to_the_backup_copy(ros, tmp_path, recor
     node = est.node = est.start()
     assert node.stage.restored_from == str(backup_path(est.state))
     assert node.stage.estimator.exposure_s == pytest.approx(4 * EXPOSURE)
-    status = None
-
-    def restored():
-        nonlocal status
-        found = ros.statuses(est.diagnostics, f'reducer_twin: {est.joint} wear estimator')
-        status = found[-1] if found else None
-        return status is not None and ros.key_values(status)['restored_from'].endswith('.bak')
-
-    ros.spin_until(restored, what='a diagnostics status restored from the backup')
+    est.status(lambda s: ros.key_values(s)['restored_from'].endswith('.bak'))
     ros.wait_matched(est.pub)
     est.send(records[4:8])                         # the lost window comes again: not a replay
     assert node.statuses.get('replay', 0) == 0
