@@ -88,8 +88,9 @@ def _wear(ax, joint, res):
     w = _col(res.wear, WEAR_ESTIMATE, 'wear_m') / UM
     s = _col(res.wear, WEAR_ESTIMATE, 'wear_std_m') / UM
     line, = ax.plot(h, w, label=f'{joint} estimate')
-    ax.fill_between(h, w - 2 * s, w + 2 * s, color=line.get_color(), alpha=0.2,
-                    label=f'{joint} ±2σ')
+    # Wear is never negative (the estimator keeps it >= 0): the band stops at zero.
+    ax.fill_between(h, np.maximum(w - 2 * s, 0.0), w + 2 * s, color=line.get_color(),
+                    alpha=0.2, label=f'{joint} ±2σ')
     if res.truth is not None and len(res.truth):
         ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
                 _col(res.truth, GROUND_TRUTH, 'wear_m') / UM, '--', color=line.get_color(),
@@ -106,6 +107,38 @@ def _life(ax, joint, res):
         ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
                 _col(res.truth, GROUND_TRUTH, 'true_rul_s') / HOUR, '--',
                 color=line.get_color(), label=f'{joint} truth')
+
+
+def wear_axis_limits(wear_um, std_um, skip=None):
+    """
+    Y range of a wear plot [µm] that the first windows' prior does not squash.
+
+    The first ``skip`` windows (default a tenth of them, at least 3: a reducer met
+    without state starts from a prior several µm wide) are left out, and so are
+    non-finite values; zero is always shown.
+
+    Returns
+    -------
+    tuple of float or None
+        ``(bottom, top)`` [µm], None when nothing is left to show.
+
+    """
+    if skip is None:
+        skip = max(3, len(wear_um) // 10)
+    top = np.asarray(wear_um, float)[skip:] + 2.0 * np.asarray(std_um, float)[skip:]
+    top = top[np.isfinite(top)]
+    if not top.size:
+        return None
+    hi = max(float(top.max()), 1e-3)
+    return -0.05 * hi, 1.1 * hi
+
+
+def _wear_limits(ax, results):
+    found = [wear_axis_limits(_col(r.wear, WEAR_ESTIMATE, 'wear_m') / UM,
+                              _col(r.wear, WEAR_ESTIMATE, 'wear_std_m') / UM) for r in results]
+    found = [f for f in found if f is not None]
+    if found:
+        ax.set_ylim(min(f[0] for f in found), max(f[1] for f in found))
 
 
 def _life_limits(ax, results):
@@ -146,6 +179,8 @@ def _figures(result, limit):
         ax.set_ylabel(ylabel)
         if stem == 'remaining_life':
             _life_limits(ax, joints.values())
+        elif stem == 'wear':
+            _wear_limits(ax, joints.values())
         ax.grid(alpha=0.3)
         # Outside the axes: a legend inside covered the curves and the axis label.
         ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))

@@ -3,12 +3,14 @@
 import base64
 import re
 
+import numpy as np
 import pytest
 from reducer_twin.analysis.pipeline import analyze_bag
-from reducer_twin.analysis.report import PLOTS, write_report
+from reducer_twin.analysis.report import _figures, PLOTS, wear_axis_limits, write_report
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.core.errors import BagError
+from reducer_twin.core.units import ARCMIN
 
 PNG = b'\x89PNG\r\n\x1a\n'
 
@@ -54,3 +56,23 @@ def test_a_report_directory_that_cannot_be_made_is_a_bag_error(result, tmp_path)
     blocker.write_text('x')
     with pytest.raises(BagError, match='cannot write the report'):
         write_report(result, blocker / 'sub')
+
+
+def test_the_wear_axis_leaves_out_the_prior_of_the_first_windows_and_shows_zero():
+    wear = np.array([1.0, 2.0, 0.5, 3.0, 3.2, 3.4, 3.6, 3.8, 4.0, 4.2])
+    std = np.array([12.0, 9.0, 5.0, 0.3, 0.3, 0.3, 0.3, 0.3, 0.3, np.nan])
+    bottom, top = wear_axis_limits(wear, std)
+    assert bottom < 0.0 < 3.0 < top
+    assert top == pytest.approx(1.1 * (4.0 + 0.6))
+    assert wear_axis_limits(wear[:3], std[:3]) is None
+
+
+def test_the_wear_band_never_goes_below_zero_wear(result):
+    figures = dict(_figures(result, limit=3.0 * ARCMIN))
+    ax = figures['wear'].axes[0]
+    bands = [c for c in ax.collections if c.get_label().endswith('±2σ')]
+    assert len(bands) == 2
+    for band in bands:
+        ys = np.concatenate([p.vertices[:, 1] for p in band.get_paths()])
+        assert ys.min() >= 0.0
+    assert ax.get_ylim()[0] <= 0.0
