@@ -755,10 +755,10 @@ def _bag_aging_factor(bag, settings):
     return value
 
 
-def _motor_scale(settings, joint, angles=None):
+def _motor_scale(settings, joint, angles=None, direction=1.0):
     if (angles or settings.motor_angles) == 'output':
-        return total_ratio(settings.params_of(joint).geometry)
-    return 1.0
+        return direction * total_ratio(settings.params_of(joint).geometry)
+    return direction
 
 
 MIN_DETECT_TRAVEL_RAD = 0.05
@@ -789,6 +789,40 @@ def motor_travel_ratio(link, motor):
         return float(np.abs(np.diff(x)).sum()) if x.size > 1 else 0.0
     t_link, t_motor = travel(link), travel(motor)
     return t_motor / t_link if t_link >= MIN_DETECT_TRAVEL_RAD else math.nan
+
+
+def motor_direction(t_link, link, t_motor, motor):
+    """
+    Whether the motor encoder counts with the link (+1) or against it (-1), in one chunk.
+
+    A gear stage or the encoder's mounting may reverse the motor's sense (ros2_control
+    then carries a negative reduction): the motor's steps, taken at the link's stamps,
+    then correlate negatively with the link's. NaN when the link moved less than
+    :data:`MIN_DETECT_TRAVEL_RAD` or the two do not overlap in time.
+
+    Parameters
+    ----------
+    t_link, link, t_motor, motor : ndarray
+        Stamps [ns] and positions [rad] of the link and motor entries (NaN where absent).
+
+    Returns
+    -------
+    float
+        +1, -1 or NaN.
+
+    """
+    lk, mk = np.isfinite(link), np.isfinite(motor)
+    t_l, x_l, t_m, x_m = t_link[lk], link[lk], t_motor[mk], motor[mk]
+    if x_l.size < 2 or x_m.size < 2 or np.abs(np.diff(x_l)).sum() < MIN_DETECT_TRAVEL_RAD:
+        return math.nan
+    inside = (t_l >= t_m[0]) & (t_l <= t_m[-1])
+    if np.count_nonzero(inside) < 2:
+        return math.nan
+    order = np.argsort(t_m, kind='stable')
+    steps_l = np.diff(x_l[inside])
+    steps_m = np.diff(np.interp(t_l[inside], t_m[order], x_m[order]))
+    product = float(steps_l @ steps_m)
+    return math.copysign(1.0, product) if product else math.nan
 
 
 class _Output:
@@ -885,14 +919,21 @@ class _Run:
                 if link is None or not len(link):
                     continue
                 pos = _columns(link, link_names[2 * k:2 * k + 2], fields=1)[0]
-                r = motor_travel_ratio(pos[:, 0], pos[:, 1])
+                x_link, x_motor, t_motor = pos[:, 0], pos[:, 1], link.stamps_ns
             else:
                 if link is None or motor is None or not len(link) or not len(motor):
                     continue
-                r = motor_travel_ratio(_columns(link, [joint], fields=1)[0][:, 0],
-                                       _columns(motor, [plan.motor_names[k]], fields=1)[0][:, 0])
-            if not math.isfinite(r):
+                x_link = _columns(link, [joint], fields=1)[0][:, 0]
+                x_motor = _columns(motor, [plan.motor_names[k]], fields=1)[0][:, 0]
+                t_motor = motor.stamps_ns
+            r = motor_travel_ratio(x_link, x_motor)
+            sense = motor_direction(link.stamps_ns, x_link, t_motor, x_motor)
+            if not (math.isfinite(r) and math.isfinite(sense)):
                 continue
+            if sense < 0:   # never silent: the reversed sense is read, and said
+                self.bag.warnings.append(ReadWarning(
+                    str(self.bag.path), None, f'the motor encoder of {joint} counts against '
+                    'the link (a negative reduction): its angles are taken reversed'))
             found = 'raw' if r > math.sqrt(ratio) else 'output'
             if settings.motor_angles not in ('auto', found):
                 where = plan.motor_topic or plan.link_topic
@@ -901,15 +942,16 @@ class _Run:
                     f'--config, '
                     f'but the motor angles of {joint} on {where} move {r:.3g} times the link '
                     f'({found!r}: raw angles move about {ratio:g} times, output angles about 1)')
-            self._set_angles(joint, found)
+            self._set_angles(joint, found, sense)
 
-    def _set_angles(self, joint, angles):
+    def _set_angles(self, joint, angles, direction=1.0):
         front = self.fronts[joint]
         self.angles[joint] = angles
-        front.motor_scale = _motor_scale(self.settings, joint, angles)
+        front.motor_scale = _motor_scale(self.settings, joint, angles, direction)
         front.pairer.motor_scale = front.motor_scale
-        front.effort_scale = motor_effort_scale(self.settings.motor_effort_units, angles,
-                                                front.ratio)
+        # A motor that counts against the link reports its torque in its own sense too.
+        front.effort_scale = direction * motor_effort_scale(self.settings.motor_effort_units,
+                                                            angles, front.ratio)
         front.pairer.motor_effort_scale = front.effort_scale
 
     def run(self):

@@ -911,6 +911,8 @@ class WindowAnalyzer:
         self.windows_emitted = 0
         self.windows_observed = 0
         self.windows_friction_unknown = 0
+        self.windows_implausible = 0
+        self.largest_te_span = 0.0
         self._period_s = None
 
     def update(self, stream, effort, velocity):
@@ -1032,6 +1034,15 @@ class WindowAnalyzer:
                     'samples): the lost motion needs the torque')
         if self.windows_emitted == 0:
             return f'no complete analysis window yet ({seen} samples)'
+        if self.windows_implausible:
+            return (f'the motor and link encoders do not measure the same motion: the '
+                    f'transmission error spans up to {math.degrees(self.largest_te_span):.3g} '
+                    f'deg in {self.windows_implausible} of {self.windows_emitted} windows '
+                    f'(a reducer\'s moves by arcminutes; at most '
+                    f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
+                    f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
+                    'frozen encoder, a motor encoder that counts against the link, or a '
+                    'wrong reduction ratio or motor_angles')
         rate = self.rate_hz
         if math.isfinite(rate) and rate < LOW_RATE_HZ:
             return (f'{rate:.0f} Hz: too few samples per torque reversal in '
@@ -1221,7 +1232,21 @@ class WindowAnalyzer:
             withheld = unknown & (usable.sum(axis=1) >= self.min_bins)
             self.windows_friction_unknown += int(withheld.sum())
             usable &= ~unknown[:, None]
-        fit = [a.tolist() for a in self._fit_wear(torque_h, width, std, usable)]
+        te_max = np.maximum.reduceat(y, starts)
+        te_min = np.minimum.reduceat(y, starts)
+        implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
+        usable &= ~implausible[:, None]
+        fit = self._fit_wear(torque_h, width, std, usable)
+        # A lost motion no reducer has is an encoder or configuration fault.
+        beyond = fit[2] > PLAUSIBLE_LOST_MOTION_RAD
+        for k in (0, 1, 2, 3, 4):
+            fit[k][beyond] = np.nan
+        implausible |= beyond
+        if implausible.any():
+            self.windows_implausible += int(implausible.sum())
+            self.largest_te_span = max(self.largest_te_span,
+                                       float(np.max((te_max - te_min)[implausible])))
+        fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
         # within a window), over the loaded samples.
@@ -1232,8 +1257,6 @@ class WindowAnalyzer:
             loaded_mean = ((y_sums - np.einsum('wj,jw->w', beta, x_sums))
                            / np.add.reduceat(loaded, starts))
         duty = self._duty(torque, speed, dt, starts)
-        te_max = np.maximum.reduceat(y, starts)
-        te_min = np.minimum.reduceat(y, starts)
         n_ord = len(self.orders)
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
@@ -2204,6 +2227,23 @@ Friction [fraction of rated torque, at the window's RMS speed] below which none 
 
 Far below the lowest torque bin (2 %) and the effort noise band: it cannot change a
 flank, while subtracting a fitted near-zero friction would only move samples between bins.
+"""
+
+PLAUSIBLE_TE_SPAN_RAD = math.radians(10.0)
+"""
+Largest transmission-error span [rad] within one window that encoders on one reducer give.
+
+A reducer's TE moves by arcminutes (windup, hysteresis, harmonics; an encoder time offset
+adds its speed times the delay, about 2 degrees at 3 rad/s and 10 ms). Beyond 10 degrees the
+two encoders do not measure the same motion: a motor encoder that counts against the link,
+a frozen encoder, or a wrong ratio. Such a window gives no lost motion.
+"""
+
+PLAUSIBLE_LOST_MOTION_RAD = math.radians(1.0)
+"""
+Largest lost motion [rad] read as one: 60 arcmin, 20 times the usual wear limit (3 arcmin).
+
+A reading beyond it is an encoder or configuration fault, not a reducer.
 """
 
 LOW_RATE_HZ = 200.0

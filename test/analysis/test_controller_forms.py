@@ -93,6 +93,45 @@ def test_motor_angles_divided_by_the_ratio_are_recognised_without_a_config(origi
     _assert_same_estimate(result, original)
 
 
+@pytest.mark.parametrize('divided', [False, True], ids=['raw', 'output'])
+def test_a_motor_encoder_that_counts_against_the_link_is_read_reversed_and_said(
+        original, tmp_path, capsys, divided):
+    js = original[0]
+    position = _output_angles(js) if divided else js.position.copy()
+    effort = np.full_like(js.effort, np.nan)
+    for k in _motor_columns(js):
+        link = js.names.index(js.names[k][:-len('_motor')])
+        position[:, k] *= -1.0      # a negative reduction: the motor turns the other way
+        # Its torque in its own sense (motor units with raw angles, joint units with output
+        # angles: the 'auto' units).
+        effort[:, k] = -js.effort[:, link] / (1.0 if divided else RATIO)
+    bag = _rewrite(js, tmp_path, 'reversed', position=position, effort=effort)
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 0
+    for joint, wear in _wear(original[1]).items():
+        assert out['joints'][joint]['observed'] is True
+        assert out['joints'][joint]['wear_um'] == pytest.approx(wear, rel=0.02)
+        assert any(line.startswith('WARNING:') and f'motor encoder of {joint} counts against '
+                   'the link' in line for line in err.splitlines())
+
+
+@pytest.mark.parametrize('side', ['motor', 'link'])
+def test_a_frozen_encoder_is_declared_not_observed_never_read_as_wear(
+        original, tmp_path, capsys, side):
+    js = original[0]
+    position = js.position.copy()
+    k = js.names.index('joint_1_motor' if side == 'motor' else 'joint_1')
+    position[:, k] = position[0, k]     # the encoder stopped counting
+    bag = _rewrite(js, tmp_path, f'frozen_{side}', position=position)
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    got = out['joints']['joint_1']
+    assert got['observed'] is False and got['wear_um'] is None and got['rul_p50_h'] is None
+    assert 'do not measure the same motion' in got['reason'] and 'frozen encoder' in got['reason']
+    assert any(x.startswith('WARNING: joint_1: not observed') for x in err.splitlines())
+    assert out['joints']['joint_2']['observed'] is True
+
+
 def test_a_config_that_contradicts_the_motor_angles_is_an_error_naming_both(
         original, tmp_path, capsys):
     js = original[0]

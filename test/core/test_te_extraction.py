@@ -801,3 +801,26 @@ def test_a_learnt_time_offset_reads_the_tick_pair_along_the_motor_motion():
     # Read along the motor's motion between tick pairs on jittered stamps (a speed 3 % off
     # per step at 30 µs in 1 ms): what is left is a few percent of omega * delta.
     assert rms_without_offset(te - (link - motor / RATIO)) < 0.15 * naive
+
+
+@pytest.mark.parametrize('fault', ['motor reversed', 'motor frozen'])
+def test_encoders_that_do_not_measure_the_same_motion_give_no_lost_motion_and_say_so(fault):
+    # Read as a reducer, a reversed or frozen motor encoder gave lost motions of thousands
+    # of arcminutes and a remaining life of 0 h.
+    _, b = simulated(samples=8000)
+    motor = -b.motor_angle if fault == 'motor reversed' else np.full_like(b.motor_angle,
+                                                                          b.motor_angle[0])
+    stream = compute_te(b.t, motor, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    feats = analyzer.update(stream, b.effort, b.link_velocity) + analyzer.flush()
+    assert feats and all(not np.isfinite(f.lost_motion) for f in feats)
+    assert analyzer.windows_implausible >= 1 and analyzer.windows_observed == 0
+    reason = analyzer.not_observed_reason()
+    assert reason.startswith('the motor and link encoders do not measure the same motion')
+    assert 'frozen encoder' in reason and 'counts against the link' in reason
+    # The same stream with the encoders right is read.
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO), b.effort,
+                    b.link_velocity)
+    analyzer.flush()
+    assert analyzer.windows_observed >= 1 and analyzer.windows_implausible == 0
