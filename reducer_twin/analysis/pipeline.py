@@ -42,7 +42,7 @@ and decoded a few chunks ahead by a second forked process (``reader_process=True
 results are identical.
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from pathlib import Path
 import time
@@ -290,6 +290,27 @@ class JointPlan:
     motor_topic: str
     joints: tuple
     motor_names: tuple
+    others: tuple = ()
+
+    def not_analysed(self):
+        """
+        Joints of the bag's other paired topics, which this analysis leaves out.
+
+        Returns
+        -------
+        dict of str to str
+            ``<namespace>/<joint>`` (the topic's namespace, else the topic) to the reason.
+
+        """
+        out = {}
+        for topic, joints in self.others:
+            space = topic.rsplit('/', 1)[0].strip('/') or topic
+            for joint in joints:
+                out[f'{space}/{joint}'] = (
+                    f'not analysed: {topic} also holds motor/link pairs, and one analysis '
+                    f'reads one robot\'s topic ({self.link_topic} here); analyse it with '
+                    f'twin.link_topic: {topic} in --config')
+        return out
 
 
 def _topic_list(bag):
@@ -373,17 +394,17 @@ def plan_joints(bag, settings):
                      *_motor_entries(names_of(link), names_of(motor), suffix))
     candidates = [settings.link_topic] if settings.link_topic in states else []
     candidates += [t for t in states if t not in candidates]
-    for link in candidates:
-        have = names_of(link)
-        pairs = [n for n in have if n + suffix in have]
-        if pairs:
-            return _pick(bag, settings, link, None, pairs, [n + suffix for n in pairs])
-    dynamic = [t for t in states if bag.topics[t].msgtype != JOINT_STATE]
-    for link in candidates:
-        for motor in [t for t in states if t != link and ('motor' in t.lower() or t in dynamic)]:
-            common, motor_names = _motor_entries(names_of(link), names_of(motor), suffix)
-            if common and 'motor' not in link.lower():
-                return _pick(bag, settings, link, motor, common, motor_names)
+    found = _paired_topics(candidates, states, bag, names_of, suffix)
+    if found:
+        (link, motor), (pairs, motor_names) = found[0]
+        plan = _pick(bag, settings, link, motor, pairs, motor_names)
+        if settings.configured_topics:     # the configuration chose the topic
+            return plan
+        # Never silent: another robot (or arm) in the same recording is named.
+        used = {link, motor} - {None}
+        others = tuple((topic, tuple(joints)) for (topic, other), (joints, _) in found[1:]
+                       if topic not in used and other not in used)
+        return replace(plan, others=others)
     if not any(names_of(t) for t in states):
         problems = ''.join(f'; {w}' for w in bag.warnings)
         raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
@@ -409,6 +430,38 @@ def _motor_entries(link_names, motor_names, suffix):
                 entries.append(entry)
                 break
     return joints, entries
+
+
+def _paired_topics(candidates, states, bag, names_of, suffix):
+    """
+    Every link topic with motor/link pairs, in order of preference.
+
+    Returns
+    -------
+    list of tuple
+        ``((link topic, motor topic or None), (joints, motor entry names))``: the
+        combined form first (one topic with ``<joint>`` and ``<joint><suffix>``), then
+        the split form (a motor JointState topic, or a DynamicJointState one, naming
+        the link topic's joints).
+
+    """
+    found = []
+    for link in candidates:
+        have = names_of(link)
+        pairs = [n for n in have if n + suffix in have]
+        if pairs:
+            found.append(((link, None), (pairs, [n + suffix for n in pairs])))
+    dynamic = [t for t in states if bag.topics[t].msgtype != JOINT_STATE]
+    combined = {link for (link, _), _ in found}
+    for link in candidates:
+        if link in combined or 'motor' in link.lower():
+            continue
+        for motor in [t for t in states if t != link and ('motor' in t.lower() or t in dynamic)]:
+            common, motor_names = _motor_entries(names_of(link), names_of(motor), suffix)
+            if common:
+                found.append(((link, motor), (common, motor_names)))
+                break
+    return found
 
 
 def _pick(bag, settings, link, motor, available, motor_names):
@@ -708,7 +761,12 @@ class BagResult:
     def as_json(self):
         """Return ``{"joints": {name: {...}}, "messages_per_s": x}``."""
         rate = self.messages_per_s
-        return {'joints': {name: j.summary() for name, j in self.joints.items()},
+        joints = {name: j.summary() for name, j in self.joints.items()}
+        for name, reason in self.plan.not_analysed().items():
+            joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
+                            'observed': False, 'windows': 0, 'reason': reason,
+                            'pairing': None}
+        return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 
 

@@ -245,6 +245,9 @@ def run(args):
                 sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
                                  f'{res.reason or "no usable window"}\n')
                 blind = True
+        for joint, reason in result.plan.not_analysed().items():
+            sys.stderr.write(f'WARNING: {joint}: not observed in {name}: {reason}\n')
+            blind = True
         if args.report:
             from reducer_twin.analysis.report import write_report
             try:
@@ -321,3 +324,5 @@ def _print_summary(name, result):
               f'um, lost motion {_fmt(s["lost_motion_arcmin"], ".3f")} arcmin, remaining life '
               f'P10/P50/P90 {_fmt(s["rul_p10_h"], ",.0f")} / {_fmt(s["rul_p50_h"], ",.0f")} / '
               f'{_fmt(s["rul_p90_h"], ",.0f")} h, {s["rejected"]} samples rejected')
+    for joint, reason in result.plan.not_analysed().items():
+        print(f'  {joint}: NOT OBSERVED: {reason}')

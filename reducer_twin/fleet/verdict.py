@@ -248,4 +248,12 @@ def bag_rows(result, life=None, params=None):
                           float(np.sum(feats[:, exposure])) if len(feats) else 0.0, summary,
                           life.lost_motion_limit, life.warn_s, life.error_s)
         rows.append(fleet_row(reducer, params))
+    plan = getattr(result, 'plan', None)
+    if plan is not None and plan.others:     # another robot of the recording: never left out
+        listed = result.as_json()['joints']
+        for joint, reason in plan.not_analysed().items():
+            summary = dict(listed[joint], rul_censored=False)
+            reducer = Reducer(0, '', joint, None, None, None, None, 0, 1, 0, 0.0, summary,
+                              life.lost_motion_limit, life.warn_s, life.error_s)
+            rows.append(dict(fleet_row(reducer, params), reason=reason))
     return rank(rows)

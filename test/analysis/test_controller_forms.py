@@ -179,6 +179,39 @@ def _cli_json(bag, tmp_path, capsys):
     return code, json.loads(captured.out), captured.err
 
 
+def test_a_second_robot_in_the_recording_is_declared_not_analysed_never_left_out(
+        original, tmp_path, capsys):
+    js = original[0]
+    root = tmp_path / 'two_robots'
+    with BagDirWriter(root, compression='none', custom_data=CUSTOM) as writer:
+        for robot in ('robot_a', 'robot_b'):
+            writer.write_joint_states(writer.add_topic(f'/{robot}/joint_states', JOINT_STATE),
+                                      js)
+    code, out, err = _cli_json(root, tmp_path, capsys)
+    assert code == 3
+    assert out['joints']['joint_1']['observed'] is True
+    for joint in ('robot_b/joint_1', 'robot_b/joint_2'):
+        got = out['joints'][joint]
+        assert got['observed'] is False and got['wear_um'] is None
+        assert 'twin.link_topic: /robot_b/joint_states' in got['reason']
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
+    # The report's verdict table names them too, with the reason.
+    page = tmp_path / 'report'
+    assert main(['analyze', str(root), '--out', str(tmp_path / 'r'), '--report',
+                 str(page)]) == 3
+    capsys.readouterr()
+    text = (page / 'index.html').read_text(encoding='utf-8')
+    assert text.count('twin.link_topic: /robot_b/joint_states') == 2
+    assert '<td>robot_b/joint_1</td>' in text or 'robot_b/joint_1</td>' in text
+    # Chosen in the configuration, the other robot is analysed and nothing is left out.
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  link_topic: /robot_b/joint_states\n')
+    code = main(['analyze', str(root), '--out', str(tmp_path / 'b'), '--json', '--config',
+                 str(config)])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0 and sorted(out['joints']) == ['joint_1', 'joint_2']
+
+
 def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         original, tmp_path, capsys):
     js = original[0]
