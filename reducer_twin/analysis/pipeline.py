@@ -221,6 +221,9 @@ class AnalysisSettings:
         aging = None
         if 'twin.aging_factor' in given:
             aging = _number(path, 'twin.aging_factor', twin['aging_factor'], 0.0, 1e9)
+            if aging == 0.0:    # every window would count no operating time
+                raise InvalidParameter(f'{path}: twin.aging_factor must be a number in (0, '
+                                       '1e9] (operating seconds per stream second), got 0')
         try:
             spec = twin_config(config)
         except InvalidParameter as err:
@@ -308,7 +311,7 @@ class JointPlan:
             for joint in joints:
                 out[f'{space}/{joint}'] = (
                     f'not analysed: {topic} also holds motor/link pairs, and one analysis '
-                    f'reads one robot\'s topic ({self.link_topic} here); analyse it with '
+                    f"reads one robot's topic ({self.link_topic} here); analyse it with "
                     f'twin.link_topic: {topic} in --config')
         return out
 
@@ -410,6 +413,7 @@ def plan_joints(bag, settings):
         raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
                        f'{problems}')
     found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)
+    dynamic = any(bag.topics[t].msgtype != JOINT_STATE for t in states)
     hint = (f'; a DynamicJointState joint gives <joint>{suffix} from its interface '
             f'{settings.interfaces.motor_position!r} (twin.interfaces.motor_position)'
             if dynamic else '')
@@ -807,9 +811,10 @@ def _bag_aging_factor(bag, settings):
         value = float(text)
     except ValueError:
         value = float('nan')
-    if not (math.isfinite(value) and 0.0 <= value <= 1e9):
+    if not (math.isfinite(value) and 0.0 < value <= 1e9):
         raise InvalidInput(f'{bag.path}: custom_data {AGING_KEY} = {text!r} is not an aging '
-                           'factor in [0, 1e9]; set twin.aging_factor with --config')
+                           'factor in (0, 1e9] (operating seconds per stream second); set '
+                           'twin.aging_factor with --config')
     return value
 
 

@@ -1038,7 +1038,7 @@ class WindowAnalyzer:
             return (f'the motor and link encoders do not measure the same motion: the '
                     f'transmission error spans up to {math.degrees(self.largest_te_span):.3g} '
                     f'deg in {self.windows_implausible} of {self.windows_emitted} windows '
-                    f'(a reducer\'s moves by arcminutes; at most '
+                    f"(a reducer's moves by arcminutes; at most "
                     f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
                     f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
                     'frozen encoder, a motor encoder that counts against the link, or a '
