@@ -680,6 +680,7 @@ class JointResult:
     truth: np.ndarray = None
     windows: int = 0
     reason: str = None
+    partial: str = None
 
     @property
     def observed(self):
@@ -696,8 +697,9 @@ class JointResult:
             ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
             ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
             ``observed``, ``windows`` (windows with a lost motion), ``reason`` (why
-            not observed, else None) and ``pairing`` (how link and motor samples were
-            paired, and why).
+            not observed, else None), ``partial`` (why an observed estimate stands as of
+            a window well before the recording's end, else None) and ``pairing`` (how
+            link and motor samples were paired, and why).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
@@ -711,6 +713,7 @@ class JointResult:
         out['observed'] = observed
         out['windows'] = int(self.windows)
         out['reason'] = None if observed else (self.reason or 'no usable window')
+        out['partial'] = self.partial if observed else None
         out['pairing'] = self.counts.get('pairing')
         return out
 
@@ -769,7 +772,7 @@ class BagResult:
         for name, reason in self.plan.not_analysed().items():
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
-                            'pairing': None}
+                            'partial': None, 'pairing': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 
@@ -823,6 +826,12 @@ def _motor_scale(settings, joint, angles=None, direction=1.0):
         return direction * total_ratio(settings.params_of(joint).geometry)
     return direction
 
+
+PARTIAL_SHARE = 0.2
+"""Share of a joint's stream after its last lost motion from which the estimate is partial."""
+
+PARTIAL_WINDOWS = 3
+"""Windows of stream after the last lost motion below which the estimate is taken as current."""
 
 MIN_DETECT_TRAVEL_RAD = 0.05
 """Link travel [rad] a chunk must show before its motor angles are classified."""
@@ -955,6 +964,7 @@ class _Run:
         self.started = False
         self.messages_read = 0
         self.angles = {}     # joint -> 'raw' / 'output', as the data show them
+        self.span = {}       # joint -> [first, last] stamp of its paired samples [ns]
         for joint, front in self.fronts.items():
             front.effort_topic = plan.link_topic if settings.effort_source != 'motor' or \
                 not plan.motor_topic else plan.motor_topic
@@ -1090,6 +1100,8 @@ class _Run:
         if t_ns.size == 0:
             return
         samples = (np.asarray(t_ns, np.int64), motor, link, effort, velocity)
+        span = self.span.setdefault(joint, [int(t_ns[0]), int(t_ns[-1])])
+        span[1] = max(span[1], int(t_ns[-1]))
         if joint in self.remote:
             self.backs.submit(joint, 'feed', samples)
             return
@@ -1157,6 +1169,41 @@ class _Run:
                     + f' ({counts.get("unpaired", 0)} unpaired)')
         return front.analyzer.not_observed_reason(front.effort_topic)
 
+    def _partial(self, joint, front, features):
+        """
+        Say when an observed joint's lost motion stopped well before its stream did.
+
+        The estimate then stands as of its last observed window (without effort the
+        operating time after it is not even counted): never presented as the end's
+        without a word.
+        """
+        if not front.analyzer.windows_observed or joint not in self.span:
+            return None
+        fields = TE_FEATURES.fields
+        seen = np.isfinite(features[:, fields.index('lost_motion_rad')])
+        first, last = (t * 1e-9 for t in self.span[joint])
+        until = float(np.max(features[seen, fields.index('window_end_s')]))
+        tail = last - until
+        a = front.analyzer
+        if last <= first or tail < max(PARTIAL_SHARE * (last - first),
+                                       PARTIAL_WINDOWS * self.settings.window_s):
+            if a.samples_without_effort >= PARTIAL_SHARE * max(a.samples_seen, 1):
+                return (f'no effort on {front.effort_topic} in {a.samples_without_effort} '
+                        f'of {a.samples_seen} samples: their operating time is not counted '
+                        'in the wear')
+            return None
+        if a.samples_without_effort >= 0.1 * max(a.samples_seen, 1):
+            why = (f'no effort on {front.effort_topic} in {a.samples_without_effort} of '
+                   f'{a.samples_seen} samples (their operating time is not counted)')
+        elif a.windows_implausible:
+            why = (f'in {a.windows_implausible} windows the transmission error spans up to '
+                   f'{math.degrees(a.largest_te_span):.3g} deg (a frozen encoder?)')
+        else:
+            why = 'no torque reversal under load read in its windows'
+        return (f'no lost motion in the last {100 * tail / (last - first):.0f} % of the '
+                f'stream (after {until - first:.1f} s of {last - first:.1f} s): {why}; the '
+                'wear and remaining life stand as of the last observed window')
+
     def _finish(self, chunks, link_clean, motor_clean):
         plan = self.plan
         self.messages_read = sum(chunks.messages.values())
@@ -1212,6 +1259,7 @@ class _Run:
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
+            res.partial = self._partial(joint, front, res.features)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)
                       and not k.endswith('_wrap'))

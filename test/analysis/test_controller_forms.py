@@ -212,6 +212,32 @@ def test_a_second_robot_in_the_recording_is_declared_not_analysed_never_left_out
     assert code == 0 and sorted(out['joints']) == ['joint_1', 'joint_2']
 
 
+def test_an_estimate_that_stops_before_the_recording_says_as_of_when_and_why(
+        original, tmp_path, capsys):
+    # Effort only in the first half: the wear read at the half was reported as the end's
+    # (41-47 % low) without a word.
+    js = original[0]
+    effort = js.effort.copy()
+    effort[len(effort) // 2:] = np.nan
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'half', effort=effort), tmp_path, capsys)
+    assert code == 0
+    for joint, got in out['joints'].items():
+        assert got['observed'] is True
+        assert got['partial'].startswith('no lost motion in the last 5')
+        assert 'no effort on /joint_states' in got['partial']
+        assert any(x.startswith(f'WARNING: {joint}: observed in part of') for x in
+                   err.splitlines())
+    # Effort on every other message: read, and the uncounted operating time said.
+    effort = js.effort.copy()
+    effort[1::2] = np.nan
+    _, out, _ = _cli_json(_rewrite(js, tmp_path, 'every_other', effort=effort),
+                          tmp_path / 'e', capsys)
+    for got in out['joints'].values():
+        assert got['observed'] is True and 'operating time is not counted' in got['partial']
+    for res in original[1].joints.values():
+        assert res.summary()['partial'] is None
+
+
 def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         original, tmp_path, capsys):
     js = original[0]
