@@ -68,7 +68,8 @@ from reducer_twin.msg_adapters.diagnostic_cdr import (
     encode_diagnostic_array, MSGTYPE as DIAGNOSTICS)
 from reducer_twin.msg_adapters.diagnostic_cdr import Status
 from reducer_twin.msg_adapters.dynamic_joint_state import InterfaceMap
-from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, MSGTYPE as JOINT_STATE
+from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, JointStateBatch
+from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from reducer_twin.msg_adapters.layouts import GROUND_TRUTH, REMAINING_LIFE, TE_BATCH
 from reducer_twin.msg_adapters.layouts import TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.multiarray_cdr import decode_multiarray, encode_multiarrays
@@ -500,6 +501,7 @@ class _Chunks:
         self.repeated_names = dict.fromkeys(self.topics, 0)
         self.stamp_repeats = dict.fromkeys(self.topics, 0)
         self.zero_stamps = dict.fromkeys(self.topics, 0)
+        self.name_messages = {}     # topic -> name -> messages, once a message was partial
         self._last_stamp = {}
 
     def __iter__(self):
@@ -510,17 +512,40 @@ class _Chunks:
                 self.malformed[topic] += len(decoded.rejected)
                 self.first_problem.setdefault(topic, decoded.rejected[0][1])
             self.repeated_names[topic] += decoded.repeated_names
-            self._note_stamps(topic, decoded.stamps_ns)
             self.messages[topic] += len(decoded)
             parts[topic].append(decoded)
             pending += len(decoded)
             if pending >= self.size:
-                yield {t: concat_batches(p) if p else None for t, p in parts.items()}
+                yield {t: self._ready(t, p) for t, p in parts.items()}
                 parts = {t: [] for t in self.topics}
                 pending = 0
         if pending:
-            yield {t: concat_batches(p) if p else None for t, p in parts.items()}
+            yield {t: self._ready(t, p) for t, p in parts.items()}
         self._warn()
+
+    def _ready(self, topic, parts):
+        """Return a topic's messages of one chunk, several publishers' partial ones merged."""
+        if not parts:
+            return None
+        batch = concat_batches(parts)
+        absent = np.isnan(batch.position)
+        if absent.any():
+            counts = self.name_messages.setdefault(topic, {})
+            for name, n in zip(batch.names, len(batch) - np.count_nonzero(absent, axis=0)):
+                counts[name] = counts.get(name, 0) + int(n)
+            batch = merge_partial_messages(batch)
+        else:
+            counts = self.name_messages.get(topic)
+            if counts is not None:
+                for name in batch.names:
+                    counts[name] = counts.get(name, 0) + len(batch)
+        self._note_stamps(topic, batch.stamps_ns)
+        return batch
+
+    def joint_messages(self, topic, name):
+        """Messages of ``topic`` that carried ``name`` (all of them, unless partial)."""
+        counts = self.name_messages.get(topic)
+        return self.messages[topic] if counts is None else counts.get(name, 0)
 
     def _note_stamps(self, topic, stamps):
         """Count messages whose header stamp repeats the one before (a clock that stands)."""
@@ -551,12 +576,72 @@ class _Chunks:
                     'entries were dropped (the first entry of a name counts)'))
 
 
+def merge_partial_messages(batch):
+    """
+    Merge the messages of a tick that several publishers sent, each with some entries.
+
+    Two ``joint_state_broadcaster`` (or a link and a motor publisher) on one topic each
+    send their own entries of a controller tick, with the same stamp or stamps a fraction
+    of a period apart, in either order. Taken one by one, the second message of a tick
+    repeated or preceded the first's stamp and was dropped with all its entries (a joint
+    reported as "stamps do not advance"). Within the chunk the messages are put in stamp
+    order where they are at most a period out of it, and neighbours that name disjoint
+    entries less than half a period apart become one message (at the first's stamp; the
+    entries of one message keep theirs together). Full messages are left alone: a stamp
+    that repeats on them is a clock that stands, and said so.
+
+    Parameters
+    ----------
+    batch : JointStateBatch
+        One topic's messages of a chunk, NaN where a message did not name an entry.
+
+    Returns
+    -------
+    JointStateBatch
+        The merged messages.
+
+    """
+    t = batch.stamps_ns
+    if len(batch) < 2:
+        return batch
+    steps = np.diff(t)
+    # The tick period, from the entry named most often (the stamps of all messages
+    # alternate between the publishers' offsets).
+    present = np.isfinite(batch.position)
+    ticks = np.diff(np.sort(t[present[:, np.argmax(present.sum(axis=0))]]))
+    ticks = ticks[ticks > 0]
+    if not ticks.size:
+        return batch
+    period = float(np.median(ticks))
+    if (steps < 0).any() and -steps.min() <= period:
+        batch = batch.take(np.argsort(t, kind='stable'))
+        t = batch.stamps_ns
+    present = np.isfinite(batch.position)
+    pos, vel, eff = (a.copy() for a in (batch.position, batch.velocity, batch.effort))
+    keep = np.ones(len(batch), dtype=bool)
+    for k in range(1, len(batch)):     # only partial messages get here: a plain loop
+        j = k - 1
+        while not keep[j]:
+            j -= 1
+        if t[k] - t[j] < 0.5 * period and not (present[k] & present[j]).any():
+            take = present[k]
+            pos[j, take], vel[j, take], eff[j, take] = pos[k, take], vel[k, take], eff[k, take]
+            present[j] |= take
+            keep[k] = False
+    if keep.all():
+        return batch
+    log = None if batch.log_time_ns is None else batch.log_time_ns[keep]
+    return JointStateBatch(t[keep], batch.names, pos[keep], vel[keep], eff[keep],
+                           batch.frame_id, log, ())
+
+
 def _read_worker(chunks, queue):
     """Read and decode the chunks in a forked process; end with the counts and warnings."""
     try:
         for chunk in chunks:
             queue.put(chunk)
         queue.put((_END, {'messages': chunks.messages, 'malformed': chunks.malformed,
+                          'name_messages': chunks.name_messages,
                           'first_problem': chunks.first_problem,
                           'warnings': list(chunks.bag.warnings)}))
     except BaseException as err:  # noqa: B902 - reported to the parent, which raises
@@ -579,6 +664,7 @@ class _ForkedChunks:
         self.bag = chunks.bag
         self.messages = chunks.messages
         self.malformed = chunks.malformed
+        self.name_messages = chunks.name_messages
         self.first_problem = chunks.first_problem
         self._queue = ctx.Queue(maxsize=3)
         self._proc = ctx.Process(target=_read_worker, name='reducer-twin-reader',
@@ -596,12 +682,15 @@ class _ForkedChunks:
                 raise RuntimeError(f'the bag reading process failed: {payload}')
             self.messages = payload['messages']
             self.malformed = payload['malformed']
+            self.name_messages = payload['name_messages']
             self.first_problem = payload['first_problem']
             for warning in payload['warnings']:
                 if warning not in self.bag.warnings:
                     self.bag.warnings.append(warning)
             break
         self._proc.join(timeout=10)
+
+    joint_messages = _Chunks.joint_messages
 
     def terminate(self):
         """Stop the reading process (after an error)."""
@@ -1241,8 +1330,9 @@ class _Run:
             malformed = sum(chunks.malformed.values())
             counts['malformed_messages'] = int(malformed)
             res.counts = counts
-            res.messages = chunks.messages[plan.link_topic] + (
-                chunks.messages[plan.motor_topic] if plan.motor_topic else 0)
+            res.messages = chunks.joint_messages(plan.link_topic, joint) + (
+                chunks.joint_messages(plan.motor_topic, plan.motor_names[k])
+                if plan.motor_topic else 0)
             res.rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
                 counts.get(f'{side}_{r}', 0) for side, _, _ in sides for r in _REPAIRED
                 if r != 'clock_jump')

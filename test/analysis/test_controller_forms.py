@@ -19,7 +19,8 @@ from reducer_twin.cli import main
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
-from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch, MSGTYPE as JOINT_STATE
+from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
+from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 
 AGING = 180_000.0
 SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
@@ -171,6 +172,36 @@ def test_link_and_motor_topics_far_apart_in_the_file_lose_no_pair_at_chunk_bound
         assert res.counts['unpaired'] == 0
         assert res.summary()['rejected'] == 0
     _assert_same_estimate(result, original, rel=0.03)
+
+
+@pytest.mark.parametrize('offset_ns, second_first', [(0, False), (300_000, True)],
+                         ids=['same stamp', 'stamped 0.3 ms apart, logged out of order'])
+def test_two_publishers_of_one_topic_each_with_its_joints_lose_no_sample(
+        original, tmp_path, offset_ns, second_first):
+    # Two joint_state_broadcasters on /joint_states, each sending its own joints of a
+    # tick: the second message of a tick was taken for a frozen clock (joint_2 "not
+    # observed"), or, stamped a little earlier, for a sample out of order.
+    js = original[0]
+    parts = []
+    for joint in ('joint_1', 'joint_2'):
+        cols = [js.names.index(joint), js.names.index(joint + '_motor')]
+        stamps = js.stamps_ns + (offset_ns if joint == 'joint_1' else 0)
+        buffer, offsets = encode_joint_states(stamps, (joint, joint + '_motor'),
+                                              js.position[:, cols], js.velocity[:, cols],
+                                              js.effort[:, cols])
+        parts.append([buffer[offsets[i]:offsets[i + 1]].tobytes() for i in range(len(js))])
+    if second_first:
+        parts.reverse()
+    root = tmp_path / 'two_publishers'
+    with BagDirWriter(root, compression='none', custom_data=CUSTOM) as writer:
+        channel = writer.add_topic('/joint_states', JOINT_STATE)
+        for i, log_ns in enumerate(js.stamps_ns):
+            for k, part in enumerate(parts):
+                writer.write(channel, int(log_ns) + k, part[i])
+    result = analyze_bag(root, tmp_path / 'd')
+    for res in result.joints.values():
+        assert res.summary()['rejected'] == 0 and res.messages == len(js)
+    _assert_same_estimate(result, original, rel=0.005)
 
 
 def _cli_json(bag, tmp_path, capsys):
