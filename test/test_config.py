@@ -148,6 +148,14 @@ def test_each_joint_takes_its_own_reducer_from_a_file_or_overrides_and_the_rest_
         == 3.6e7
 
 
+def test_a_motor_direction_other_than_1_or_minus_1_is_refused(tmp_path):
+    assert load_config(_file(tmp_path, 'twin:\n  motor_direction: -1\n'))['twin'][
+        'motor_direction'] == -1
+    path = _file(tmp_path, 'twin:\n  motor_direction: 2\n')
+    with pytest.raises(InvalidParameter, match=r'twin.motor_direction must be 1 .* got 2'):
+        load_config(path)
+
+
 BAD_REDUCERS = [
     ('a joint the robot does not have', 'twin:\n  joints: [joint_1]\n'
      'reducers:\n  joint_9: {rating: {rated_torque: 392.0}}\n',

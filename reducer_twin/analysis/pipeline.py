@@ -128,6 +128,10 @@ class AnalysisSettings:
         ``'raw'``, ``'output'`` (already divided by the ratio) or ``'auto'``: found
         from the data (motor travel against link travel); a configured value the
         data contradict is an error naming both.
+    motor_direction : int or str
+        1 (the motor encoder counts with the link), -1 (against it) or ``'auto'``:
+        found per joint from the data (its steps against the link's); a configured
+        value the data contradict is an error naming both.
     effort_source : str
         Where the torque is read: ``'link'``, ``'motor'`` or ``'auto'`` (the link
         entry where it has an effort, else the motor entry).
@@ -168,6 +172,7 @@ class AnalysisSettings:
     motor_topic: str = ''
     motor_suffix: str = '_motor'
     motor_angles: str = 'auto'
+    motor_direction: object = 'auto'
     effort_source: str = 'auto'
     motor_effort_units: str = 'auto'
     interfaces: InterfaceMap = field(default_factory=InterfaceMap)
@@ -249,6 +254,8 @@ class AnalysisSettings:
                    link_topic=str(twin['link_topic']), motor_topic=str(twin['motor_topic']),
                    motor_suffix=str(twin['motor_suffix']),
                    motor_angles=twin['motor_angles'] if 'twin.motor_angles' in given else 'auto',
+                   motor_direction=(twin['motor_direction'] if 'twin.motor_direction' in given
+                                    else 'auto'),
                    effort_source=twin['effort_source'],
                    motor_effort_units=twin['motor_effort_units'],
                    interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
@@ -1092,7 +1099,14 @@ class _Run:
             sense = motor_direction(link.stamps_ns, x_link, t_motor, x_motor)
             if not (math.isfinite(r) and math.isfinite(sense)):
                 continue
-            if sense < 0:   # never silent: the reversed sense is read, and said
+            if settings.motor_direction not in ('auto', sense):
+                where = plan.motor_topic or plan.link_topic
+                raise InvalidInput(
+                    f'{self.bag.path}: twin.motor_direction is {settings.motor_direction} in '
+                    f'--config, but the motor angles of {joint} on {where} step '
+                    f'{"with" if sense > 0 else "against"} the link (motor_direction '
+                    f'{int(sense)})')
+            if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
                 self.bag.warnings.append(ReadWarning(
                     str(self.bag.path), None, f'the motor encoder of {joint} counts against '
                     'the link (a negative reduction): its angles are taken reversed'))

@@ -29,6 +29,8 @@ STREAMS = {
                         'link_topic as <joint><motor_suffix>'),
     'motor_suffix': ('_motor', 'suffix of motor-side entries in a combined message'),
     'motor_angles': ('raw', "'raw' (input side) or 'output' (divided by the ratio)"),
+    'motor_direction': (1, '1: the motor encoder counts with the link; -1: against it (a '
+                           'negative reduction)'),
     'effort_source': ('auto', "torque from the 'link' entry, the 'motor' entry, or 'auto' "
                               '(link where it has one, else motor)'),
     'motor_effort_units': ('auto', "motor entry's effort: 'motor' torque (times the ratio), "
@@ -63,17 +65,22 @@ class RobotIngest:
         ``'link'``, ``'motor'`` or ``'auto'``.
     motor_effort_units : str
         ``'motor'``, ``'joint'`` or ``'auto'`` (see :func:`motor_effort_scale`).
+    motor_direction : int
+        1, or -1 for a motor encoder that counts against the link (its angles and its
+        torque are taken reversed).
 
     """
 
     def __init__(self, joints, ratio, config=None, split=False, motor_angles='raw',
-                 effort_source='auto', motor_effort_units='auto'):
+                 effort_source='auto', motor_effort_units='auto', motor_direction=1):
         config = config or IngestConfig()
+        check_motor_direction(motor_direction)
         self.joints = list(joints)
         self.split = bool(split)
-        self.scale = ratio if motor_angles == 'output' else 1.0
+        self.scale = motor_direction * (ratio if motor_angles == 'output' else 1.0)
         self.effort_source = effort_source
-        self.effort_scale = motor_effort_scale(motor_effort_units, motor_angles, ratio)
+        self.effort_scale = motor_direction * motor_effort_scale(motor_effort_units,
+                                                                 motor_angles, ratio)
         self.link = StreamCleaner(config)
         self.motor = StreamCleaner(config) if self.split else None
         self.spikes = SpikeFilterBank(ratio, len(self.joints), config)
@@ -179,6 +186,21 @@ def _clean(cleaner, rows):
     vel = np.stack([r[2] for r in rows])
     eff = np.stack([r[3] for r in rows])
     return cleaner.process(t, pos, vel, eff)
+
+
+def check_motor_direction(value, prefix=''):
+    """
+    Check a motor direction: 1 or -1.
+
+    Raises
+    ------
+    InvalidParameter
+        Naming the value and the allowed ones.
+
+    """
+    if isinstance(value, bool) or value not in (1, -1):
+        raise InvalidParameter(f'{prefix}motor_direction must be 1 (the motor encoder counts '
+                               f'with the link) or -1 (against it), got {value!r}')
 
 
 def check_streams(joints, link_topic, motor_topic, motor_suffix, prefix=''):

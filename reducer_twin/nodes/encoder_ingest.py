@@ -6,7 +6,8 @@ Subscribes to what robot controllers publish: one ``sensor_msgs/JointState``
 ``<joint><motor_suffix>`` (motor side), or link and motor sides on two JointState
 topics with the same joint names (``motor_topic``; a second ``joint_state_broadcaster``
 publishes ros2_control's ``motor_position`` interface so: README, "ROS 2 nodes").
-Motor angles are raw or already divided by the ratio (``motor_angles``); the torque
+Motor angles are raw or already divided by the ratio (``motor_angles``), counted with the
+link or against it (``motor_direction`` 1 or -1, a negative reduction); the torque
 comes from the link or the motor entry (``effort_source``, ``motor_effort_units``).
 Messages are taken as serialised bytes and read by
 :class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateReader`; the core's
@@ -24,7 +25,8 @@ from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.core.robot_ingest import check_streams, RobotIngest, STREAMS
+from reducer_twin.core.robot_ingest import check_motor_direction, check_streams, RobotIngest
+from reducer_twin.core.robot_ingest import STREAMS
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
 from reducer_twin.msg_adapters.ros import JointStatePicker
@@ -64,7 +66,8 @@ class EncoderIngest(Node):
         self.batch_ns = int(s.batch_period_s * 1e9)
         self.split = bool(p['motor_topic'])
         self.ingest = RobotIngest(self.joints, ratio, self.ingest_params.value, self.split,
-                                  p['motor_angles'], p['effort_source'], p['motor_effort_units'])
+                                  p['motor_angles'], p['effort_source'], p['motor_effort_units'],
+                                  p['motor_direction'])
         self.outputs = {joint: SharedOutput(self.create_publisher(
             Float64MultiArray, joint_topic(joint, 'encoder_pairs'), encoder_qos()),
             PAIRED_SAMPLES) for joint in self.joints}
@@ -94,6 +97,7 @@ class EncoderIngest(Node):
             **STREAMS,
             'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription')})
         check_choice('motor_angles', out['motor_angles'], ('raw', 'output'))
+        check_motor_direction(out['motor_direction'])
         check_choice('effort_source', out['effort_source'], EFFORT_SOURCES)
         check_choice('motor_effort_units', out['motor_effort_units'], MOTOR_EFFORT_UNITS)
         check_streams(out['joints'], out['link_topic'], out['motor_topic'], out['motor_suffix'])

@@ -114,6 +114,17 @@ def test_a_motor_encoder_that_counts_against_the_link_is_read_reversed_and_said(
         assert out['joints'][joint]['wear_um'] == pytest.approx(wear, rel=0.02)
         assert any(line.startswith('WARNING:') and f'motor encoder of {joint} counts against '
                    'the link' in line for line in err.splitlines())
+    # Configured, it is read without a warning; configured the other way, it is an error.
+    config = tmp_path / 'twin.yaml'
+    for direction, want in ((-1, 0), (1, 1)):
+        config.write_text(f'twin:\n  motor_direction: {direction}\n')
+        code = main(['analyze', str(bag), '--out', str(tmp_path / f'c{direction}'),
+                     '--config', str(config)])
+        err = capsys.readouterr().err
+        assert code == want and 'counts against the link' not in err
+        if want:
+            (line,) = [x for x in err.splitlines() if x.startswith('ERROR:')]
+            assert 'twin.motor_direction is 1' in line and 'motor_direction -1' in line
 
 
 @pytest.mark.parametrize('side', ['motor', 'link'])

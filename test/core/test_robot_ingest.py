@@ -61,3 +61,27 @@ def test_streams_whose_sides_cannot_be_told_apart_are_refused(joints, link, moto
                                                               message):
     with pytest.raises(InvalidParameter, match=message.replace('(', r'\(').replace(')', r'\)')):
         check_streams(joints, link, motor, suffix, 'twin.')
+
+
+@pytest.mark.parametrize('split', [False, True], ids=['combined', 'split'])
+def test_a_motor_encoder_counting_against_the_link_gives_the_same_pairs_at_direction_minus_1(
+        split):
+    sim = JointSimulator(ReducerParams(), SimConfig(name='j0', rate_hz=250.0, seed=3,
+                                                    exact_mesh=False))
+    batches = [sim.step(300)]
+    link, motor = _messages(batches, split)
+    found = []
+    for direction in (1, -1):
+        if direction < 0:     # the motor's angle (and its torque) in its own, reversed sense
+            if split:
+                motor = [(t, -p, v, -e) for t, p, v, e in motor]
+            else:
+                link = [(t, p * np.array([1.0, -1.0]), v, e * np.array([1.0, -1.0]))
+                        for t, p, v, e in link]
+        ingest = RobotIngest(['j0'], RATIO, split=split, effort_source='link',
+                             motor_direction=direction)
+        found.append(np.concatenate([r for _, r in ingest.process(link, motor)]))
+    np.testing.assert_allclose(found[1], found[0], rtol=0, atol=1e-12)
+    for bad in (0, 2, True, '-1'):
+        with pytest.raises(InvalidParameter, match='motor_direction must be 1 .* or -1'):
+            RobotIngest(['j0'], RATIO, motor_direction=bad)

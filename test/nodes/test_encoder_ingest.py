@@ -63,18 +63,21 @@ class Robot:
         Form (b), two topics; else form (a), one combined topic.
     motor_angles : str
         ``'raw'`` or ``'output'`` (reported divided by the ratio).
+    motor_direction : int
+        -1: the motor angles are published in the reversed sense (and the node told so).
 
     """
 
     def __init__(self, ros, split=False, motor_angles='raw', joints=2, batch_period_s=0.002,
-                 extra=()):
+                 extra=(), motor_direction=1):
         n = next(_ids)
         self.ros = ros
         self.joints = [f'arm{n}_j{k + 1}' for k in range(joints)]
         self.link_topic = f'/robot{n}/joint_states'
         self.motor_topic = f'/robot{n}/motor_states' if split else ''
         self.split = split
-        self.scale = RATIO if motor_angles == 'output' else 1.0
+        # Published motor angle = true angle / scale (a reversed encoder: negative).
+        self.scale = motor_direction * (RATIO if motor_angles == 'output' else 1.0)
         self.t0 = (time.time_ns() // MS - 10_000) * MS
         self.node = ros.add(EncoderIngest(
             f'encoder_ingest_{n}', context=ros.context, parameter_overrides=[
@@ -82,6 +85,7 @@ class Robot:
                 Parameter('link_topic', value=self.link_topic),
                 Parameter('motor_topic', value=self.motor_topic),
                 Parameter('motor_angles', value=motor_angles),
+                Parameter('motor_direction', value=motor_direction),
                 Parameter('batch_period_s', value=batch_period_s),
                 Parameter('diagnostics_period_s', value=0.1), *extra]))
         self.probe = ros.probe()
@@ -210,9 +214,10 @@ def test_an_unknown_effort_source_stops_the_node_naming_the_allowed_values(ros):
             Parameter('effort_source', value='elbow')])
 
 
-@pytest.mark.parametrize('motor_angles', ['raw', 'output'])
-def test_combined_joint_states_become_aligned_encoder_pairs(ros, motor_angles):
-    robot = Robot(ros, motor_angles=motor_angles)
+@pytest.mark.parametrize('motor_angles, motor_direction', [
+    ('raw', 1), ('output', 1), ('raw', -1)], ids=['raw', 'output', 'raw, counting against'])
+def test_combined_joint_states_become_aligned_encoder_pairs(ros, motor_angles, motor_direction):
+    robot = Robot(ros, motor_angles=motor_angles, motor_direction=motor_direction)
     n = 300
     robot.send([(robot.link_pub, robot.combined(k)) for k in range(n)])
     ks = np.arange(n)
