@@ -571,7 +571,8 @@ class _Chunks:
             if repeats >= 2 and repeats * 100 >= n:   # 1 % or more: a clock that stands
                 zeros = self.zero_stamps[topic]
                 kind = 'all zero' if zeros == n else (
-                    f'{zeros:,} of them zero' if zeros else 'a frozen clock')
+                    f'{zeros:,} of them zero' if zeros else
+                    'a frozen clock, or each message logged twice')
                 self.bag.warnings.append(ReadWarning(
                     str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages on '
                     f'{topic} carry the header stamp of the message before (stamps that do '
@@ -1318,6 +1319,13 @@ class _Run:
                     f'be told raw from output (the link moved less than '
                     f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
                     'twin.motor_angles in --config'))
+        for topic, cleaner in ((plan.link_topic, link_clean), (plan.motor_topic, motor_clean)):
+            late = cleaner.counts['out_of_order'] if cleaner is not None else 0
+            if late and late * 100 >= chunks.messages[topic]:   # a loss that size is said
+                self.bag.warnings.append(ReadWarning(
+                    str(self.bag.path), None, f'{late:,} of {chunks.messages[topic]:,} '
+                    f'JointState messages on {topic} were logged after a later stamp (out of '
+                    'stamp order) and were dropped, as encoder_ingest drops them live'))
         for topic, count in chunks.malformed.items():
             if count:   # as Bag.read_joint_states reports them
                 self.bag.warnings.append(ReadWarning(

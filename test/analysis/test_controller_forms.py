@@ -293,6 +293,18 @@ def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
 
 
+def test_messages_logged_out_of_stamp_order_are_dropped_and_said(original, tmp_path, capsys):
+    js = original[0]
+    stamps = js.stamps_ns.copy()
+    swap = np.arange(0, len(stamps) - 1, 20)        # every 20th message logged after the next
+    stamps[swap], stamps[swap + 1] = stamps[swap + 1], stamps[swap].copy()
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'late', stamps_ns=stamps), tmp_path,
+                               capsys)
+    assert code == 0
+    (line,) = [x for x in err.splitlines() if 'out of stamp order' in x]
+    assert line.startswith('WARNING:') and f'{swap.size:,} of {len(js):,}' in line
+
+
 def test_all_zero_header_stamps_are_declared_as_stamps_that_do_not_advance(
         original, tmp_path, capsys):
     js = original[0]
