@@ -316,6 +316,10 @@ def _verdicts(result, life):
 def _page(result, images, life=None):
     title = f'reducer_twin analysis of {result.bag.name}'
     notes = ''.join(f'<li>{html.escape(str(w))}</li>' for w in result.warnings)
+    # An estimate that stands as of a window well before the recording's end says so.
+    notes += ''.join(f'<li>{html.escape(joint)}: observed in part: {html.escape(res.partial)}'
+                     '</li>' for joint, res in result.joints.items()
+                     if res.observed and res.partial)
     sections = ''.join(
         f'<h2>{html.escape(t)}</h2><p><img alt="{html.escape(t)}" src="data:image/png;base64,'
         f'{images[stem]}"></p>' for stem, t in PLOTS if stem in images)

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from reducer_twin.analysis import pipeline
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.report import write_report
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.core.kinematics import total_ratio
@@ -278,6 +279,10 @@ def test_an_estimate_that_stops_before_the_recording_says_as_of_when_and_why(
         assert got['observed'] is True and 'operating time is not counted' in got['partial']
     for res in original[1].joints.values():
         assert res.summary()['partial'] is None
+    # The report says it too.
+    result = analyze_bag(_rewrite(js, tmp_path, 'half_report', effort=effort), tmp_path / 'r')
+    page = write_report(result, tmp_path / 'report').read_text(encoding='utf-8')
+    assert page.count('observed in part: no effort on /joint_states') == 2
 
 
 def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
