@@ -1273,7 +1273,7 @@ class _Run:
                     + f' ({counts.get("unpaired", 0)} unpaired)')
         return front.analyzer.not_observed_reason(front.effort_topic)
 
-    def _partial(self, joint, front, features):
+    def _partial(self, joint, front):
         """
         Say when an observed joint's lost motion stopped well before its stream did.
 
@@ -1281,32 +1281,24 @@ class _Run:
         operating time after it is not even counted): never presented as the end's
         without a word.
         """
-        if not front.analyzer.windows_observed or joint not in self.span:
-            return None
-        fields = TE_FEATURES.fields
-        seen = np.isfinite(features[:, fields.index('lost_motion_rad')])
-        first, last = (t * 1e-9 for t in self.span[joint])
-        until = float(np.max(features[seen, fields.index('window_end_s')]))
-        tail = last - until
         a = front.analyzer
-        if last <= first or tail < max(PARTIAL_SHARE * (last - first),
-                                       PARTIAL_WINDOWS * self.settings.window_s):
-            if a.samples_without_effort >= PARTIAL_SHARE * max(a.samples_seen, 1):
-                return (f'no effort on {front.effort_topic} in {a.samples_without_effort} '
-                        f'of {a.samples_seen} samples: their operating time is not counted '
-                        'in the wear')
+        if not a.windows_observed or joint not in self.span:
             return None
-        if a.samples_without_effort >= 0.1 * max(a.samples_seen, 1):
-            why = (f'no effort on {front.effort_topic} in {a.samples_without_effort} of '
-                   f'{a.samples_seen} samples (their operating time is not counted)')
-        elif a.windows_implausible:
-            why = (f'in {a.windows_implausible} windows the transmission error spans up to '
-                   f'{math.degrees(a.largest_te_span):.3g} deg (a frozen encoder?)')
-        else:
-            why = 'no torque reversal under load read in its windows'
-        return (f'no lost motion in the last {100 * tail / (last - first):.0f} % of the '
-                f'stream (after {until - first:.1f} s of {last - first:.1f} s): {why}; the '
-                'wear and remaining life stand as of the last observed window')
+        first, last = (t * 1e-9 for t in self.span[joint])
+        stale = a.stale_reason(max(PARTIAL_SHARE * (last - first),
+                                   PARTIAL_WINDOWS * self.settings.window_s),
+                               front.effort_topic)
+        if stale is not None:
+            gap, why, _ = stale
+            return (f'no lost motion in the last {100 * gap / (last - first):.0f} % of the '
+                    f'stream (after {a.last_observed_t - first:.1f} s of {last - first:.1f} '
+                    f's): {why}; the wear and remaining life stand as of the last observed '
+                    'window')
+        if a.samples_without_effort >= PARTIAL_SHARE * max(a.samples_seen, 1):
+            return (f'no effort on {front.effort_topic} in {a.samples_without_effort} of '
+                    f'{a.samples_seen} samples: their operating time is not counted in the '
+                    'wear')
+        return None
 
     def _finish(self, chunks, link_clean, motor_clean):
         plan = self.plan
@@ -1371,7 +1363,7 @@ class _Run:
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
-            res.partial = self._partial(joint, front, res.features)
+            res.partial = self._partial(joint, front)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)
                       and not k.endswith('_wrap'))

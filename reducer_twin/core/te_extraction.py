@@ -717,6 +717,9 @@ class WindowFeatures:
         Standard errors of ``hysteresis`` [rad].
     duty : DutySummary
         Load and speed history of the window.
+    implausible : bool
+        The encoders did not measure the same motion in it (no lost motion read:
+        :data:`PLAUSIBLE_TE_SPAN_RAD`, :data:`PLAUSIBLE_LOST_MOTION_RAD`).
 
     """
 
@@ -740,6 +743,7 @@ class WindowFeatures:
     hysteresis: np.ndarray = field(repr=False)
     hysteresis_std: np.ndarray = field(repr=False)
     duty: DutySummary = None
+    implausible: bool = False
 
 
 WINDOW_MODES = ('auto', 'revolution', 'duration')
@@ -913,6 +917,10 @@ class WindowAnalyzer:
         self.windows_friction_unknown = 0
         self.windows_implausible = 0
         self.largest_te_span = 0.0
+        self.last_observed_t = None     # end of the last window with a lost motion [s]
+        self.latest_t = None            # latest stamp fed [s]
+        self._since = dict.fromkeys(_SINCE, 0)
+        self._recent_t = (_EMPTY, _EMPTY)  # fresh and effortless stamps of the last update
         self._period_s = None
 
     def update(self, stream, effort, velocity):
@@ -967,14 +975,24 @@ class WindowAnalyzer:
     def _update(self, stream, effort, velocity):
         """Feed a chunk without a clock reset."""
         fresh = stream.valid if self._last_t is None else stream.valid & (stream.t > self._last_t)
-        self.samples_seen += int(np.count_nonzero(fresh))
+        n_fresh = int(np.count_nonzero(fresh))
+        self.samples_seen += n_fresh
+        self._since['seen'] += n_fresh
+        if n_fresh:
+            latest = float(np.max(stream.t[fresh]))
+            self.latest_t = latest if self.latest_t is None else max(self.latest_t, latest)
+        self._recent_t = (stream.t[fresh], _EMPTY)
         if self._period_s is None and np.count_nonzero(fresh) > 16:
             steps = np.diff(stream.t[fresh][:4096])
             steps = steps[steps > 0]
             if steps.size:
                 self._period_s = float(np.median(steps))
         use = fresh & np.isfinite(effort)
-        self.samples_without_effort += int(np.count_nonzero(fresh & ~use))
+        without = int(np.count_nonzero(fresh & ~use))
+        self.samples_without_effort += without
+        self._since['without_effort'] += without
+        if without:
+            self._recent_t = (self._recent_t[0], stream.t[fresh & ~use])
         unknown = use & ~np.isfinite(velocity)
         if unknown.any():
             velocity = self._derive_velocity(stream, use, velocity, unknown)
@@ -1064,6 +1082,42 @@ class WindowAnalyzer:
         return (f'no torque reversal at equal |T| above the effort noise in '
                 f'{self.windows_emitted} windows (the joint did not reverse under load)')
 
+    def stale_reason(self, after_s, effort_source='the joint states'):
+        """
+        Say why an observed reducer's lost motion stopped, once ``after_s`` of stream passed.
+
+        Parameters
+        ----------
+        after_s : float
+            Stream time [s] after the last window with a lost motion from which it counts.
+        effort_source : str
+            Where the effort was expected (a topic name), for the message.
+
+        Returns
+        -------
+        tuple of (float, str, bool) or None
+            Stream seconds since the last lost motion, the cause (one line), and whether
+            the stream is faulty (effort missing, encoders that do not measure the same
+            motion) rather than only without a torque reversal; None while the lost
+            motion is current or was never read (:meth:`not_observed_reason` says why).
+
+        """
+        if self.last_observed_t is None or self.latest_t is None:
+            return None
+        gap = self.latest_t - self.last_observed_t
+        if gap < after_s:
+            return None
+        since = self._since
+        if since['without_effort'] >= 0.1 * max(since['seen'], 1):
+            return gap, (f'no effort on {effort_source} in {since["without_effort"]} of '
+                         f'{since["seen"]} samples since (their operating time is not '
+                         'counted)'), True
+        if since['implausible']:
+            return gap, (f'in {since["implausible"]} of {since["windows"]} windows since, the '
+                         f'transmission error spans up to '
+                         f'{math.degrees(self.largest_te_span):.3g} deg (a frozen encoder?)'), True
+        return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False
+
     def _derive_velocity(self, stream, use, velocity, unknown):
         """
         Output speed from the unwrapped output angle where the stream has none.
@@ -1124,6 +1178,17 @@ class WindowAnalyzer:
             found = self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
             self.windows_emitted += len(found)
             self.windows_observed += sum(math.isfinite(f.lost_motion) for f in found)
+            for f in found:
+                if math.isfinite(f.lost_motion):
+                    self.last_observed_t = f.t_end
+                    # The samples of the last update after it (the update that cut it).
+                    seen, without = self._recent_t
+                    self._since = {'seen': int(np.count_nonzero(seen > f.t_end)),
+                                   'without_effort': int(np.count_nonzero(without > f.t_end)),
+                                   'implausible': 0, 'windows': 0}
+                else:
+                    self._since['windows'] += 1
+                    self._since['implausible'] += int(f.implausible)
             out += found
             first = last
         end = cuts[-1][1]
@@ -1276,7 +1341,7 @@ class WindowAnalyzer:
                 lost_motion_std=fit[3][k], compliance_fit=fit[4][k],
                 hysteresis_torque=torque_h[k, use], hysteresis=width[k, use],
                 hysteresis_std=std[k, use],
-                duty=duty[k]))
+                duty=duty[k], implausible=bool(implausible[k])))
         return out
 
     def _harmonics(self, theta):
@@ -2228,6 +2293,11 @@ Friction [fraction of rated torque, at the window's RMS speed] below which none 
 Far below the lowest torque bin (2 %) and the effort noise band: it cannot change a
 flank, while subtracting a fitted near-zero friction would only move samples between bins.
 """
+
+_EMPTY = np.zeros(0)
+
+_SINCE = ('seen', 'without_effort', 'implausible', 'windows')
+"""What :meth:`WindowAnalyzer.stale_reason` counts since the last lost motion."""
 
 PLAUSIBLE_TE_SPAN_RAD = math.radians(10.0)
 """

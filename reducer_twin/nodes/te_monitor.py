@@ -45,6 +45,9 @@ _TE_COLUMNS = [0, 2, 5, 3]
 LATENCY_KEEP = 1 << 17
 """Latency samples kept for the statistics (a ring of 2 MB per joint)."""
 
+STALE_WINDOWS = 10
+"""Windows of stream without a lost motion after which the diagnostics say since when."""
+
 
 class TEMonitor(Node):
     """
@@ -178,11 +181,19 @@ class TEMonitor(Node):
         level = 'OK' if self.rejects.total == 0 else 'WARN'
         message = f'{self.windows} windows analysed'
         analyzer = self.twin.analyzer
-        reason = analyzer.not_observed_reason(joint_topic(self.joint, 'encoder_pairs'))
+        topic = joint_topic(self.joint, 'encoder_pairs')
+        reason = analyzer.not_observed_reason(topic)
         values['observed_windows'] = analyzer.windows_observed
+        stale = analyzer.stale_reason(STALE_WINDOWS * self.twin.config.window_s, topic)
         if reason is not None:
             # Never OK without a lost motion: say why the reducer cannot be seen.
             level, message = 'STALE', f'not observed: {reason}'
+        elif stale is not None:
+            # Seen before, not now: the estimate stands as of then; a faulty stream warns.
+            gap, why, faulty = stale
+            values['seconds_since_lost_motion'] = gap
+            message = f'{message}; no lost motion for {gap:.0f} s: {why}'
+            level = 'WARN' if faulty else level
         return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
                  values)]
 

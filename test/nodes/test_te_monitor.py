@@ -265,3 +265,23 @@ def test_with_effort_the_diagnostics_say_ok_once_a_window_gave_a_lost_motion(ros
     monitor.feed(rows)
     status = monitor.status(lambda s: s.level == DiagnosticStatus.OK)
     assert int(ros.key_values(status)['observed_windows']) >= 1
+
+
+def test_effort_that_stops_after_a_lost_motion_turns_the_diagnostics_to_warn_saying_since_when(
+        ros, simulated):
+    # Once observed, a monitor whose effort stopped kept saying OK: the wear estimate
+    # stood as of the last lost motion, and nothing said so.
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    monitor.status(lambda s: s.level == DiagnosticStatus.OK)
+    span = rows[-1, 0] - rows[0, 0] + 1e-3
+    for k in range(1, 4):           # 24 s more, without effort
+        blind = rows.copy()
+        blind[:, 0] += k * span
+        blind[:, 3] = np.nan
+        monitor.feed(blind)
+    status = monitor.status(lambda s: 'no lost motion for' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    assert 'no effort on /reducer_twin/' in status.message
+    assert float(ros.key_values(status)['seconds_since_lost_motion']) >= 20.0
