@@ -536,16 +536,16 @@ class _Chunks:
             return None
         batch = concat_batches(parts)
         absent = np.isnan(batch.position)
-        if absent.any():
+        merged = merge_partial_messages(batch) if absent.any() else batch
+        counts = self.name_messages.get(topic)
+        if merged is not batch:     # several publishers: a joint is in the messages naming it
             counts = self.name_messages.setdefault(topic, {})
             for name, n in zip(batch.names, len(batch) - np.count_nonzero(absent, axis=0)):
                 counts[name] = counts.get(name, 0) + int(n)
-            batch = merge_partial_messages(batch)
-        else:
-            counts = self.name_messages.get(topic)
-            if counts is not None:
-                for name in batch.names:
-                    counts[name] = counts.get(name, 0) + len(batch)
+        elif counts is not None:    # (a NaN value alone is a bad sample of a message naming it)
+            for name in batch.names:
+                counts[name] = counts.get(name, 0) + len(batch)
+        batch = merged
         self._note_stamps(topic, batch.stamps_ns)
         return batch
 
@@ -988,8 +988,9 @@ def motor_direction(t_link, link, t_motor, motor):
     if np.count_nonzero(inside) < 2:
         return math.nan
     order = np.argsort(t_m, kind='stable')
-    steps_l = np.diff(x_l[inside])
-    steps_m = np.diff(np.interp(t_l[inside], t_m[order], x_m[order]))
+    # Single-turn encoders wrap at +-pi: each side unwrapped before its steps are taken.
+    steps_l = np.diff(np.unwrap(x_l)[inside])
+    steps_m = np.diff(np.interp(t_l[inside], t_m[order], np.unwrap(x_m[order])))
     product = float(steps_l @ steps_m)
     return math.copysign(1.0, product) if product else math.nan
 
