@@ -15,9 +15,11 @@ The same core objects the live nodes run, in the same order, on whole arrays:
 * ``wear_estimator`` and ``life_publisher``: :class:`~reducer_twin.core.pipeline.
   EstimatorStage` and :class:`~reducer_twin.core.pipeline.LifeStage` per window.
 
-JointState messages are taken in file order, as ``encoder_ingest`` takes them in arrival
-order (rosbag2 writes in receive order); the ingestion rules drop and count what comes
-out of order. The derived bag carries what the nodes publish, in their layouts:
+JointState messages are taken in log-time order, as ``encoder_ingest`` takes them in
+arrival order (rosbag2 writes in receive order; MCAP chunks of different topics that
+overlap in time are merged by the reader); the ingestion rules drop and count what comes
+out of stamp order, and several publishers' partial messages of one tick are merged
+(:func:`merge_partial_messages`). The derived bag carries what the nodes publish, in their layouts:
 ``/reducer_twin/<joint>/te`` (TE batches, ``TE_BATCH_S`` = 0.5 s of stream per message
 instead of the node's 20 ms), ``te_features``, ``wear`` and ``remaining_life`` per window,
 ``/diagnostics`` (the life publisher's status per window and joint, and the ingest

@@ -351,7 +351,7 @@ class Bag:
 
     def iter_joint_states(self, topics, errors='skip'):
         """
-        Decode joint state topics piece by piece (per storage chunk), in file order.
+        Decode joint state topics piece by piece (about one storage chunk each), in order.
 
         Parameters
         ----------
@@ -365,7 +365,9 @@ class Bag:
         ------
         tuple
             ``(topic, JointStateBatch)`` with ``log_time_ns`` of the decoded messages;
-            DynamicJointState as ``<joint>`` and ``<joint><motor_suffix>`` entries.
+            DynamicJointState as ``<joint>`` and ``<joint><motor_suffix>`` entries. File
+            after file; within a file MCAP and sqlite3 give log-time order across topics
+            (MCAP chunks that overlap in time are merged), a ROS 1 bag its file order.
 
         Raises
         ------
@@ -393,7 +395,7 @@ class Bag:
         Yields
         ------
         tuple
-            ``(topic, RawBatch)``; within a file in file order.
+            ``(topic, RawBatch)``; within a file in the order of :meth:`iter_joint_states`.
 
         """
         names = self._known_topics(topics)
@@ -616,7 +618,8 @@ class Bag:
 
 
 def _merge_raw(first, second):
-    # Parts of one chunk share its buffer: their offsets give the file order.
+    # Parts of one batch share its buffer: their offsets give the topic's order (file
+    # order in a chunk, log-time order where the reader merged overlapping chunks).
     shared = first.data is second.data
     shift = 0 if shared else first.data.shape[0]
     data = first.data if shared else np.concatenate([first.data, second.data])

@@ -9,6 +9,14 @@ plus offset and length arrays, gathered with numpy from runs of equal-length
 message records or from the Message Index records, ready for the vectorised
 JointState decoder.
 
+Messages come out in log-time order, as rosbag2 and the mcap library's
+``log_time_order=True`` read them. In the usual file the chunks already are in that
+order (a recorder writes what it receives as it comes) and are handed out as they lie.
+A file that stores topics in separate chunks overlapping in time (a writer that
+buffers per topic, or one that writes one topic after the other) would hand one topic
+out tens of seconds ahead of another; there the chunks are read by the start times of
+the chunk index and their messages merged by log time, window by window.
+
 A file without a usable summary (a recording cut short) is scanned record by record;
 what is readable is returned and the reader's ``warnings`` say where reading stopped.
 """
@@ -162,6 +170,10 @@ class _ChunkRef:
     length: int  # of the whole record
     compression: str = ''
     index_offsets: dict = field(default_factory=dict)  # channel -> message index record
+    # Log-time range of the chunk's messages from the chunk index; None when the file
+    # was scanned (no index: the chunks are read in file order).
+    start_ns: object = None
+    end_ns: object = None
 
     @property
     def data_offset(self):
@@ -415,7 +427,7 @@ class McapBagReader:
 
     def iter_batches(self, topics=None):
         """
-        Iterate over the messages of the selected topics, one chunk at a time.
+        Iterate over the messages of the selected topics, about one chunk at a time.
 
         Parameters
         ----------
@@ -425,7 +437,11 @@ class McapBagReader:
         Yields
         ------
         RawBatch
-            The selected messages of one chunk, in file order.
+            Selected messages in log-time order across batches. Where the chunks do not
+            overlap in time, one batch per chunk, its messages in file order; where they
+            do, the messages of the overlapping chunks merged by log time (ties in file
+            order), so that no topic runs ahead of another. Messages outside chunks
+            come last.
 
         """
         wanted = self._channel_ids(topics)
@@ -434,26 +450,13 @@ class McapBagReader:
         wanted_arr = np.array(sorted(wanted), np.uint16)
         chunks = [c for c in self._chunks
                   if not c.index_offsets or wanted.intersection(c.index_offsets)]
-        # Decompression (and the CRC check) of the next chunks runs on a worker thread
-        # while this one is handed out; zstd and zlib release the GIL.
-        with ThreadPoolExecutor(1) as pool:
-            queue = collections.deque()
-            upcoming = iter(chunks)
-            for chunk in itertools.islice(upcoming, 2):
-                queue.append((chunk, pool.submit(self._load_chunk, chunk)))
-            while queue:
-                chunk, future = queue.popleft()
-                following = next(upcoming, None)
-                if following is not None:
-                    queue.append((following, pool.submit(self._load_chunk, following)))
-                batch = self._chunk_batch(chunk, wanted, future.result())
-                if batch is not None and len(batch):
-                    ids = batch.channel_id
-                    if not (ids.min() == ids.max() and int(ids[0]) in wanted) and \
-                            not np.isin(ids, wanted_arr).all():
-                        batch = batch.select(np.isin(batch.channel_id, wanted_arr))
-                    if len(batch):
-                        yield batch
+        plan = self._log_time_plan(chunks, wanted)
+        if plan is None:
+            for _, batch in self._loaded_batches(chunks, wanted, wanted_arr):
+                if batch is not None:
+                    yield batch
+        else:
+            yield from self._merged_batches(*plan, wanted, wanted_arr)
         for starts in self._loose:
             batch = self._loose_batch(starts)
             batch = batch.select(np.isin(batch.channel_id, wanted_arr))
@@ -516,6 +519,86 @@ class McapBagReader:
         names = {topics} if isinstance(topics, str) else set(topics)
         return {cid for cid, ch in self.channels.items() if ch.topic in names}
 
+    def _loaded_batches(self, chunks, wanted, wanted_arr):
+        """Yield ``(chunk, batch of the wanted messages or None)`` for each chunk, in order."""
+        # Decompression (and the CRC check) of the next chunks runs on a worker thread
+        # while this one is handed out; zstd and zlib release the GIL.
+        with ThreadPoolExecutor(1) as pool:
+            queue = collections.deque()
+            upcoming = iter(chunks)
+            for chunk in itertools.islice(upcoming, 2):
+                queue.append((chunk, pool.submit(self._load_chunk, chunk)))
+            while queue:
+                chunk, future = queue.popleft()
+                following = next(upcoming, None)
+                if following is not None:
+                    queue.append((following, pool.submit(self._load_chunk, following)))
+                batch = self._chunk_batch(chunk, wanted, future.result())
+                if batch is not None and len(batch):
+                    ids = batch.channel_id
+                    if not (ids.min() == ids.max() and int(ids[0]) in wanted) and \
+                            not np.isin(ids, wanted_arr).all():
+                        batch = batch.select(np.isin(batch.channel_id, wanted_arr))
+                yield chunk, batch if batch is not None and len(batch) else None
+
+    def _log_time_plan(self, chunks, wanted):
+        """
+        Return ``(chunks, first log times)`` in log-time order, or None for file order.
+
+        None when file order already is log-time order (each chunk starts no earlier
+        than every chunk before it ends: the usual recording) or when the file has no
+        chunk index to tell (a scanned file keeps its file order).
+        """
+        if len(chunks) < 2 or any(c.start_ns is None for c in chunks):
+            return None
+        starts = np.array([c.start_ns for c in chunks], np.int64)
+        ends = np.array([c.end_ns for c in chunks], np.int64)
+        if _ranges_in_order(starts, ends):
+            return None
+        # The index gives a chunk's range over all its channels: the chunk that holds a
+        # 1 Hz topic spans the whole recording although its joint states span seconds.
+        # The message indexes of the wanted channels give their own range.
+        for i, chunk in enumerate(chunks):
+            if chunk.index_offsets and not wanted.issuperset(chunk.index_offsets):
+                try:
+                    times = np.concatenate([pairs[0::2] for pairs in
+                                            self._index_entries(chunk, wanted)])
+                except (_Corrupt, struct.error, ValueError):
+                    continue   # the chunk's own range is still a valid (wider) bound
+                if times.size:
+                    starts[i], ends[i] = times.min(), times.max()
+        if _ranges_in_order(starts, ends):
+            return None
+        order = np.lexsort((np.array([c.offset for c in chunks]), starts))
+        return [chunks[i] for i in order.tolist()], starts[order]
+
+    def _merged_batches(self, chunks, starts, wanted, wanted_arr):
+        """
+        Yield the messages of time-overlapping chunks merged by log time.
+
+        The chunks come by first log time. Once chunk k is read, no message of a later
+        chunk is older than the first log time of chunk k + 1 (the chunk index says
+        so), so every message held before that time is handed out; the rest waits.
+        What is held at a time is the chunks that overlap: about one per topic.
+        """
+        topic_rank = self._topic_ranks()
+        held = []   # (chunk offset, batch sorted by log time, not yet handed out)
+        loaded = self._loaded_batches(chunks, wanted, wanted_arr)
+        for k, (chunk, batch) in enumerate(loaded):
+            if batch is not None:
+                held.append((chunk.offset, _sorted_by_log_time(batch)))
+            limit = int(starts[k + 1]) if k + 1 < len(chunks) else None
+            ready, held = _split_held(held, limit)
+            yield from _merge_by_log_time(ready, topic_rank)
+
+    def _topic_ranks(self):
+        """Return an array: channel id -> rank of its topic (channels of a topic share it)."""
+        names = sorted({ch.topic for ch in self.channels.values()})
+        rank = np.zeros(max(self.channels, default=0) + 1, np.int64)
+        for cid, channel in self.channels.items():
+            rank[cid] = names.index(channel.topic)
+        return rank
+
     def _read_header(self):
         try:
             opcode, length = struct.unpack_from('<BQ', self._mm, 8)
@@ -569,7 +652,8 @@ class McapBagReader:
         opcode, body = struct.unpack_from('<BQ', self._mm, offset)
         if opcode != OP_CHUNK or 9 + body != length:
             raise _Corrupt(f'no chunk record of {length} bytes at byte {offset}')
-        return _ChunkRef(offset, length, index.compression, dict(index.message_index_offsets))
+        return _ChunkRef(offset, length, index.compression, dict(index.message_index_offsets),
+                         index.message_start_time, index.message_end_time)
 
     def _chunk_at(self, offset):
         opcode, length = struct.unpack_from('<BQ', self._mm, offset)
@@ -636,7 +720,8 @@ class McapBagReader:
             self._warn(chunk.offset, problem)
         return data
 
-    def _index_starts(self, chunk, wanted):
+    def _index_entries(self, chunk, wanted):
+        """Return the (log time, offset) uint64 pairs of the wanted channels' message indexes."""
         parts = []
         for channel_id in wanted:
             offset = chunk.index_offsets.get(channel_id)
@@ -648,8 +733,11 @@ class McapBagReader:
             index_channel, size = struct.unpack_from('<HI', self._mm, offset + 9)
             if index_channel != channel_id or size % 16 or 6 + size > length:
                 raise _Corrupt(f'the message index at byte {offset} is malformed')
-            pairs = np.frombuffer(self._pread(offset + 15, size), '<u8')
-            parts.append(pairs[1::2].astype(np.int64))
+            parts.append(np.frombuffer(self._pread(offset + 15, size), '<u8'))
+        return parts
+
+    def _index_starts(self, chunk, wanted):
+        parts = [pairs[1::2].astype(np.int64) for pairs in self._index_entries(chunk, wanted)]
         if not parts:
             return np.zeros(0, np.int64)
         return np.sort(np.concatenate(parts)) if len(parts) > 1 else parts[0]
@@ -801,6 +889,128 @@ class McapBagReader:
         ids, counts = np.unique(channel_ids, return_counts=True)
         for cid, count in zip(ids.tolist(), counts.tolist()):
             self._counts[cid] = self._counts.get(cid, 0) + count
+
+
+def _ranges_in_order(starts, ends):
+    """Whether each [start, end] log-time range begins no earlier than all before it end."""
+    return bool((starts[1:] >= np.maximum.accumulate(ends[:-1])).all())
+
+
+def _sorted_by_log_time(batch):
+    """Return the batch stably sorted by log time (a chunk's file order is kept for ties)."""
+    logs = batch.log_time_ns
+    if logs.shape[0] > 1 and (logs[1:] < logs[:-1]).any():
+        return batch.select(np.argsort(logs, kind='stable'))
+    return batch
+
+
+def _split_held(held, limit):
+    """Split held batches into the messages before ``limit`` (None: all) and the rest."""
+    ready, rest = [], []
+    for offset, batch in held:
+        cut = len(batch) if limit is None else int(
+            np.searchsorted(batch.log_time_ns, limit, 'left'))
+        if cut:
+            ready.append((offset, batch.select(slice(0, cut))))
+        if cut < len(batch):
+            rest.append((offset, batch.select(slice(cut, None))))
+    return ready, rest
+
+
+def _merge_by_log_time(parts, topic_rank):
+    """
+    Yield the messages of sorted batches in log-time order (ties in file order).
+
+    The leading messages of the batch that starts first and the trailing ones of the
+    batch that ends last overlap no other batch: they are handed out as they are, and
+    only the overlap is merged (a recording whose chunks overlap by a few messages
+    costs next to nothing).
+    """
+    parts = [batch for _, batch in sorted(parts, key=lambda part: part[0])]
+    if len(parts) < 2:
+        yield from parts
+        return
+    firsts = [int(b.log_time_ns[0]) for b in parts]
+    lasts = [int(b.log_time_ns[-1]) for b in parts]
+    head = int(np.argmin(firsts))
+    tail = int(np.argmax(lasts))
+    # Before every other batch's first message (ties stay in the merge, for file order).
+    cut = int(np.searchsorted(parts[head].log_time_ns,
+                              min(f for i, f in enumerate(firsts) if i != head), 'left'))
+    # After every other batch's last message.
+    keep = int(np.searchsorted(parts[tail].log_time_ns,
+                               max(v for i, v in enumerate(lasts) if i != tail), 'right'))
+    prefix = parts[head].select(slice(0, cut))
+    suffix = parts[tail].select(slice(keep, None))
+    if head == tail:   # cut <= keep: the others' first message is not after their last
+        parts[head] = parts[head].select(slice(cut, keep))
+    else:
+        parts[head] = parts[head].select(slice(cut, None))
+        parts[tail] = parts[tail].select(slice(0, keep))
+    middle = [b for b in parts if len(b)]
+    if len(middle) > 1:
+        middle = [_interleave(middle, topic_rank)]
+    for piece in (prefix, *middle, suffix):
+        if len(piece):
+            yield piece
+
+
+def _interleave(parts, topic_rank):
+    """
+    Merge sorted batches of different chunks into one batch in log-time order.
+
+    Within each topic the offsets keep the order the messages are handed out in (as
+    in a chunk, where they give the file order). When each topic comes from one chunk
+    in file order (a topic stored in chunks of its own), copying each chunk's bytes
+    keeps it; otherwise the payloads are gathered topic by topic in log-time order.
+    """
+    logs = np.concatenate([b.log_time_ns for b in parts])
+    order = np.argsort(logs, kind='stable')   # parts come in file order: ties keep it
+    part = np.repeat(np.arange(len(parts)), [len(b) for b in parts])[order]
+    source = np.concatenate([b.offsets for b in parts])[order]
+    length = np.concatenate([b.lengths for b in parts])[order]
+    channel = np.concatenate([b.channel_id for b in parts])[order]
+    topics = [_topics_of(topic_rank[b.channel_id]) for b in parts]
+    if sum(t.shape[0] for t in topics) == np.unique(np.concatenate(topics)).shape[0] and \
+            all((b.offsets[1:] > b.offsets[:-1]).all() for b in parts):
+        # Only the bytes the messages occupy, each once: a chunk held for long is not
+        # copied whole each time a few of its messages are handed out.
+        spans, shift, base = [], np.zeros(len(parts), np.int64), 0
+        for i, b in enumerate(parts):
+            low, high = int(b.offsets[0]), int(b.offsets[-1] + b.lengths[-1])
+            spans.append(b.data[low:high])
+            shift[i] = base - low
+            base += high - low
+        data, offsets = np.concatenate(spans), source + shift[part]
+    else:
+        data, offsets = _gather_by_topic(parts, part, source, length, topic_rank[channel])
+    return RawBatch(channel, np.concatenate([b.sequence for b in parts])[order], logs[order],
+                    np.concatenate([b.publish_time_ns for b in parts])[order], data, offsets,
+                    length)
+
+
+def _topics_of(ranks):
+    """Return the distinct topic ranks (a chunk of one topic is the usual case)."""
+    low, high = ranks.min(), ranks.max()
+    return np.array([low]) if low == high else np.unique(ranks)
+
+
+def _gather_by_topic(parts, part, source, length, topic):
+    """Copy the payloads into one buffer topic by topic, in log-time order; return it, offsets."""
+    layout = np.argsort(topic, kind='stable')
+    part, source, size = part[layout], source[layout], length[layout]
+    placed = np.zeros(layout.shape[0], np.int64)
+    np.cumsum(size[:-1], out=placed[1:])
+    offsets = np.empty_like(placed)
+    offsets[layout] = placed
+    data = np.empty(int(placed[-1] + size[-1]), np.uint8)
+    for i, b in enumerate(parts):
+        mine = part == i
+        # Byte k of a message lands at its place + k, from its offset + k in the chunk.
+        count = size[mine]
+        step = np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+        data[np.repeat(placed[mine], count) + step] = b.data[np.repeat(source[mine], count) + step]
+    return data, offsets
 
 
 def _stop_offset(err, default):

@@ -9,6 +9,7 @@ from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 from reducer_twin.core.errors import BagError, InvalidInput, ReducerTwinError
+from reducer_twin.io.bag import open_bag
 from reducer_twin.io.mcap_array_writer import McapBagWriter
 from reducer_twin.io.mcap_reader import McapBagReader
 from reducer_twin.io.rosbag2_metadata import dump_yaml, parse_qos_profiles, QosProfile
@@ -219,6 +220,123 @@ def test_unchunked_messages_are_read(tmp_path):
     assert len(batches) == 1, 'consecutive unchunked messages are handed over as one batch'
     decoded = decode_joint_states(batches[0].data, batches[0].offsets, batches[0].lengths)
     np.testing.assert_array_equal(decoded.position, position)
+
+
+def _write_with_the_mcap_library(path, steps, chunk_size=4096, use_statistics=True):
+    """
+    Write JointState messages with the mcap library, in the order the steps give.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+    steps : list of tuple
+        ``(channel, log times)``: written one step after the other, so that a channel
+        written in one step fills chunks of its own. A channel is named by its topic,
+        ``'/topic#2'`` for a second publisher of the topic.
+    chunk_size : int
+        Bytes per chunk (4 KiB: about 40 messages).
+    use_statistics : bool
+        Write the statistics record (without it the reader scans the file).
+
+    """
+    with open(path, 'wb') as stream:
+        writer = ReferenceMcapWriter(stream, chunk_size=chunk_size,
+                                     use_statistics=use_statistics)
+        writer.start(profile='ros2', library='test')
+        schema = writer.register_schema(JOINT_STATE, 'ros2msg',
+                                        ros_schemas.message_definition(JOINT_STATE).encode())
+        channels = {}
+        for name, times in steps:
+            if name not in channels:
+                channels[name] = writer.register_channel(name.split('#')[0], 'cdr', schema,
+                                                         {'offered_qos_profiles': ''})
+            phase = (times - T0) / 1e9
+            buffer, offsets = encode_joint_states(times, [name.strip('/')],
+                                                  np.sin(phase)[:, None])
+            for i, t in enumerate(times.tolist()):
+                writer.add_message(channels[name], t, buffer[offsets[i]:offsets[i + 1]]
+                                   .tobytes(), t)
+        writer.finish()
+
+
+def _ticks(start, stop):
+    return T0 + np.arange(start, stop, dtype=np.int64) * 1_000_000
+
+
+# Layouts whose chunks overlap in log time: 1 kHz joint states, the same tick stamped alike
+# on every topic (ties in log time).
+OVERLAPPING_LAYOUTS = {
+    # rosbags, or a converter, writing one topic after the other; a 1 Hz topic last.
+    'topic after topic': [('/joint_states', _ticks(0, 1200)), ('/motor_states', _ticks(0, 1200)),
+                          ('/slow', _ticks(0, 1200)[::500])],
+    # A writer buffering each topic on its own (simulate --layout split over long runs).
+    'per-topic blocks': [(topic, _ticks(k, k + 300)) for k in range(0, 1200, 300)
+                         for topic in ('/joint_states', '/motor_states')],
+    # Two publishers of one topic, 0.5 ms apart, stored one after the other.
+    'two publishers of a topic': [('/joint_states', _ticks(0, 1200)),
+                                  ('/joint_states#2', _ticks(0, 1200) + 500_000)],
+    # A message written 60 ms late, in a later chunk than its log time: that chunk
+    # overlaps the ones before it by one message.
+    'a late message': [('/joint_states', np.concatenate(
+        [_ticks(0, 499), _ticks(500, 560), _ticks(499, 500), _ticks(560, 1200)]))],
+}
+
+
+@pytest.mark.parametrize('layout', list(OVERLAPPING_LAYOUTS))
+def test_chunks_overlapping_in_time_are_read_in_log_time_order_as_the_mcap_library_reads_them(
+        tmp_path, layout):
+    path = tmp_path / 'overlap.mcap'
+    _write_with_the_mcap_library(path, OVERLAPPING_LAYOUTS[layout])
+    with open(path, 'rb') as stream:
+        expected = [(c.topic, m.log_time, m.publish_time, m.data)
+                    for _, c, m in make_reader(stream).iter_messages(log_time_order=True)]
+    with McapBagReader(path) as reader:
+        got = list(reader.iter_messages())
+        batches = list(reader.iter_batches(['/joint_states', '/motor_states']))
+        topic_of = {cid: channel.topic for cid, channel in reader.channels.items()}
+        assert not reader.warnings
+    # Same messages, same order: by log time, ties in file order (payloads copied right).
+    assert got == expected
+    times = np.concatenate([b.log_time_ns for b in batches])
+    assert (np.diff(times) >= 0).all(), 'no topic runs ahead of another'
+    for batch in batches:
+        topics = np.array([topic_of[int(cid)] for cid in batch.channel_id])
+        for topic in set(topics):   # within a topic, offsets follow the order handed out
+            assert (np.diff(batch.offsets[topics == topic]) > 0).all()
+        decoded = decode_joint_states(batch.data, batch.offsets, batch.lengths)
+        np.testing.assert_array_equal(decoded.stamps_ns, batch.log_time_ns)
+    # What the analysis reads: each topic's pieces follow each other in time.
+    with open_bag(path) as bag:
+        pieces = list(bag.iter_joint_states(list(bag.topics)))
+    for topic in {name for name, _ in pieces}:
+        times = np.concatenate([js.log_time_ns for name, js in pieces if name == topic])
+        assert (np.diff(times) >= 0).all(), topic
+
+
+def test_chunks_that_follow_each_other_in_time_are_handed_out_one_per_chunk(tmp_path):
+    # The 1 Hz topic shares the last chunk with /joint_states' tail: that chunk's index
+    # spans the whole file, but /joint_states alone is in order and read as it lies.
+    path = tmp_path / 'ordered.mcap'
+    _write_with_the_mcap_library(path, [('/joint_states', _ticks(0, 1200)),
+                                        ('/slow', _ticks(0, 1200)[::500])])
+    with McapBagReader(path) as reader:
+        (cid,) = reader.topics()['/joint_states'].channel_ids
+        holding = [c for c in reader._chunks if cid in c.index_offsets]
+        batches = list(reader.iter_batches(['/joint_states']))
+    assert len(batches) == len(holding) > 20
+    np.testing.assert_array_equal(np.concatenate([b.log_time_ns for b in batches]),
+                                  _ticks(0, 1200))
+
+
+def test_a_file_without_statistics_is_scanned_and_read_in_file_order(tmp_path):
+    path = tmp_path / 'scanned.mcap'
+    steps = OVERLAPPING_LAYOUTS['topic after topic'][:2]
+    _write_with_the_mcap_library(path, steps, use_statistics=False)
+    with McapBagReader(path) as reader:
+        got = [(topic, t) for topic, t, _, _ in reader.iter_messages()]
+        assert not reader.has_summary
+    assert got == [(topic, t) for topic, times in steps for t in times.tolist()]
 
 
 @pytest.mark.parametrize('keep', [0.97, 0.6, 0.3, 0.05])
