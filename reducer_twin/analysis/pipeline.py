@@ -1103,26 +1103,26 @@ class _Run:
             sense = motor_direction(link.stamps_ns, x_link, t_motor, x_motor)
             if not (math.isfinite(r) and math.isfinite(sense)):
                 continue
-            if settings.motor_direction not in ('auto', sense):
-                where = plan.motor_topic or plan.link_topic
-                raise InvalidInput(
-                    f'{self.bag.path}: twin.motor_direction is {settings.motor_direction} in '
-                    f'--config, but the motor angles of {joint} on {where} step '
-                    f'{"with" if sense > 0 else "against"} the link (motor_direction '
-                    f'{int(sense)})')
+            self._against_config('motor_direction', int(sense), joint,
+                                 f'step {"with" if sense > 0 else "against"} the link')
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
                 self.bag.warnings.append(ReadWarning(
                     str(self.bag.path), None, f'the motor encoder of {joint} counts against '
                     'the link (a negative reduction): its angles are taken reversed'))
             found = 'raw' if r > math.sqrt(ratio) else 'output'
-            if settings.motor_angles not in ('auto', found):
-                where = plan.motor_topic or plan.link_topic
-                raise InvalidInput(
-                    f'{self.bag.path}: twin.motor_angles is {settings.motor_angles!r} in '
-                    f'--config, '
-                    f'but the motor angles of {joint} on {where} move {r:.3g} times the link '
-                    f'({found!r}: raw angles move about {ratio:g} times, output angles about 1)')
+            self._against_config('motor_angles', found, joint,
+                                 f'move {r:.3g} times the link (raw angles move about '
+                                 f'{ratio:g} times, output angles about 1)')
             self._set_angles(joint, found, sense)
+
+    def _against_config(self, key, found, joint, seen):
+        """Refuse a ``twin.<key>`` of ``--config`` that the data of ``joint`` contradict."""
+        configured = getattr(self.settings, key)
+        if configured in ('auto', found):
+            return
+        where = self.plan.motor_topic or self.plan.link_topic
+        raise InvalidInput(f'{self.bag.path}: twin.{key} is {configured!r} in --config, but '
+                           f'the motor angles of {joint} on {where} {seen}: {key} {found!r}')
 
     def _set_angles(self, joint, angles, direction=1.0):
         front = self.fronts[joint]

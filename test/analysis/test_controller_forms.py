@@ -125,7 +125,7 @@ def test_a_motor_encoder_that_counts_against_the_link_is_read_reversed_and_said(
         assert code == want and 'counts against the link' not in err
         if want:
             (line,) = [x for x in err.splitlines() if x.startswith('ERROR:')]
-            assert 'twin.motor_direction is 1' in line and 'motor_direction -1' in line
+            assert 'twin.motor_direction is 1' in line and 'motor_direction -1' in line, line
 
 
 @pytest.mark.parametrize('side', ['motor', 'link'])
