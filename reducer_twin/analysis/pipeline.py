@@ -296,6 +296,13 @@ class JointPlan:
     motor_names : tuple of str
         Name of each joint's motor entry (``<joint><suffix>`` combined, ``<joint>``
         split).
+    others : tuple of tuple
+        ``(link topic, joints, motor topic or None, motor entry names)`` of the other
+        topics with motor/link pairs, which this plan leaves out (:meth:`not_analysed`;
+        :func:`robot_plans` makes a plan of each).
+    prefix : str
+        Put before the topic's entry names (``<namespace>/``) when a recording holds
+        several robots; ``joints`` and ``motor_names`` carry it.
 
     """
 
@@ -304,6 +311,7 @@ class JointPlan:
     joints: tuple
     motor_names: tuple
     others: tuple = ()
+    prefix: str = ''
 
     def not_analysed(self):
         """
@@ -316,12 +324,12 @@ class JointPlan:
 
         """
         out = {}
-        for topic, joints in self.others:
+        for topic, joints, *_ in self.others:
             space = topic.rsplit('/', 1)[0].strip('/') or topic
             for joint in joints:
                 out[f'{space}/{joint}'] = (
-                    f'not analysed: {topic} also holds motor/link pairs, and one analysis '
-                    f"reads one robot's topic ({self.link_topic} here); analyse it with "
+                    f'not analysed: {topic} also holds motor/link pairs, and twin.joints '
+                    f'in --config chose joints of {self.link_topic}; analyse it with '
                     f'twin.link_topic: {topic} in --config')
         return out
 
@@ -415,7 +423,8 @@ def plan_joints(bag, settings):
             return plan
         # Never silent: another robot (or arm) in the same recording is named.
         used = {link, motor} - {None}
-        others = tuple((topic, tuple(joints)) for (topic, other), (joints, _) in found[1:]
+        others = tuple((topic, tuple(joints), other, tuple(motor_names))
+                       for (topic, other), (joints, motor_names) in found[1:]
                        if topic not in used and other not in used)
         return replace(plan, others=others)
     if not any(names_of(t) for t in states):
@@ -444,6 +453,32 @@ def _motor_entries(link_names, motor_names, suffix):
                 entries.append(entry)
                 break
     return joints, entries
+
+
+def robot_plans(bag, plan, settings):
+    """
+    Every robot's plan when a recording holds several (one per paired link topic).
+
+    Each robot's joints are named ``<namespace>/<joint>`` (the topic's namespace; none
+    for a topic at the root): two arms with the same joint names stay apart. With
+    ``twin.joints`` configured only the plan given is analysed (the others are said).
+
+    Returns
+    -------
+    list of JointPlan
+        The plans, the given one first; just it when there is no other robot.
+
+    """
+    if not plan.others or settings.joints is not None:
+        return [plan]
+    plans = []
+    for topic, joints, motor, motor_names in ((plan.link_topic, plan.joints, plan.motor_topic,
+                                               plan.motor_names), *plan.others):
+        space = topic.rsplit('/', 1)[0].strip('/')
+        prefix = f'{space}/' if space else ''
+        plans.append(JointPlan(topic, motor, tuple(prefix + j for j in joints),
+                               tuple(prefix + m for m in motor_names), prefix=prefix))
+    return plans
 
 
 def _paired_topics(candidates, states, bag, names_of, suffix):
@@ -500,10 +535,11 @@ def _pick(bag, settings, link, motor, available, motor_names):
 class _Chunks:
     """JointState messages of the plan's topics, decoded in chunks of about N messages."""
 
-    def __init__(self, bag, topics, size):
+    def __init__(self, bag, topics, size, prefix=''):
         self.bag = bag
         self.topics = list(topics)
         self.size = size
+        self.prefix = prefix    # put before every entry name (a robot's namespace)
         self.messages = dict.fromkeys(self.topics, 0)
         self.malformed = dict.fromkeys(self.topics, 0)
         self.first_problem = {}
@@ -537,6 +573,8 @@ class _Chunks:
         if not parts:
             return None
         batch = concat_batches(parts)
+        if self.prefix:
+            batch = replace(batch, names=tuple(self.prefix + n for n in batch.names))
         absent = np.isnan(batch.position)
         merged = merge_partial_messages(batch) if absent.any() else batch
         counts = self.name_messages.get(topic)
@@ -1000,7 +1038,7 @@ def motor_direction(t_link, link, t_motor, motor):
 class _Output:
     """Channels and writes of the derived bag."""
 
-    def __init__(self, writer, joints, truth_topics):
+    def __init__(self, writer, joints, truth_topics, diagnostics=None):
         self.writer = writer
         self.channels = {}
         for joint in joints:
@@ -1011,7 +1049,8 @@ class _Output:
             if joint in truth_topics:
                 self.channels[joint, 'ground_truth'] = writer.add_topic(
                     truth_topics[joint], MULTIARRAY, LATEST_QOS)
-        self.diagnostics = writer.add_topic('/diagnostics', DIAGNOSTICS, DEFAULT_QOS)
+        self.diagnostics = diagnostics if diagnostics is not None else writer.add_topic(
+            '/diagnostics', DIAGNOSTICS, DEFAULT_QOS)
 
     def arrays(self, joint, suffix, layout, log_ns, values):
         values = np.asarray(values, dtype=np.float64)
@@ -1031,7 +1070,7 @@ class _Output:
 class _Run:
     """The analysis of one opened bag."""
 
-    def __init__(self, bag, plan, settings, writer, backs, aging, chunks):
+    def __init__(self, bag, plan, settings, writer, backs, aging, chunks, diagnostics=None):
         self.bag = bag
         self.chunks = chunks
         self.plan = plan
@@ -1044,7 +1083,7 @@ class _Run:
             if bag.topics.get(topic, (None,))[0] == MULTIARRAY:
                 truth[joint] = topic
         self.truth_topics = truth
-        self.out = _Output(writer, plan.joints, truth)
+        self.out = _Output(writer, plan.joints, truth, diagnostics)
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)
@@ -1425,28 +1464,37 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         with open_bag(path, interfaces=settings.interfaces,
                       motor_suffix=settings.motor_suffix) as bag:
             _check_configured_topics(bag, settings)
-            plan = plan_joints(bag, settings)
+            plans = robot_plans(bag, plan_joints(bag, settings), settings)
+            if len(plans) > 1:      # every robot of the recording is analysed, one by one
+                plans[0] = replace(plans[0], others=())
+            plan = plans[0]
+            every = [j for p in plans for j in p.joints]
             aging = _bag_aging_factor(bag, settings)
             if isinstance(stage_worker, WorkerBacks):
                 backs = stage_worker
             else:  # forked only now: a bag that cannot be analysed costs no process
                 backs = WorkerBacks() if stage_worker else LocalBacks()
-            backs.configure({j: settings.params_of(j) for j in plan.joints}, settings.life,
+            backs.configure({j: settings.params_of(j) for j in every}, settings.life,
                             initial_states)
-            topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
-            chunks = _Chunks(bag, topics, CHUNK_MESSAGES)
-            if reader_process:   # forked before the writer opens its file and threads
-                chunks = _ForkedChunks(chunks)
             custom = {'reducer_twin.source': str(Path(path).resolve()),
                       AGING_KEY: repr(float(aging)),
-                      'reducer_twin.joints': ','.join(plan.joints)}
-            needed = DERIVED_BYTES_PER_SAMPLE * len(plan.joints) * bag.topics[
-                plan.link_topic].count
+                      'reducer_twin.joints': ','.join(every)}
+            needed = DERIVED_BYTES_PER_SAMPLE * sum(
+                len(p.joints) * bag.topics[p.link_topic].count for p in plans)
+            joints, messages, diagnostics = {}, 0, None
             with BagDirWriter(out_dir, compression=settings.compression, custom_data=custom,
                               overwrite=overwrite, needed=needed,
                               what='derived bag') as writer:
-                run = _Run(bag, plan, settings, writer, backs, aging, chunks)
-                joints = run.run()
+                for robot in plans:
+                    topics = [robot.link_topic] + ([robot.motor_topic] if robot.motor_topic
+                                                   else [])
+                    chunks = _Chunks(bag, topics, CHUNK_MESSAGES, robot.prefix)
+                    if reader_process:   # forked before the writer opens its file and threads
+                        chunks = _ForkedChunks(chunks)
+                    run = _Run(bag, robot, settings, writer, backs, aging, chunks, diagnostics)
+                    diagnostics = run.out.diagnostics
+                    joints.update(run.run())
+                    messages += run.messages_read
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):
@@ -1456,6 +1504,6 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         raise
     if backs is not stage_worker:
         backs.close()
-    return BagResult(Path(path), Path(out_dir), plan, joints, run.messages_read,
+    return BagResult(Path(path), Path(out_dir), plan, joints, messages,
                      time.perf_counter() - start, aging, warnings,
                      any(is_damage(w) for w in warnings), dict(backs.states))

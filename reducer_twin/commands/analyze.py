@@ -21,12 +21,14 @@ Never silent: a joint without a usable window (no effort, too few samples per to
 reversal, stamps that do not advance, ...) is reported with ``"observed": false``, its
 ``"windows"`` and ``"reason"`` in ``--json`` (and no number for its wear or life), a
 ``WARNING: <joint>: not observed ...`` line on stderr, and exit status 3 when nothing
-else failed; so is a joint of another robot's topic in the same recording (one analysis
-reads one robot's topic; ``twin.link_topic`` chooses). An observed joint whose lost motion
-stopped well before the recording did (effort missing, an encoder that froze), or whose
-effort is missing from many samples, has ``"partial"`` saying so and a ``WARNING: <joint>:
-observed in part of ...`` line. Encoders that do not measure the same motion (a frozen
-one) give no lost motion; a motor encoder that counts against the link is read reversed.
+else failed. A recording of several robots (arms) is analysed robot by robot, each joint
+named ``<namespace>/<joint>`` by its topic's namespace; with ``twin.joints`` configured, the
+joints of the other robots' topics are listed not observed, with the reason. An observed
+joint whose lost motion stopped well before the recording did (effort missing, an encoder
+that froze), or whose effort is missing from many samples, has ``"partial"`` saying so and a
+``WARNING: <joint>: observed in part of ...`` line. Encoders that do not measure the same
+motion (a frozen one) give no lost motion; a motor encoder that counts against the link is
+read reversed.
 
 Outputs never destroy data: OUT and DIR must be new or empty; ``--overwrite`` replaces a
 derived bag reducer-twin wrote (nothing else), DIR may hold a previous report, which is

@@ -222,8 +222,9 @@ def _cli_json(bag, tmp_path, capsys):
     return code, json.loads(captured.out), captured.err
 
 
-def test_a_second_robot_in_the_recording_is_declared_not_analysed_never_left_out(
+def test_every_robot_of_a_recording_is_analysed_its_joints_named_by_namespace(
         original, tmp_path, capsys):
+    # A second robot's /robot_b/joint_states was left out without a word.
     js = original[0]
     root = tmp_path / 'two_robots'
     with BagDirWriter(root, compression='none', custom_data=CUSTOM) as writer:
@@ -231,28 +232,32 @@ def test_a_second_robot_in_the_recording_is_declared_not_analysed_never_left_out
             writer.write_joint_states(writer.add_topic(f'/{robot}/joint_states', JOINT_STATE),
                                       js)
     code, out, err = _cli_json(root, tmp_path, capsys)
-    assert code == 3
-    assert out['joints']['joint_1']['observed'] is True
+    assert code == 0, err
+    assert sorted(out['joints']) == ['robot_a/joint_1', 'robot_a/joint_2', 'robot_b/joint_1',
+                                     'robot_b/joint_2']
+    for joint, wear in _wear(original[1]).items():
+        for robot in ('robot_a', 'robot_b'):
+            got = out['joints'][f'{robot}/{joint}']
+            assert got['observed'] is True and got['messages'] == len(js)
+            assert got['wear_um'] == pytest.approx(wear, rel=1e-9)
+    with open_bag(tmp_path / 'd') as derived:
+        assert '/reducer_twin/robot_b/joint_1/wear' in derived.topics
+    # With twin.joints configured, the other robot is declared, never left out.
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  joints: [joint_1, joint_2]\n')
+    code = main(['analyze', str(root), '--out', str(tmp_path / 'c'), '--json', '--config',
+                 str(config), '--report', str(tmp_path / 'report')])
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert code == 3 and out['joints']['joint_1']['observed'] is True
     for joint in ('robot_b/joint_1', 'robot_b/joint_2'):
         got = out['joints'][joint]
         assert got['observed'] is False and got['wear_um'] is None
         assert 'twin.link_topic: /robot_b/joint_states' in got['reason']
-        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
-    # The report's verdict table names them too, with the reason.
-    page = tmp_path / 'report'
-    assert main(['analyze', str(root), '--out', str(tmp_path / 'r'), '--report',
-                 str(page)]) == 3
-    capsys.readouterr()
-    text = (page / 'index.html').read_text(encoding='utf-8')
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in
+                   captured.err.splitlines())
+    text = (tmp_path / 'report' / 'index.html').read_text(encoding='utf-8')
     assert text.count('twin.link_topic: /robot_b/joint_states') == 2
-    assert '<td>robot_b/joint_1</td>' in text or 'robot_b/joint_1</td>' in text
-    # Chosen in the configuration, the other robot is analysed and nothing is left out.
-    config = tmp_path / 'twin.yaml'
-    config.write_text('twin:\n  link_topic: /robot_b/joint_states\n')
-    code = main(['analyze', str(root), '--out', str(tmp_path / 'b'), '--json', '--config',
-                 str(config)])
-    out = json.loads(capsys.readouterr().out)
-    assert code == 0 and sorted(out['joints']) == ['joint_1', 'joint_2']
 
 
 def test_an_estimate_that_stops_before_the_recording_says_as_of_when_and_why(
