@@ -71,11 +71,14 @@ def print_table(rows, store_path):
           f'{"RUL P10/P50 h":>13} verdict')
     for r in rows:
         name = f'{r["robot"]}/{r["joint"]}'
+        if len(name) > 18:     # never cut: two arms' joints differ only at the end
+            print(name)
+            name = ''
         wear = '-' if r['wear_um'] is None else \
             f'{r["wear_um"]:.2f}±{_num(r["wear_std_um"], ".2f")}'
         rul = f'{_num(r["rul_p10_h"], ".0f")}/{_num(r["rul_p50_h"], ".0f")}'
         bags = f'{r["bags"]}+L' if r.get('live_segments') else str(r['bags'])
-        print(f'{name[:18]:<18} {bags:>4} {r["hours_observed"]:>6.0f} {wear:>11} '
+        print(f'{name:<18} {bags:>4} {r["hours_observed"]:>6.0f} {wear:>11} '
               f'{_num(r["lost_motion_arcmin"], ".2f"):>9} {rul:>13} {r["verdict"]}')
         print(textwrap.fill(r['reason'], 79, initial_indent='    ', subsequent_indent='    '))
     if live:

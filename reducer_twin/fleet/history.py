@@ -145,7 +145,7 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
 
     """
     from reducer_twin.io.bag import open_bag
-    from reducer_twin.analysis.pipeline import plan_joints
+    from reducer_twin.analysis.pipeline import plan_joints, robot_plans
     from reducer_twin.analysis.simulate import ROBOT_KEY
     with open_bag(path) as bag:
         robot = robot_flag or bag.metadata.get(ROBOT_KEY, '') or robot_config
@@ -165,7 +165,9 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
             batches.close()
         if first is None:
             raise BagError(f'{path}: no JointState message on {plan.link_topic}')
-        return BagInfo(str(path), name, str(out), robot, fingerprint(bag), first, plan.joints)
+        # A recording of several robots (arms): the joints of each, by namespace.
+        joints = tuple(j for p in robot_plans(bag, plan, settings) for j in p.joints)
+        return BagInfo(str(path), name, str(out), robot, fingerprint(bag), first, joints)
 
 
 # --------------------------------------------------------------------------- planning

@@ -242,6 +242,16 @@ def test_every_robot_of_a_recording_is_analysed_its_joints_named_by_namespace(
             assert got['wear_um'] == pytest.approx(wear, rel=1e-9)
     with open_bag(tmp_path / 'd') as derived:
         assert '/reducer_twin/robot_b/joint_1/wear' in derived.topics
+    # Into a fleet store: four reducers, their names whole in the fleet view.
+    store = tmp_path / 'fleet.db'
+    assert main(['analyze', str(root), '--out', str(tmp_path / 's'), '--store', str(store),
+                 '--robot', 'cell1']) == 0
+    capsys.readouterr()
+    assert main(['fleet', '--store', str(store)]) == 0
+    view = capsys.readouterr().out
+    for robot in ('robot_a', 'robot_b'):
+        for joint in ('joint_1', 'joint_2'):
+            assert f'cell1/{robot}/{joint}\n' in view
     # With twin.joints configured, the other robot is declared, never left out.
     config = tmp_path / 'twin.yaml'
     config.write_text('twin:\n  joints: [joint_1, joint_2]\n')
