@@ -970,6 +970,14 @@ PARTIAL_SHARE = 0.2
 PARTIAL_WINDOWS = 3
 """Windows of stream after the last lost motion below which the estimate is taken as current."""
 
+COARSE_STEP_RAD = math.radians(0.5 / 60.0)
+"""
+Encoder step [rad at the output] beyond which a joint's lost motion is said to be uncertain.
+
+Half an arcminute: a reducer's lost motion is 0.4-3 arcmin. A 16-bit link encoder steps by
+0.33 arcmin, a 12-bit one by 5.3; motor encoders' steps are divided by the ratio.
+"""
+
 MIN_DETECT_TRAVEL_RAD = 0.05
 """Link travel [rad] a chunk must show before its motor angles are classified."""
 
@@ -1149,10 +1157,26 @@ class _Run:
                     str(self.bag.path), None, f'the motor encoder of {joint} counts against '
                     'the link (a negative reduction): its angles are taken reversed'))
             found = 'raw' if r > math.sqrt(ratio) else 'output'
+            self._note_resolution(joint, x_link, x_motor / (ratio if found == 'raw' else 1.0))
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
                                  f'{ratio:g} times, output angles about 1)')
             self._set_angles(joint, found, sense)
+
+    def _note_resolution(self, joint, link, motor):
+        """Say when an encoder's steps [rad at the output] are too coarse for the lost motion."""
+        for side, x in (('link', link), ('motor', motor)):
+            steps = np.abs(np.diff(x[np.isfinite(x)]))
+            steps = steps[steps > 0]
+            if steps.size < 100:
+                continue
+            step = float(np.percentile(steps, 0.1))     # the smallest move it reports
+            if step > COARSE_STEP_RAD:
+                self.bag.warnings.append(ReadWarning(
+                    str(self.bag.path), None, f'the {side} encoder of {joint} moves in steps '
+                    f'of {math.degrees(step) * 60:.2g} arcmin at the output, coarser than the '
+                    f'{math.degrees(COARSE_STEP_RAD) * 60:g} arcmin the lost motion is read '
+                    'to: its lost motion and wear are uncertain by about that much'))
 
     def _against_config(self, key, found, joint, seen):
         """Refuse a ``twin.<key>`` of ``--config`` that the data of ``joint`` contradict."""

@@ -325,6 +325,21 @@ def test_messages_logged_out_of_stamp_order_are_dropped_and_said(original, tmp_p
     assert line.startswith('WARNING:') and f'{swap.size:,} of {len(js):,}' in line
 
 
+def test_a_link_encoder_too_coarse_for_the_lost_motion_is_said(original, tmp_path, capsys):
+    js = original[0]
+    position = js.position.copy()
+    k = js.names.index('joint_1')
+    quantum = 2.0 * np.pi / 4096        # a 12-bit link encoder: 5.3 arcmin steps
+    position[:, k] = np.round(position[:, k] / quantum) * quantum
+    _, _, err = _cli_json(_rewrite(js, tmp_path, 'coarse', position=position), tmp_path,
+                          capsys)
+    (line,) = [x for x in err.splitlines() if 'moves in steps' in x]
+    assert line.startswith('WARNING:') and 'link encoder of joint_1' in line
+    assert 'steps of 5.3 arcmin' in line
+    assert not any('moves in steps' in x for x in _cli_json(
+        _rewrite(js, tmp_path, 'fine'), tmp_path / 'f', capsys)[2].splitlines())
+
+
 def test_all_zero_header_stamps_are_declared_as_stamps_that_do_not_advance(
         original, tmp_path, capsys):
     js = original[0]
