@@ -58,7 +58,8 @@ from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS, StreamCleaner
-from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TwinConfig
+from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TOPIC_NAMESPACE
+from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import LifeConfig
@@ -956,6 +957,16 @@ def _bag_aging_factor(bag, settings):
         return settings.aging_factor
     text = bag.metadata.get(AGING_KEY)
     if text is None:
+        truth = sorted(t for t in bag.topics
+                       if t.startswith(f'/{TOPIC_NAMESPACE}/') and t.endswith('/ground_truth'))
+        if truth:
+            # A simulator's recording ages its reducers faster than its clock; the factor
+            # lives in metadata.yaml's custom_data, which a bare storage file has lost.
+            bag.warnings.append(ReadWarning(
+                str(bag.path), None, f'the recording carries the simulated truth {truth[0]} but '
+                f'no {AGING_KEY} in its metadata: aging factor 1 assumed (operating seconds '
+                'per stream second); if it was simulated faster, remaining life and wear '
+                'rates are off by that factor: set twin.aging_factor with --config'))
         return 1.0
     try:
         value = float(text)

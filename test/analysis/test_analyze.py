@@ -379,7 +379,24 @@ def test_a_sqlite3_bag_with_integer_qos_becomes_an_mcap_bag(sim, analysed, tmp_p
     for name in analysed.joints:
         np.testing.assert_array_equal(result.joints[name].features,
                                       analysed.joints[name].features)
-    assert analyze_bag(root, tmp_path / 'out1').aging_factor == 1.0
+    # A robot's recording without an aging factor is aged in real time, without a word.
+    plain = analyze_bag(root, tmp_path / 'out1')
+    assert plain.aging_factor == 1.0
+    assert not [w for w in plain.warnings if 'aging' in w.message]
+
+
+def test_a_simulated_recording_that_lost_its_aging_factor_says_1_is_assumed(sim, tmp_path):
+    root = tmp_path / 'stripped'
+    shutil.copytree(sim[0], root)
+    meta = root / 'metadata.yaml'
+    info = yaml.safe_load(meta.read_text())
+    info['rosbag2_bagfile_information'].pop('custom_data')
+    meta.write_text(yaml.safe_dump(info))
+    result = analyze_bag(root, tmp_path / 'out')
+    assert result.aging_factor == 1.0
+    said = [w.message for w in result.warnings if AGING_KEY in w.message]
+    assert len(said) == 1 and 'aging factor 1 assumed' in said[0]
+    assert 'twin.aging_factor' in said[0] and '/ground_truth' in said[0]
 
 
 def test_split_link_and_motor_topics_are_paired_by_the_ingestion_rules(tmp_path):
