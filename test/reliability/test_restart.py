@@ -269,7 +269,14 @@ def test_a_state_file_torn_at_any_byte_falls_back_to_the_backup_never_to_zeros(
     good = state.read_bytes()
     backup = offline(records[:4]).estimator.state_dict()
     assert good.endswith(b'}\n')
-    for cut in range(len(good) - 1):                 # cut the final newline only: intact
+    # Every cut is refused by the file's check (cutting the final newline only leaves
+    # it intact) ...
+    for cut in range(len(good) - 1):
+        with pytest.raises(StateFileError):
+            decode_state(good[:cut], state)
+    # ... and a refused primary is replaced by the backup (loading an estimator takes a
+    # few ms: every 61st cut, the first and the last ones).
+    for cut in sorted({*range(0, len(good) - 1, 61), 1, len(good) - 2}):
         state.write_bytes(good[:cut])
         loaded = load_with_fallback(state, PARAMS)
         assert loaded.used_backup, cut
