@@ -16,7 +16,8 @@ import sys
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.robot_ingest import check_motor_direction, check_streams, STREAMS
+from reducer_twin.core.robot_ingest import check_effort_scale, check_motor_direction
+from reducer_twin.core.robot_ingest import check_streams, STREAMS
 from reducer_twin.nodes.settings import StoreSettings
 
 _TWIN = TwinConfig()
@@ -239,6 +240,7 @@ def _check_values(path, config):
         check_streams(twin['joints'], twin['link_topic'], twin['motor_topic'],
                       twin['motor_suffix'], 'twin.')
         check_motor_direction(twin['motor_direction'], 'twin.')
+        check_effort_scale(twin['effort_scale'], 'twin.')
     except InvalidParameter as err:
         raise InvalidParameter(f'{path}: {err}') from None
 

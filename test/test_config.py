@@ -156,6 +156,16 @@ def test_a_motor_direction_other_than_1_or_minus_1_is_refused(tmp_path):
         load_config(path)
 
 
+def test_an_effort_scale_of_0_or_not_a_number_is_refused(tmp_path):
+    assert load_config(_file(tmp_path, 'twin:\n  effort_scale: -1\n'))['twin'][
+        'effort_scale'] == -1
+    for bad in ('0', 'amps', '.nan'):
+        path = _file(tmp_path, f'twin:\n  effort_scale: {bad}\n')
+        with pytest.raises(InvalidParameter, match=r'twin.effort_scale must be a number of '
+                                                   r'magnitude 1e-6 to 1e6 .* got '):
+            load_config(path)
+
+
 BAD_REDUCERS = [
     ('a joint the robot does not have', 'twin:\n  joints: [joint_1]\n'
      'reducers:\n  joint_9: {rating: {rated_torque: 392.0}}\n',

@@ -63,6 +63,7 @@ from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import LifeConfig
+from reducer_twin.core.robot_ingest import check_effort_scale
 from reducer_twin.io.bag import BagDirWriter, JOINT_STATE_TYPES, open_bag
 from reducer_twin.io.mcap_reader import ReadWarning
 from reducer_twin.io.outputs import refuse_inside_inputs
@@ -142,6 +143,9 @@ class AnalysisSettings:
         The motor entry's effort: ``'motor'`` (motor torque, times the ratio),
         ``'joint'`` (already output torque) or ``'auto'`` (motor torque when the
         motor angles are raw).
+    effort_scale : float
+        Output torque [N·m] per unit of the effort so read (-1: an effort of the other
+        sign; a torque constant times the ratio for a motor current in A).
     interfaces : InterfaceMap
         DynamicJointState interfaces of the joint (``position``, ...) and the motor
         (``motor_position``, ...) entries.
@@ -178,6 +182,7 @@ class AnalysisSettings:
     motor_direction: object = 'auto'
     effort_source: str = 'auto'
     motor_effort_units: str = 'auto'
+    effort_scale: float = 1.0
     interfaces: InterfaceMap = field(default_factory=InterfaceMap)
     aging_factor: float = None
     window_s: float = TwinConfig().window_s
@@ -261,6 +266,7 @@ class AnalysisSettings:
                                     else 'auto'),
                    effort_source=twin['effort_source'],
                    motor_effort_units=twin['motor_effort_units'],
+                   effort_scale=check_effort_scale(twin['effort_scale'], f'{path}: twin.'),
                    interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
                    max_gap_s=spec.max_gap_s, params=params,
                    joint_params=tuple(joint_params.items()), life=life)
@@ -832,8 +838,8 @@ class JointResult:
 
     @property
     def observed(self):
-        """Whether at least one window gave a lost motion (the estimate rests on data)."""
-        return self.windows > 0
+        """Whether windows gave a lost motion the twin trusts (the estimate rests on data)."""
+        return self.windows > 0 and self.reason is None
 
     def summary(self):
         """
@@ -1266,7 +1272,8 @@ class _Run:
         for k, joint in self.order:
             front = self.fronts[joint]
             cols, unpaired = pair_columns(clean, 2 * k, 2 * k + 1, front.motor_scale,
-                                          self.settings.effort_source, front.effort_scale)
+                                          self.settings.effort_source, front.effort_scale,
+                                          self.settings.effort_scale)
             front.unpaired += unpaired
             self._feed(joint, *cols)
 
@@ -1345,6 +1352,8 @@ class _Run:
 
     def _not_observed(self, front, counts, sides):
         """Why a joint gave no lost motion, naming the topic; None when it did."""
+        if front.analyzer.effort_fault is not None:
+            return front.analyzer.effort_fault
         if front.analyzer.windows_observed:
             return None
         plan = self.plan

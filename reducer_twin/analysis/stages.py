@@ -82,7 +82,8 @@ class JointFront:
         # Offline a partner can come chunks later: hold link samples for PAIR_HOLD_S.
         self.pairer = Pairer(settings.ingest, motor_scale, hold_s=PAIR_HOLD_S,
                              effort=settings.effort_source,
-                             motor_effort_scale=self.effort_scale, ratio=self.ratio)
+                             motor_effort_scale=self.effort_scale, ratio=self.ratio,
+                             effort_scale=settings.effort_scale)
         self.unpaired = 0
         self.samples = 0
         self.period_ns = None

@@ -950,6 +950,8 @@ class Pairer:
         Factor that turns the motor entry's effort into output torque.
     ratio : float, optional
         Reduction ratio; None: always interpolate (no :class:`TickPairing`).
+    effort_scale : float
+        Output torque per unit of the effort read (after ``motor_effort_scale``).
 
     Attributes
     ----------
@@ -961,8 +963,9 @@ class Pairer:
     """
 
     def __init__(self, config=None, motor_scale=1.0, hold_s=None, effort='link',
-                 motor_effort_scale=1.0, ratio=None):
+                 motor_effort_scale=1.0, ratio=None, effort_scale=1.0):
         self.config = config or IngestConfig()
+        self.effort_scale = float(effort_scale)
         self.motor_scale = float(motor_scale)
         self.hold_ns = int((self.config.max_gap_s if hold_s is None else hold_s) * 1e9)
         self.effort = effort
@@ -1041,6 +1044,8 @@ class Pairer:
             if tick is not None:
                 me = np.where(tick >= 0, motor.effort[np.maximum(tick, 0)], me)
             torque = choose_effort(torque, me[ok], self.effort, self.motor_effort_scale)
+        if self.effort_scale != 1.0:
+            torque = torque * self.effort_scale
         out = PairedSamples(link.t_ns[good], m[ok] * self.motor_scale, link.position[good],
                             torque, link.velocity[good])
         self._link = _take(link, rest)
@@ -1110,7 +1115,8 @@ def motor_effort_scale(units, motor_angles, ratio):
     return ratio if units == 'motor' else 1.0
 
 
-def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1.0):
+def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1.0,
+                  effort_scale=1.0):
     """
     Output torque from the link side, the motor side, or the link side where it is known.
 
@@ -1123,6 +1129,9 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
     motor_effort_scale : float
         Factor that turns the motor entry's effort into output torque (the ratio
         for a motor torque, 1 when the controller reports it in joint units).
+    effort_scale : float
+        Output torque per unit of the effort so chosen (-1 for an effort of the other
+        sign; a torque constant for a current).
 
     Returns
     -------
@@ -1130,6 +1139,9 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
         Output torque [N·m], NaN where unknown.
 
     """
+    if effort_scale != 1.0:
+        return effort_scale * choose_effort(link_effort, motor_effort, source,
+                                            motor_effort_scale)
     if source == 'link':
         return link_effort
     if source != 'motor':
@@ -1143,7 +1155,7 @@ def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1
 
 
 def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
-                 motor_effort_scale=1.0):
+                 motor_effort_scale=1.0, effort_scale=1.0):
     """
     Pair two columns of a stream cleaned together (one message per tick).
 
@@ -1159,6 +1171,8 @@ def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
         Where the torque is read (:data:`EFFORT_SOURCES`).
     motor_effort_scale : float
         Factor that turns the motor entry's effort into output torque.
+    effort_scale : float
+        Output torque per unit of the effort so chosen.
 
     Returns
     -------
@@ -1173,7 +1187,7 @@ def pair_columns(stream, link_col, motor_col, motor_scale=1.0, effort='link',
     ok = np.isfinite(link) & np.isfinite(motor)
     unpaired = int(np.count_nonzero(np.isfinite(link) ^ np.isfinite(motor)))
     torque = choose_effort(stream.effort[:, link_col], stream.effort[:, motor_col], effort,
-                           motor_effort_scale)
+                           motor_effort_scale, effort_scale)
     if ok.all():
         return (stream.t_ns, motor * motor_scale, link, torque,
                 stream.velocity[:, link_col]), unpaired

@@ -31,6 +31,10 @@ STREAMS = {
     'motor_angles': ('raw', "'raw' (input side) or 'output' (divided by the ratio)"),
     'motor_direction': (1, '1: the motor encoder counts with the link; -1: against it (a '
                            'negative reduction)'),
+    'effort_scale': (1.0, 'output torque [N*m] per unit of the effort read (after '
+                          'motor_effort_units): -1 for a drive that reports its effort with '
+                          'the other sign; for a motor current in A, the torque constant '
+                          'times the ratio'),
     'effort_source': ('auto', "torque from the 'link' entry, the 'motor' entry, or 'auto' "
                               '(link where it has one, else motor)'),
     'motor_effort_units': ('auto', "motor entry's effort: 'motor' torque (times the ratio), "
@@ -68,13 +72,17 @@ class RobotIngest:
     motor_direction : int
         1, or -1 for a motor encoder that counts against the link (its angles and its
         torque are taken reversed).
+    effort_scale : float
+        Output torque per unit of the effort read (:func:`check_effort_scale`).
 
     """
 
     def __init__(self, joints, ratio, config=None, split=False, motor_angles='raw',
-                 effort_source='auto', motor_effort_units='auto', motor_direction=1):
+                 effort_source='auto', motor_effort_units='auto', motor_direction=1,
+                 effort_scale=1.0):
         config = config or IngestConfig()
         check_motor_direction(motor_direction)
+        self.torque_scale = check_effort_scale(effort_scale)
         self.joints = list(joints)
         self.split = bool(split)
         self.scale = motor_direction * (ratio if motor_angles == 'output' else 1.0)
@@ -85,7 +93,8 @@ class RobotIngest:
         self.motor = StreamCleaner(config) if self.split else None
         self.spikes = SpikeFilterBank(ratio, len(self.joints), config)
         self.pairers = [Pairer(config, self.scale, effort=effort_source,
-                               motor_effort_scale=self.effort_scale, ratio=ratio)
+                               motor_effort_scale=self.effort_scale, ratio=ratio,
+                               effort_scale=self.torque_scale)
                         for _ in self.joints]
         self.joint_spikes = [SpikeFilter(ratio, config) for _ in self.joints]
 
@@ -145,7 +154,8 @@ class RobotIngest:
         rows[:, :, 1] = motor.T
         rows[:, :, 2] = link.T
         rows[:, :, 3] = choose_effort(clean.effort[:, 0::2], clean.effort[:, 1::2],
-                                      self.effort_source, self.effort_scale).T
+                                      self.effort_source, self.effort_scale,
+                                      self.torque_scale).T
         rows[:, :, 4] = clean.velocity[:, 0::2].T
         all_kept = keep is paired and unpaired is None
         out = []
@@ -201,6 +211,30 @@ def check_motor_direction(value, prefix=''):
     if isinstance(value, bool) or value not in (1, -1):
         raise InvalidParameter(f'{prefix}motor_direction must be 1 (the motor encoder counts '
                                f'with the link) or -1 (against it), got {value!r}')
+
+
+def check_effort_scale(value, prefix=''):
+    """
+    Check an effort scale: a finite number, not 0, of magnitude 1e-6 to 1e6.
+
+    Returns
+    -------
+    float
+        The scale.
+
+    Raises
+    ------
+    InvalidParameter
+        Naming the value and the allowed ones.
+
+    """
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
+        np.isfinite(value) and 1e-6 <= abs(value) <= 1e6
+    if not ok:
+        raise InvalidParameter(f'{prefix}effort_scale must be a number of magnitude 1e-6 to '
+                               '1e6 (output torque [N*m] per unit of the effort; negative '
+                               f'for an effort of the other sign), got {value!r}')
+    return float(value)
 
 
 def check_streams(joints, link_topic, motor_topic, motor_suffix, prefix=''):

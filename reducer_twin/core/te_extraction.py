@@ -917,6 +917,9 @@ class WindowAnalyzer:
         self.windows_friction_unknown = 0
         self.windows_implausible = 0
         self.largest_te_span = 0.0
+        self.effort_fault = None        # why the effort is not the output torque
+        self.windows_effort_fault = 0
+        self._effort_checks = []        # (width [rad], slope ratio) of the latest windows
         self.last_observed_t = None     # end of the last window with a lost motion [s]
         self.latest_t = None            # latest stamp fed [s]
         self._since = dict.fromkeys(_SINCE, 0)
@@ -1031,6 +1034,9 @@ class WindowAnalyzer:
         """
         Say why no window has given a lost motion yet, or None once one has.
 
+        An effort found not to be the output torque (:attr:`effort_fault`) is said
+        even after windows gave lost motions: they were read with that effort.
+
         Parameters
         ----------
         effort_source : str
@@ -1042,6 +1048,8 @@ class WindowAnalyzer:
             One line a maintenance engineer can act on.
 
         """
+        if self.effort_fault is not None:
+            return self.effort_fault
         if self.windows_observed:
             return None
         seen = self.samples_seen
@@ -1073,6 +1081,14 @@ class WindowAnalyzer:
                     f'({100.0 * self.edges[0] / self.rated_torque:.0f} % of the rated torque) '
                     'from which the lost motion is read: a joint without load, or an effort '
                     'in other units (a motor torque: set motor_effort_units to motor)')
+        if self.largest_effort > EFFORT_PLAUSIBLE_RATED * self.rated_torque:
+            return (f'the effort on {effort_source} reaches {self.largest_effort:.3g} N*m, '
+                    f'{self.largest_effort / self.rated_torque:.3g} times the rated torque '
+                    f'(a reducer takes at most about {EFFORT_PLAUSIBLE_RATED:g} times, '
+                    'momentarily): not the output torque in N*m (a torque in joint units '
+                    'on the motor entry, taken for a motor torque and multiplied by the '
+                    'ratio: motor_effort_units joint; or other units: effort_scale, '
+                    'twin.effort_scale in --config)')
         if self.windows_friction_unknown:
             return (f'the friction in the effort could not yet be told from the load: '
                     f'{self.windows_friction_unknown} of {self.windows_emitted} windows had '
@@ -1301,6 +1317,10 @@ class WindowAnalyzer:
         te_min = np.minimum.reduceat(y, starts)
         implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
         usable &= ~implausible[:, None]
+        # From the window where the effort is found not to be the torque, none is read.
+        faulty = self._check_effort(torque_h, width, std, usable)
+        usable &= ~faulty[:, None]
+        self.windows_effort_fault += int(faulty.sum())
         fit = self._fit_wear(torque_h, width, std, usable)
         # A lost motion no reducer has is an encoder or configuration fault.
         beyond = fit[2] > PLAUSIBLE_LOST_MOTION_RAD
@@ -1343,6 +1363,84 @@ class WindowAnalyzer:
                 hysteresis_std=std[k, use],
                 duty=duty[k], implausible=bool(implausible[k])))
         return out
+
+    def _check_effort(self, torque_b, width, std, usable):
+        """
+        Check, window by window, that the effort is the output torque in N·m.
+
+        Beyond the play the loaded flanks part as ``H = L + 2·|T|/k``: the width is
+        positive (the twist follows the torque) and grows with the model's series
+        compliance ``1/k_s``. Per window with two or more usable bins beyond twice
+        the lost-motion test torque: the median width and the weighted slope of the
+        width on ``2·|T|`` times ``k_s``. Over the latest :data:`EFFORT_CHECK_MEMORY`
+        such windows (at least :data:`EFFORT_CHECK_WINDOWS`), a negative median
+        width is an effort of the opposite sign, a median slope ratio outside
+        :data:`EFFORT_SLOPE_RANGE` an effort in other units: :attr:`effort_fault`
+        says which, once, and that window and every later one give no lost motion.
+
+        Returns
+        -------
+        ndarray of bool, shape (W,)
+            Windows from which on the effort is known not to be the torque.
+
+        """
+        n_win = usable.shape[0]
+        if self.effort_fault is not None:
+            return np.ones(n_win, dtype=bool)
+        beyond = usable & (np.nan_to_num(torque_b) >= 2.0 * self.takeup_torque)
+        faulty = np.zeros(n_win, dtype=bool)
+        rows = np.flatnonzero(beyond.sum(axis=1) >= 2)
+        if rows.size == 0:
+            return faulty
+        b = beyond[rows]
+        w = np.where(b, 1.0 / np.where(b, std[rows], 1.0) ** 2, 0.0)
+        x = np.where(b, 2.0 * torque_b[rows], 0.0)
+        h = np.where(b, width[rows], 0.0)
+        sw = w.sum(axis=1)
+        x0 = (w * x).sum(axis=1) / sw
+        h0 = (w * h).sum(axis=1) / sw
+        sxx = (w * (x - x0[:, None]) ** 2).sum(axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            ratio = ((w * (x - x0[:, None]) * (h - h0[:, None])).sum(axis=1) / sxx
+                     * self.tables.series_stiffness)
+        middle = np.nanmedian(np.where(b, width[rows], np.nan), axis=1)
+        checks = self._effort_checks
+        for row, level, slope in zip(rows.tolist(), middle.tolist(), ratio.tolist()):
+            if not (math.isfinite(level) and math.isfinite(slope)):
+                continue
+            checks.append((level, slope))
+            del checks[:-EFFORT_CHECK_MEMORY]
+            if len(checks) < EFFORT_CHECK_WINDOWS:
+                continue
+            level, slope = np.median(np.array(checks), axis=0).tolist()
+            self.effort_fault = self._effort_fault(level, slope, len(checks))
+            if self.effort_fault is not None:
+                faulty[row:] = True
+                break
+        return faulty
+
+    def _effort_fault(self, level, slope, windows):
+        """Say how the effort differs from the torque (medians of the check), or None."""
+        beyond = f'{2.0 * self.takeup_torque:.3g} N*m'
+        if level < 0.0:
+            return (f'the effort has the opposite sign of the torque the reducer carries: '
+                    f'in {windows} windows the transmission error under positive effort '
+                    f'beyond {beyond} lies {math.degrees(-level) * 60:.3g} arcmin below the '
+                    'one under negative effort, where a twist follows its torque (a drive '
+                    'that reports its effort with the other sign): set effort_scale '
+                    '(twin.effort_scale in --config) to -1')
+        lo, hi = EFFORT_SLOPE_RANGE
+        if lo <= slope <= hi:
+            return None
+        if slope <= 0.0:
+            return None     # a width that does not grow: no verdict on the units
+        return (f'the effort is not the output torque in N*m: in {windows} windows the '
+                f'transmission error grows with it {slope:.3g} times as fast as the '
+                "reducer's torsional stiffness gives (plausible "
+                f'{lo:g}-{hi:g}), so the effort reads about {1.0 / slope:.3g} times the '
+                'torque (a motor current in A, or a motor torque taken for joint units or '
+                'the other way round: motor_effort_units): set effort_scale '
+                '(twin.effort_scale in --config) to the torque per unit of effort')
 
     def _harmonics(self, theta):
         """
@@ -2314,6 +2412,33 @@ PLAUSIBLE_LOST_MOTION_RAD = math.radians(1.0)
 Largest lost motion [rad] read as one: 60 arcmin, 20 times the usual wear limit (3 arcmin).
 
 A reading beyond it is an encoder or configuration fault, not a reducer.
+"""
+
+EFFORT_CHECK_WINDOWS = 5
+"""Windows with two or more hysteresis bins beyond twice the test torque that decide the check."""
+
+EFFORT_CHECK_MEMORY = 50
+"""The latest windows of the effort check (its medians)."""
+
+EFFORT_SLOPE_RANGE = (0.25, 4.0)
+"""
+Plausible ratio of the hysteresis' growth with the effort to the model's (1 for the torque).
+
+Beyond the play, the width between the loaded flanks grows as ``2·|T|/k_s``: an effort in
+the output torque's units gives the model's series stiffness within its tolerance. Measured
+(median over a joint's windows, bins beyond twice the test torque): 0.95-1.13 on the
+independent generator, 0.68-1.18 on the third (catalogue stiffness +-20 %, a soft knee),
+1.07-1.08 on the model's simulator; an effort ten times the torque gives 0.11, a tenth of
+it 10.4. A ratio outside this range is an effort in other units, not a reducer.
+"""
+
+EFFORT_PLAUSIBLE_RATED = 5.0
+"""
+Largest effort, in rated torques, a joint's reducer is taken to carry.
+
+An RV reducer's momentary maximum torque is about 5 times its rated torque (RV-80E:
+3920 N·m against 784); an effort beyond it explains a joint without lost motion as an
+effort in other units.
 """
 
 LOW_RATE_HZ = 200.0

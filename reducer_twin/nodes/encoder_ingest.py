@@ -25,7 +25,8 @@ from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.core.robot_ingest import check_motor_direction, check_streams, RobotIngest
+from reducer_twin.core.robot_ingest import check_effort_scale, check_motor_direction
+from reducer_twin.core.robot_ingest import check_streams, RobotIngest
 from reducer_twin.core.robot_ingest import STREAMS
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
@@ -67,7 +68,7 @@ class EncoderIngest(Node):
         self.split = bool(p['motor_topic'])
         self.ingest = RobotIngest(self.joints, ratio, self.ingest_params.value, self.split,
                                   p['motor_angles'], p['effort_source'], p['motor_effort_units'],
-                                  p['motor_direction'])
+                                  p['motor_direction'], p['effort_scale'])
         self.outputs = {joint: SharedOutput(self.create_publisher(
             Float64MultiArray, joint_topic(joint, 'encoder_pairs'), encoder_qos()),
             PAIRED_SAMPLES) for joint in self.joints}
@@ -98,6 +99,7 @@ class EncoderIngest(Node):
             'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription')})
         check_choice('motor_angles', out['motor_angles'], ('raw', 'output'))
         check_motor_direction(out['motor_direction'])
+        check_effort_scale(out['effort_scale'])
         check_choice('effort_source', out['effort_source'], EFFORT_SOURCES)
         check_choice('motor_effort_units', out['motor_effort_units'], MOTOR_EFFORT_UNITS)
         check_streams(out['joints'], out['link_topic'], out['motor_topic'], out['motor_suffix'])

@@ -158,9 +158,18 @@ def declare_plain(node, specs):
         Parameter name to the value the node starts with.
 
     """
-    return {name: node.declare_parameter(
-        name, default, ParameterDescriptor(description=doc, read_only=True)).value
-        for name, (default, doc) in specs.items()}
+    out = {}
+    for name, (default, doc) in specs.items():
+        if isinstance(default, float):   # a whole number given for a number is taken
+            desc = ParameterDescriptor(description=doc, read_only=True, dynamic_typing=True)
+            value = node.declare_parameter(name, default, desc).value
+            if isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+        else:
+            value = node.declare_parameter(
+                name, default, ParameterDescriptor(description=doc, read_only=True)).value
+        out[name] = value
+    return out
 
 
 def check_choice(name, value, allowed):

@@ -186,8 +186,10 @@ class TEMonitor(Node):
         values['observed_windows'] = analyzer.windows_observed
         stale = analyzer.stale_reason(STALE_WINDOWS * self.twin.config.window_s, topic)
         if reason is not None:
-            # Never OK without a lost motion: say why the reducer cannot be seen.
-            level, message = 'STALE', f'not observed: {reason}'
+            # Never OK without a lost motion: say why the reducer cannot be seen (an
+            # effort that is not the torque is a configuration to fix).
+            level = 'ERROR' if analyzer.effort_fault is not None else 'STALE'
+            message = f'not observed: {reason}'
         elif stale is not None:
             # Seen before, not now: the estimate stands as of then; a faulty stream warns.
             gap, why, faulty = stale

@@ -75,6 +75,7 @@ def build_nodes(config, sim_overrides=None):
         Parameter('motor_suffix', value=twin['motor_suffix']),
         Parameter('motor_angles', value=twin['motor_angles']),
         Parameter('motor_direction', value=twin['motor_direction']),
+        Parameter('effort_scale', value=float(twin['effort_scale'])),
         Parameter('effort_source', value=twin['effort_source']),
         Parameter('motor_effort_units', value=twin['motor_effort_units'])])
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]

@@ -313,6 +313,56 @@ def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
 
 
+def _link_columns(js):
+    return [k for k, n in enumerate(js.names) if not n.endswith('_motor')]
+
+
+@pytest.mark.parametrize('factor, said, scale', [
+    (-1.0, 'the effort has the opposite sign of the torque', -1.0),
+    # Beyond the torque bins, ten times the torque is named by its size.
+    (10.0, 'times the rated torque', 0.1),
+    (0.1, 'the effort reads about', 10.0),        # a motor current in A
+], ids=['sign reversed', 'ten times the torque', 'a tenth of the torque'])
+def test_an_effort_that_is_not_the_output_torque_is_refused_and_the_config_reads_it(
+        original, tmp_path, capsys, factor, said, scale):
+    js = original[0]
+    effort = js.effort.copy()
+    effort[:, _link_columns(js)] *= factor
+    bag = _rewrite(js, tmp_path, 'effort', effort=effort)
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    # Read as the torque, such an effort gave 30 um instead of 0.9 and 0 h left, or -60 %.
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None and got['rul_p50_h'] is None
+        assert said in got['reason'] and 'twin.effort_scale' in got['reason']
+        if factor == 0.1:
+            shown = float(got['reason'].split('the effort reads about ')[1].split()[0])
+            assert shown == pytest.approx(factor, rel=0.25)
+        assert any(x.startswith(f'WARNING: {joint}: not observed') and said in x
+                   for x in err.splitlines())
+    config = tmp_path / 'twin.yaml'
+    config.write_text(f'twin:\n  effort_scale: {scale}\n')
+    result = analyze_bag(bag, tmp_path / 'd_scaled', AnalysisSettings.from_config(config))
+    _assert_same_estimate(result, original, rel=1e-6)
+
+
+def test_an_effort_far_beyond_the_reducers_rating_is_named_as_other_units(original, tmp_path):
+    js = original[0]
+    effort = np.full_like(js.effort, np.nan)
+    for k in _motor_columns(js):       # the joint's torque on the motor entry, in joint units
+        effort[:, k] = js.effort[:, js.names.index(js.names[k][:-len('_motor')])]
+    result = analyze_bag(_rewrite(js, tmp_path, 'joint_units', effort=effort), tmp_path / 'd')
+    for got in result.joints.values():
+        reason = got.summary()['reason']
+        assert not got.observed and 'times the rated torque' in reason
+        assert 'motor_effort_units joint' in reason
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_effort_units: joint\n')
+    _assert_same_estimate(analyze_bag(_rewrite(js, tmp_path, 'joint_units2', effort=effort),
+                                      tmp_path / 'd2', AnalysisSettings.from_config(config)),
+                          original)
+
+
 def test_messages_logged_out_of_stamp_order_are_dropped_and_said(original, tmp_path, capsys):
     js = original[0]
     stamps = js.stamps_ns.copy()

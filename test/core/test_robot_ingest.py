@@ -85,3 +85,22 @@ def test_a_motor_encoder_counting_against_the_link_gives_the_same_pairs_at_direc
     for bad in (0, 2, True, '-1'):
         with pytest.raises(InvalidParameter, match='motor_direction must be 1 .* or -1'):
             RobotIngest(['j0'], RATIO, motor_direction=bad)
+
+
+@pytest.mark.parametrize('split', [False, True], ids=['combined', 'split'])
+@pytest.mark.parametrize('source', ['link', 'motor'])
+def test_the_effort_scale_turns_any_effort_into_the_output_torque(split, source):
+    sim = JointSimulator(ReducerParams(), SimConfig(name='j0', rate_hz=250.0, seed=3,
+                                                    exact_mesh=False))
+    link, motor = _messages([sim.step(300)], split)
+    found = {}
+    for scale in (1.0, -2.5):
+        ingest = RobotIngest(['j0'], RATIO, split=split, effort_source=source,
+                             motor_effort_units='joint', effort_scale=scale)
+        found[scale] = np.concatenate([r for _, r in ingest.process(link, motor)])
+    np.testing.assert_array_equal(found[-2.5][:, [0, 1, 2, 4]], found[1.0][:, [0, 1, 2, 4]])
+    np.testing.assert_allclose(found[-2.5][:, 3], -2.5 * found[1.0][:, 3], rtol=1e-15)
+    for bad in (0, 0.0, 1e9, float('nan'), True, '-1'):
+        with pytest.raises(InvalidParameter, match='effort_scale must be a number of '
+                                                   'magnitude 1e-6 to 1e6'):
+            RobotIngest(['j0'], RATIO, effort_scale=bad)

@@ -285,3 +285,25 @@ def test_effort_that_stops_after_a_lost_motion_turns_the_diagnostics_to_warn_say
     assert status.level == DiagnosticStatus.WARN
     assert 'no effort on /reducer_twin/' in status.message
     assert float(ros.key_values(status)['seconds_since_lost_motion']) >= 20.0
+
+
+def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
+        ros, simulated):
+    # A drive that reports its effort with the other sign gave a wear of a few um with an
+    # sd of 10 um, presented as observed.
+    _, rows = simulated
+    monitor = Monitor(ros)
+    span = rows[-1, 0] - rows[0, 0] + 1e-3
+    for k in range(3):
+        flipped = rows.copy()
+        flipped[:, 0] += k * span
+        flipped[:, 3] *= -1.0
+        monitor.feed(flipped)
+    status = monitor.status(lambda s: 'opposite sign' in s.message)
+    assert status.level == DiagnosticStatus.ERROR
+    assert status.message.startswith('not observed: the effort has the opposite sign')
+    assert 'effort_scale' in status.message
+    # From the window that decided it on, no lost motion is published.
+    analyzer = monitor.node.twin.analyzer
+    assert analyzer.windows_effort_fault >= 1
+    assert analyzer.windows_observed < analyzer.windows_emitted
