@@ -1381,6 +1381,16 @@ class _Run:
         if not a.windows_observed or joint not in self.span:
             return None
         first, last = (t * 1e-9 for t in self.span[joint])
+        start = min(s[0] for s in self.span.values()) * 1e-9
+        end = max(s[1] for s in self.span.values()) * 1e-9
+        if end - last >= max(PARTIAL_SHARE * (end - start),
+                             PARTIAL_WINDOWS * self.settings.window_s):
+            # Its entries went missing while the others' went on: renamed, or no longer
+            # published (nothing about its reducer after that is in the recording).
+            return (f'its samples stop {end - last:.1f} s before the recording ends (after '
+                    f'{last - start:.1f} s of {end - start:.1f} s): the later messages do not '
+                    f'carry {joint} with its motor entry (renamed, or no longer published); '
+                    'the wear and remaining life stand as of its last observed window')
         stale = a.stale_reason(max(PARTIAL_SHARE * (last - first),
                                    PARTIAL_WINDOWS * self.settings.window_s),
                                front.effort_topic)

@@ -300,6 +300,24 @@ def test_an_estimate_that_stops_before_the_recording_says_as_of_when_and_why(
     assert page.count('observed in part: no effort on /joint_states') == 2
 
 
+def test_a_joint_whose_entries_go_missing_midway_is_said_to_stand_as_of_then(
+        original, tmp_path, capsys):
+    # joint_1 renamed halfway (its entries missing from the later messages): its wear at
+    # the half was reported as the end's (-54 %) without a word.
+    js = original[0]
+    position = js.position.copy()
+    for name in ('joint_1', 'joint_1_motor'):
+        position[len(js) // 2:, js.names.index(name)] = np.nan
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'renamed', position=position), tmp_path,
+                               capsys)
+    assert code == 0
+    got = out['joints']['joint_1']
+    assert got['observed'] is True and got['partial'].startswith('its samples stop 3')
+    assert 'do not carry joint_1 with its motor entry' in got['partial']
+    assert any(x.startswith('WARNING: joint_1: observed in part of') for x in err.splitlines())
+    assert out['joints']['joint_2']['partial'] is None
+
+
 def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         original, tmp_path, capsys):
     js = original[0]
