@@ -57,6 +57,32 @@ def build_parser():
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is, so that its outputs are cleaned up as at Ctrl-C."""
+
+
+def _on_sigterm(pid):
+    """Return a SIGTERM handler raising :class:`Terminated` in process ``pid`` only."""
+    import signal
+
+    def handler(signum, frame):
+        if os.getpid() != pid:      # a forked worker dies as it would have
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        raise Terminated()
+    return handler
+
+
+def _catch_sigterm():
+    """Handle SIGTERM like Ctrl-C when the command runs as its own program."""
+    import signal
+    import threading
+    if threading.current_thread() is threading.main_thread() and \
+            signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _on_sigterm(os.getpid()))
+
+
 def main(argv=None):
     """
     Run the ``reducer-twin`` command.
@@ -75,11 +101,16 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     table_cache.install()   # the core's tables are kept on disk between runs
+    if args.command != 'demo':      # the demo's nodes stop on SIGTERM as ROS nodes do
+        _catch_sigterm()
     try:
         return int(args.run(args) or 0)
     except ReducerTwinError as err:
         sys.stderr.write(f'ERROR: {err}\n')
         return 1
+    except Terminated:
+        sys.stderr.write('ERROR: terminated (SIGTERM); nothing was left at the outputs\n')
+        return 143
     except KeyboardInterrupt:
         sys.stderr.write('ERROR: interrupted\n')
         return 130

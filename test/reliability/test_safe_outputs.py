@@ -334,6 +334,37 @@ def test_analyze_killed_mid_write_leaves_a_named_temporary_the_next_run_removes(
     assert temporaries(tmp_path) == [], 'the stale temporary and the lock are gone'
 
 
+@pytest.mark.parametrize('sig, code, said', [
+    (signal.SIGTERM, 143, 'ERROR: terminated (SIGTERM)'),
+    (signal.SIGINT, 130, 'ERROR: interrupted'),
+], ids=['SIGTERM (a service stopped)', 'SIGINT (Ctrl-C)'])
+def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
+        tmp_path, sig, code, said):
+    # SIGTERM left the partial derived bag and the lock beside --out (7 MB).
+    rec = tmp_path / 'rec'
+    simulate_bag(rec, SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1, seed=5))
+    before = snapshot(rec)
+    out = tmp_path / 'd'
+    proc = subprocess.Popen(program('analyze', rec, '--out', out), stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        seen = False
+        while not seen and proc.poll() is None and time.monotonic() < deadline:
+            seen = any(f.stat().st_size > 0 for tmp in
+                       tmp_path.glob(f'.d.{TEMP_TAG}-incomplete-*') for f in tmp.glob('*.mcap'))
+            time.sleep(0.001)
+        assert seen, 'the run ended before a partial derived bag was seen'
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == code and said in err and 'Traceback' not in err, err
+    assert not out.exists() and temporaries(tmp_path) == [], 'no bag, temporary or lock'
+    assert snapshot(rec) == before
+
+
 # --------------------------------------------------------------------------- full disks
 
 
