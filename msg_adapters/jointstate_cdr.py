@@ -53,8 +53,9 @@ class JointStateBatch:
         with different name sets holds the union, in order of first appearance.
     position, velocity, effort : numpy.ndarray
         float64[N, J] in rad (or m), rad/s (or m/s), N m (or N). NaN where a message
-        left the field empty, gave it a length other than its name count, or did not
-        name the joint.
+        left the field empty, gave its velocity or effort a length other than its name
+        count, or did not name the joint (a position of another length than the names
+        rejects the message: no entry can be told its value).
     frame_id : str
         ``header.frame_id`` of the first message.
     log_time_ns : numpy.ndarray or None
@@ -395,6 +396,10 @@ def _parse_layout(payload, where):
                               f'bytes but the payload ends at byte {size}')
         fields.append((pos, count))
         pos += 8 * count
+    if fields[0][1] and fields[0][1] != n_names:
+        # Which name lacks its value cannot be known: no position of it is read.
+        raise _reject(where, fields[0][0], f'position[] has {fields[0][1]} entries for '
+                      f'{n_names} names (a JointState has one per name)')
     merged = []
     for start, stop in spans:
         if merged and merged[-1][1] == start:

@@ -355,11 +355,14 @@ def _check_configured_topics(bag, settings):
                            f'found: {_topic_list(bag)}')
 
 
-def _first_names(bag, topic):
-    """Joint names of the first readable messages of a topic."""
+def _first_names(bag, topic, malformed=None):
+    """Joint names of the first readable messages of a topic (count malformed ones before)."""
     batches = bag.iter_joint_states([topic])
     try:
         for _, decoded in batches:
+            if decoded.rejected and malformed is not None:
+                count, first = malformed.get(topic, (0, decoded.rejected[0][1]))
+                malformed[topic] = (count + len(decoded.rejected), first)
             if len(decoded):
                 return decoded.names
     finally:
@@ -404,11 +407,11 @@ def plan_joints(bag, settings):
     if not states:
         raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
                        f'(and no {JOINT_STATE_TYPES[1]})')
-    names = {}
+    names, malformed = {}, {}
 
     def names_of(topic):
         if topic not in names:
-            names[topic] = _first_names(bag, topic)
+            names[topic] = _first_names(bag, topic, malformed)
         return names[topic]
 
     suffix = settings.motor_suffix
@@ -435,7 +438,9 @@ def plan_joints(bag, settings):
                        if topic not in used and other not in used)
         return replace(plan, others=others)
     if not any(names_of(t) for t in states):
-        problems = ''.join(f'; {w}' for w in bag.warnings)
+        problems = ''.join(f'; {t}: {n:,} malformed messages, the first: {first}'
+                           for t, (n, first) in malformed.items())
+        problems += ''.join(f'; {w}' for w in bag.warnings)
         raise BagError(f'{bag.path}: no readable message on its JointState topics {states}'
                        f'{problems}')
     found = '; '.join(f'{t}: {list(names_of(t))[:12]}' for t in states)

@@ -161,6 +161,17 @@ def test_a_field_shorter_than_the_name_list_decodes_as_nan():
     assert np.isnan(batch.velocity).all()
 
 
+def test_a_position_list_of_another_length_than_the_names_rejects_the_message():
+    # Which name lacks its position cannot be known (the names were one longer: every
+    # message decoded as no position at all, and nothing said why).
+    payload = _rosbags_bytes(10, ['a', 'b', 'c'], np.array([1.0, 2.0]), None, None, '')
+    with pytest.raises(InvalidInput, match=r'position\[\] has 2 entries for 3 names'):
+        decode_joint_states([payload])
+    batch = decode_joint_states([payload, _rosbags_bytes(11, ['a', 'b'], np.array([1.0, 2.0]),
+                                                         None, None, '')], errors='skip')
+    assert len(batch) == 1 and [i for i, _ in batch.rejected] == [0]
+
+
 def test_irregular_batch_decodes_to_the_union_of_names_in_input_order():
     payloads = [
         _rosbags_bytes(1, ['a', 'b'], np.array([1.0, 2.0]), None, None, 'f'),
