@@ -562,6 +562,7 @@ class _Chunks:
         self.first_problem = {}
         self.repeated_names = dict.fromkeys(self.topics, 0)
         self.stamp_repeats = dict.fromkeys(self.topics, 0)
+        self.stamp_clashes = dict.fromkeys(self.topics, 0)
         self.zero_stamps = dict.fromkeys(self.topics, 0)
         self.name_messages = {}     # topic -> name -> messages, once a message was partial
         self._last_stamp = {}
@@ -603,7 +604,7 @@ class _Chunks:
             for name in batch.names:
                 counts[name] = counts.get(name, 0) + len(batch)
         batch = merged
-        self._note_stamps(topic, batch.stamps_ns)
+        self._note_stamps(topic, batch.stamps_ns, batch.position)
         return batch
 
     def joint_messages(self, topic, name):
@@ -611,13 +612,27 @@ class _Chunks:
         counts = self.name_messages.get(topic)
         return self.messages[topic] if counts is None else counts.get(name, 0)
 
-    def _note_stamps(self, topic, stamps):
-        """Count messages whose header stamp repeats the one before (a clock that stands)."""
+    def _note_stamps(self, topic, stamps, position):
+        """
+        Count messages whose header stamp repeats the one before (a clock that stands).
+
+        Those that repeat a stamp once, not in a run, with other positions than the
+        message before are counted apart: two streams under one clock (a clock set back
+        while recording), neither a message logged twice nor a clock that stands.
+        """
         if not stamps.size:
             return
         last = self._last_stamp.get(topic)
-        self.stamp_repeats[topic] += int(np.count_nonzero(stamps[1:] == stamps[:-1])) + int(
+        same = stamps[1:] == stamps[:-1]
+        self.stamp_repeats[topic] += int(np.count_nonzero(same)) + int(
             last is not None and stamps[0] == last)
+        if same.any():
+            pair = same.copy()
+            pair[1:] &= ~same[:-1]
+            pair[:-1] &= ~same[1:]
+            a, b = position[1:][pair], position[:-1][pair]
+            self.stamp_clashes[topic] += int(np.count_nonzero(
+                ((a != b) & ~(np.isnan(a) & np.isnan(b))).any(axis=1)))
         self.zero_stamps[topic] += int(np.count_nonzero(stamps == 0))
         self._last_stamp[topic] = stamps[-1]
 
@@ -626,14 +641,24 @@ class _Chunks:
         for topic in self.topics:
             n, repeats = self.messages[topic], self.stamp_repeats[topic]
             if repeats >= 2 and repeats * 100 >= n:   # 1 % or more: a clock that stands
-                zeros = self.zero_stamps[topic]
-                kind = 'all zero' if zeros == n else (
-                    f'{zeros:,} of them zero' if zeros else
-                    'a frozen clock, or each message logged twice')
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages on '
-                    f'{topic} carry the header stamp of the message before (stamps that do '
-                    f'not advance: {kind}); their samples are dropped as duplicates'))
+                zeros, clashes = self.zero_stamps[topic], self.stamp_clashes[topic]
+                if not zeros and clashes * 2 >= repeats:
+                    self.bag.warnings.append(ReadWarning(
+                        str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages '
+                        f'on {topic} repeat the header stamp of the message before, '
+                        f'{clashes:,} with other positions: two streams under one clock, as '
+                        'when the clock is set back while recording; the first message of '
+                        'each stamp is read, and the operating time the others cover is '
+                        'not counted'))
+                else:
+                    kind = 'all zero' if zeros == n else (
+                        f'{zeros:,} of them zero' if zeros else
+                        'a frozen clock, or each message logged twice')
+                    self.bag.warnings.append(ReadWarning(
+                        str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages '
+                        f'on {topic} carry the header stamp of the message before (stamps '
+                        f'that do not advance: {kind}); their samples are dropped as '
+                        'duplicates'))
             if self.repeated_names[topic]:
                 self.bag.warnings.append(ReadWarning(
                     str(self.bag.path), None, f'{self.repeated_names[topic]:,} JointState '

@@ -123,6 +123,29 @@ def test_stamps_that_never_advance_give_a_warning_naming_the_topic_and_the_count
     assert f'{n - n // 2 - 1:,} of {n:,}' in line and 'a frozen clock' in line, line
 
 
+def test_a_clock_set_back_while_recording_is_named_not_taken_for_a_frozen_one(
+        clean, tmp_path, capsys):
+    # Stamps and log times a quarter of the recording back from the middle on (an NTP
+    # step): the two passes over that quarter interleave by log time, each stamp twice
+    # with other positions. It was called 'a frozen clock, or each message logged twice'.
+    _, batch = clean
+    n = len(batch)
+    stamps = batch.stamps_ns.copy()
+    stamps[n // 2:] -= stamps[n // 4] - stamps[0]
+    stepped = JointStateBatch(stamps, batch.names, batch.position, batch.velocity,
+                              batch.effort, log_time_ns=stamps)
+    # As a recorder writes it: chunks of a few hundred messages, in the order they came.
+    with BagDirWriter(tmp_path / 'stepped', compression='none', chunk_size=16_384,
+                      custom_data={AGING_KEY: repr(SPEC.aging_factor)}) as writer:
+        writer.write_joint_states(writer.add_topic('/joint_states', JOINT_STATE), stepped)
+    code, got, err = analyze(tmp_path / 'stepped', tmp_path / 'd', capsys)
+    (line,) = [w for w in warnings(err) if 'header stamp' in w and 'JointState messages' in w]
+    repeats = int(line.split(' of ')[0].split()[-1].replace(',', ''))
+    assert repeats >= 0.9 * (n // 4), line
+    assert 'two streams under one clock' in line and 'set back' in line, line
+    assert 'frozen clock' not in line
+
+
 def test_a_clean_bag_gives_no_stamp_or_name_warning(clean, tmp_path, capsys):
     code, _, err = analyze(clean[0], tmp_path / 'd', capsys)
     assert code == 0 and warnings(err) == []
