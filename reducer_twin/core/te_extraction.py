@@ -254,19 +254,29 @@ def _slice(stream, sl):
                     stream.turn_corrections)
 
 
-def _unwrap(t, angle, max_gap):
+def _unwrap(t, angle, max_gap, predict=None):
     """
     Unwrap within runs of samples closer than ``max_gap``; never across a gap.
 
     Whole turns are counted as integers, so an already unwrapped stream
-    comes back bit-identical. Returns the angle and the run index per sample
-    (None when there is no gap: one run).
+    comes back bit-identical. ``predict`` (optional) returns the angle the
+    stream is expected to follow (the motor: the link angle times the ratio):
+    a step is then a wrap by how far it departs from the expected step, not
+    by its size, so a fast motor that turns half a turn or more across a few
+    lost samples (65 rad/s over 40 ms) is not unwrapped by a turn. Expected
+    steps of two turns or more (the expectation's own turn count unknown) are
+    not used. Returns the angle and the run index per sample (None when there
+    is no gap: one run).
     """
     if angle.size < 2:
         return angle, None
     step = np.diff(angle)
     gap = np.diff(t) > max_gap
     if np.abs(step).max() >= np.pi:
+        expected = predict() if predict is not None else None
+        if expected is not None:
+            moved = np.diff(expected)
+            step = step - np.where(np.abs(moved) < 2.0 * TWO_PI, moved, 0.0)
         jumps = np.where(gap, 0.0, np.round(step / TWO_PI)).astype(np.int64)
         angle = angle - TWO_PI * np.concatenate([[0], np.cumsum(jumps)])
     if not gap.any():
@@ -364,8 +374,9 @@ def compute_te(t_motor, motor_angle, t_link, link_angle, ratio, max_gap_s=0.005,
     tq, al_k = (tl, al) if keep_l is None else (tl[idx_l], al[idx_l])
     if offset != 0.0:
         tq = tq + offset
-    am, run_m = _unwrap(tm, am, max_gap_s)
     al_u, run_l = _unwrap(tq, al_k, max_gap_s)
+    am, run_m = _unwrap(tm, am, max_gap_s, lambda: ratio * np.interp(tm, tq, al_u)
+                        if tq.size else None)
 
     if tm.size == 0 or idx_l.size == 0:
         empty = np.full(tl.size, np.nan)

@@ -97,6 +97,24 @@ def test_te_is_invariant_to_wrapping_the_input_angles_even_across_gaps(
     np.testing.assert_allclose(turns, np.round(turns), atol=1e-9)
 
 
+@pytest.mark.parametrize('motor_wrap', ['none', 'signed', 'positive'])
+def test_a_fast_motor_across_a_few_lost_samples_is_not_unwrapped_by_a_turn(motor_wrap):
+    # At 65 rad/s (0.8 rad/s at the output) a motor turns 3.2 rad over 49 ms of lost
+    # messages, less than max_gap_s: that step was read as a wrap, the TE jumped by
+    # 2*pi/ratio (267 arcmin) and the windows around read lost motions of 9-42 arcmin.
+    t = np.arange(0.0, 1.0, 1e-3)
+    speed = 0.8                                           # rad/s at the output
+    te_true = 1e-4 * np.sin(5.0 * t)
+    link = speed * t + te_true
+    motor = RATIO * speed * t
+    keep = (t < 0.300) | (t > 0.348)                      # 48 samples lost
+    t, link, motor, te_true = t[keep], link[keep], motor[keep], te_true[keep]
+    assert (RATIO * speed * 0.049) > math.pi
+    stream = compute_te(t, wrapped(motor, motor_wrap), t, link, RATIO, max_gap_s=0.05)
+    assert stream.valid.all()
+    np.testing.assert_allclose(stream.te - stream.te[0], te_true - te_true[0], atol=1e-9)
+
+
 def test_motor_angle_is_interpolated_at_link_stamps_that_differ_from_its_own():
     # Linear motion: linear interpolation is exact, so TE is the link's own error.
     t_motor = np.arange(0.0, 1.0, 1e-3)
