@@ -928,6 +928,8 @@ class WindowAnalyzer:
         self.windows_friction_unknown = 0
         self.windows_implausible = 0
         self.largest_te_span = 0.0
+        self.gaps = 0                   # holes longer than max_gap_s between samples
+        self.gap_time_s = 0.0           # the stream time they span [s]
         self.effort_fault = None        # why the effort is not the output torque
         self.windows_effort_fault = 0
         self._effort_checks = []        # (width [rad], slope ratio) of the latest windows
@@ -1024,6 +1026,9 @@ class WindowAnalyzer:
             step = t - previous
             gap = step > stream.max_gap_s
             dt = np.where(step <= stream.max_gap_s, step, 0.0)
+            if gap.any():      # stream time without samples: not counted as operation
+                self.gaps += int(np.count_nonzero(gap))
+                self.gap_time_s += float(step[gap].sum())
             self._last_t = float(t[-1])
             self._last_theta = float(pick(stream.output_angle)[-1])
             new = {'t': t, 'te': pick(stream.te), 'theta': pick(stream.output_angle),

@@ -184,6 +184,7 @@ class TEMonitor(Node):
         topic = joint_topic(self.joint, 'encoder_pairs')
         reason = analyzer.not_observed_reason(topic)
         values['observed_windows'] = analyzer.windows_observed
+        values['seconds_in_gaps'] = analyzer.gap_time_s
         stale = analyzer.stale_reason(STALE_WINDOWS * self.twin.config.window_s, topic)
         if reason is not None:
             # Never OK without a lost motion: say why the reducer cannot be seen (an

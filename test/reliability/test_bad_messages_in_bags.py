@@ -146,6 +146,37 @@ def test_a_clock_set_back_while_recording_is_named_not_taken_for_a_frozen_one(
     assert 'frozen clock' not in line
 
 
+def test_stamps_that_scatter_about_their_period_are_said(clean, tmp_path, capsys):
+    # Stamped on arrival: +-0.9 ms about a 2 ms period, order kept.
+    _, batch = clean
+    rng = np.random.default_rng(3)
+    stamps = batch.stamps_ns + rng.integers(-900_000, 900_000, len(batch))
+    jittered = JointStateBatch(stamps, batch.names, batch.position, batch.velocity,
+                               batch.effort, log_time_ns=stamps)
+    code, got, err = analyze(rewrite(tmp_path / 'jittered', jittered), tmp_path / 'd', capsys)
+    (line,) = [w for w in warnings(err) if 'scatter by' in w]
+    assert 'about their 2 ms period' in line and 'stamped when a message arrived' in line
+    share = int(line.split('period (')[1].split(' %')[0])
+    assert 30 <= share <= 45, line
+
+
+def test_stream_time_lost_in_holes_is_said_as_not_counted_operation(clean, tmp_path, capsys):
+    # Bursts of lost messages, a tenth of the stream: the remaining life came out short
+    # (its operating time not counted) without a word.
+    _, batch = clean
+    n = len(batch)
+    keep = np.ones(n, bool)
+    for start in range(n // 20, n, n // 10):
+        keep[start:start + n // 100] = False            # ten holes of 1 % each
+    holes = JointStateBatch(batch.stamps_ns[keep], batch.names, batch.position[keep],
+                            batch.velocity[keep], batch.effort[keep],
+                            log_time_ns=batch.stamps_ns[keep])
+    code, got, err = analyze(rewrite(tmp_path / 'holes', holes), tmp_path / 'd', capsys)
+    (line,) = [w for w in warnings(err) if 'holes longer than' in w]
+    assert 'joint_1: ' in line and '(10 %) fall in 10 holes' in line, line
+    assert 'not counted as operation' in line
+
+
 def test_a_clean_bag_gives_no_stamp_or_name_warning(clean, tmp_path, capsys):
     code, _, err = analyze(clean[0], tmp_path / 'd', capsys)
     assert code == 0 and warnings(err) == []
