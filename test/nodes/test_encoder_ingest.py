@@ -408,3 +408,17 @@ def test_a_consumer_of_a_joint_not_ingested_is_refused(ros):
     robot = Robot(ros)
     with pytest.raises(InvalidParameter, match="joint 'elbow' is not ingested here"):
         robot.node.attach('elbow', print)
+
+
+def test_the_effort_scale_parameter_turns_a_current_into_the_output_torque(ros):
+    # A drive that reports a current in A with the other sign: -2.5 N*m per A at the output
+    # (given as a whole number too: -1 at the command line is an integer).
+    robot = Robot(ros, extra=[Parameter('effort_scale', value=-2.5)])
+    n = 200
+    robot.send([(robot.link_pub, robot.combined(k)) for k in range(n)])
+    ks = np.arange(n)
+    for j, joint in enumerate(robot.joints):
+        rows = robot.wait_rows(joint, n)
+        np.testing.assert_allclose(rows[:, 3], -2.5 * 100.0 * (j + 1) * np.cos(ks * 1e-3))
+    whole = Robot(ros, extra=[Parameter('effort_scale', value=-1)])
+    assert whole.node.ingest.torque_scale == -1.0
