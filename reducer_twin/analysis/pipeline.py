@@ -1424,6 +1424,12 @@ class _Run:
             if dup and dup >= 0.5 * max(front.samples + dup, 1):
                 return (f'stamps do not advance on {topic}: {dup} samples repeat an earlier '
                         'stamp (frozen clock or all-zero header stamps)')
+        spikes = counts.get('spike', 0)
+        if spikes and spikes >= front.samples:
+            return (f'{spikes} of {spikes + front.samples} motor/link sample pairs were '
+                    'dropped as spikes of the transmission error: the encoders jump against '
+                    'each other (positions in degrees or counts, a wrong reduction ratio or '
+                    'motor_angles, or faulty encoders)')
         if front.samples == 0:
             return (f'no motor/link sample pairs on {plan.link_topic}'
                     + (f' and {plan.motor_topic}' if plan.motor_topic else '')

@@ -261,12 +261,13 @@ def _unwrap(t, angle, max_gap, predict=None):
     Whole turns are counted as integers, so an already unwrapped stream
     comes back bit-identical. ``predict`` (optional) returns the angle the
     stream is expected to follow (the motor: the link angle times the ratio):
-    a step is then a wrap by how far it departs from the expected step, not
-    by its size, so a fast motor that turns half a turn or more across a few
-    lost samples (65 rad/s over 40 ms) is not unwrapped by a turn. Expected
-    steps of two turns or more (the expectation's own turn count unknown) are
-    not used. Returns the angle and the run index per sample (None when there
-    is no gap: one run).
+    once a step of half a turn or more is seen, every step holds as many turns
+    as it departs from the expected step, so a fast motor that turns half a
+    turn or more across a few lost samples (65 rad/s over 40 ms) is not
+    unwrapped by a turn, and a wrapped one is unwrapped right. Expected steps
+    of two turns or more (the expectation's own turn count unknown) are not
+    used. Returns the angle and the run index per sample (None when there is
+    no gap: one run).
     """
     if angle.size < 2:
         return angle, None
@@ -1051,7 +1052,8 @@ class WindowAnalyzer:
         Say why no window has given a lost motion yet, or None once one has.
 
         An effort found not to be the output torque (:attr:`effort_fault`) is said
-        even after windows gave lost motions: they were read with that effort.
+        even after windows gave lost motions: they were read with that effort. Encoders
+        that do not measure the same motion are said first (they distort the check).
 
         Parameters
         ----------
@@ -1064,10 +1066,11 @@ class WindowAnalyzer:
             One line a maintenance engineer can act on.
 
         """
-        if self.effort_fault is not None:
-            return self.effort_fault
-        if self.windows_observed:
+        fault = self.effort_fault
+        if fault is None and self.windows_observed:
             return None
+        if fault is not None and not self.windows_implausible:
+            return fault
         seen = self.samples_seen
         if seen == 0:
             return 'no encoder samples with a transmission error (no motor/link pairs)'
@@ -1085,6 +1088,8 @@ class WindowAnalyzer:
                     f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
                     'frozen encoder, a motor encoder that counts against the link, or a '
                     'wrong reduction ratio or motor_angles')
+        if fault is not None:
+            return fault
         rate = self.rate_hz
         if math.isfinite(rate) and rate < LOW_RATE_HZ:
             return (f'{rate:.0f} Hz: too few samples per torque reversal in '
@@ -1389,8 +1394,9 @@ class WindowAnalyzer:
         compliance ``1/k_s``. Per window with two or more usable bins beyond twice
         the lost-motion test torque: the median width and the weighted slope of the
         width on ``2·|T|`` times ``k_s``. Over the latest :data:`EFFORT_CHECK_MEMORY`
-        such windows (at least :data:`EFFORT_CHECK_WINDOWS`), a negative median
-        width is an effort of the opposite sign, a median slope ratio outside
+        such windows (at least :data:`EFFORT_CHECK_WINDOWS`), a median width beyond
+        :data:`PLAUSIBLE_LOST_MOTION_RAD` is encoders in other units (degrees), a
+        negative one an effort of the opposite sign, a median slope ratio outside
         :data:`EFFORT_SLOPE_RANGE` an effort in other units: :attr:`effort_fault`
         says which, once, and that window and every later one give no lost motion.
 
@@ -1438,6 +1444,13 @@ class WindowAnalyzer:
     def _effort_fault(self, level, slope, windows):
         """Say how the effort differs from the torque (medians of the check), or None."""
         beyond = f'{2.0 * self.takeup_torque:.3g} N*m'
+        if abs(level) > PLAUSIBLE_LOST_MOTION_RAD:     # a width no reducer has
+            return (f'the encoders do not read radians at the output: in {windows} windows '
+                    f'the hysteresis beyond {beyond} is {math.degrees(abs(level)) * 60:.4g} '
+                    f'arcmin wide and grows {slope:.3g} times as fast with the torque as the '
+                    "reducer's torsional stiffness gives (a reducer's lost motion is below "
+                    f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin): positions in '
+                    'degrees (57.3 times radians) or in counts, or a wrong reduction ratio')
         if level < 0.0:
             return (f'the effort has the opposite sign of the torque the reducer carries: '
                     f'in {windows} windows the transmission error under positive effort '

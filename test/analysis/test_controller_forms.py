@@ -364,6 +364,21 @@ def test_an_effort_that_is_not_the_output_torque_is_refused_and_the_config_reads
     _assert_same_estimate(result, original, rel=1e-6)
 
 
+def test_positions_in_degrees_are_refused_naming_the_units(
+        original, tmp_path):
+    js = original[0]
+    bag = _rewrite(js, tmp_path, 'degrees', position=np.degrees(js.position),
+                   velocity=np.degrees(js.velocity))
+    result = analyze_bag(bag, tmp_path / 'd')
+    for got in result.joints.values():
+        summary = got.summary()
+        assert not got.observed and summary['wear_um'] is None
+        # At 250 Hz a motor in degrees jumps by more than half a "turn" per sample: most
+        # pairs are spikes (at 1 kHz the hysteresis is 57 times too wide: "do not read
+        # radians"); before, no reason named the units.
+        assert 'dropped as spikes' in summary['reason'] and 'degrees' in summary['reason']
+
+
 def test_an_effort_far_beyond_the_reducers_rating_is_named_as_other_units(original, tmp_path):
     js = original[0]
     effort = np.full_like(js.effort, np.nan)

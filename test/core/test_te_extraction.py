@@ -842,3 +842,36 @@ def test_encoders_that_do_not_measure_the_same_motion_give_no_lost_motion_and_sa
                     b.link_velocity)
     analyzer.flush()
     assert analyzer.windows_observed >= 1 and analyzer.windows_implausible == 0
+
+
+def _fault_of(batch, effort=1.0, angles=1.0):
+    """Analyse a stream whose effort or angles are scaled; return the analyzer."""
+    t = batch.t
+    stream = compute_te(t, angles * batch.motor_angle, t, angles * batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, effort * batch.effort, angles * batch.link_velocity)
+    analyzer.flush()
+    return analyzer
+
+
+@pytest.mark.parametrize('effort, angles, said', [
+    (-1.0, 1.0, 'the effort has the opposite sign'),
+    (0.1, 1.0, 'the effort is not the output torque'),
+    (1.0, 180.0 / math.pi, 'the encoders do not read radians'),
+], ids=['effort reversed', 'a tenth of the torque', 'angles in degrees'])
+def test_an_effort_or_angles_in_other_units_stop_the_lost_motion_with_the_reason(
+        effort, angles, said):
+    _, b = simulated()
+    clean = _fault_of(b)
+    assert clean.effort_fault is None and clean.windows_effort_fault == 0
+    assert clean.not_observed_reason() is None
+    bad = _fault_of(b, effort, angles)
+    assert said in bad.effort_fault
+    # Not observed, with this reason (angles in degrees may first give windows no reducer
+    # has, which are said first).
+    reason = bad.not_observed_reason()
+    assert reason == bad.effort_fault or (
+        angles != 1.0 and 'do not measure the same motion' in reason)
+    # From the window that decided it on, none gives a lost motion.
+    assert bad.windows_effort_fault >= 1
+    assert bad.windows_observed + bad.windows_effort_fault <= bad.windows_emitted
