@@ -126,3 +126,58 @@ def ingest_statuses(counts, rejected):
                          'streams clean' if bad == 0 else f'{bad} samples dropped or repaired',
                          c))
     return statuses
+
+
+def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
+              silent_after_s):
+    """
+    Return ``te_monitor``'s level and message from its window analysis; fill ``values``.
+
+    Never OK without a lost motion (``STALE`` with the reason; ``ERROR`` for an effort
+    or encoders in other units, a configuration to fix); seen before but not for
+    ``stale_after_s`` of stream, the message says since when and why (``WARN`` for a
+    faulty stream); no encoder pairs for ``silent_after_s`` [s of wall time] is a
+    stopped stream (``WARN``): the analysis stands where it was.
+
+    Parameters
+    ----------
+    analyzer : WindowAnalyzer
+        The joint's window analysis.
+    topic : str
+        Where its samples come from, for the messages.
+    level, message : str
+        The level and message when all is well.
+    values : dict
+        Key/values of the status, completed here.
+    stale_after_s : float
+        Stream time [s] without a lost motion after which it is said.
+    quiet_s : float or None
+        Wall time [s] since the latest encoder pairs (None: none yet).
+    silent_after_s : float
+        Wall time [s] without pairs from which the stream is said to have stopped.
+
+    Returns
+    -------
+    tuple of str
+        Level and message.
+
+    """
+    reason = analyzer.not_observed_reason(topic)
+    values['observed_windows'] = analyzer.windows_observed
+    values['seconds_in_gaps'] = analyzer.gap_time_s
+    stale = analyzer.stale_reason(stale_after_s, topic)
+    if reason is not None:
+        level = 'ERROR' if analyzer.effort_fault is not None else 'STALE'
+        message = f'not observed: {reason}'
+    elif stale is not None:
+        gap, why, faulty = stale
+        values['seconds_since_lost_motion'] = gap
+        message = f'{message}; no lost motion for {gap:.0f} s: {why}'
+        level = 'WARN' if faulty else level
+    if quiet_s is not None:
+        values['seconds_since_pairs'] = quiet_s
+        if quiet_s >= silent_after_s and level in ('OK', 'WARN'):
+            level = 'WARN'
+            message = (f'{message}; no encoder pairs for {quiet_s:.0f} s (the controller '
+                       'stopped publishing this joint, or renamed it)')
+    return level, message

@@ -33,12 +33,15 @@ class IngestSettings(_Validated):
 
 @dataclass(frozen=True)
 class TEMonitorSettings(_Validated):
-    """``te_monitor``'s TE batching."""
+    """``te_monitor``'s TE batching, and when a stopped stream is said."""
 
     _prefix = 'te_monitor'
     te_publish_period_s: float = spec(0.02, 's', 0.0, 3600.0, 'longest wait of a TE row for '
                                       'its batch while the stream flows (the last rows of a '
                                       'stopped stream go with the next analysis)', lo_open=True)
+    silent_after_s: float = spec(20.0, 's', 0.0, 86400.0, 'time without encoder pairs after '
+                                 'which /diagnostics warn that the stream stopped',
+                                 lo_open=True)
 
 
 @dataclass(frozen=True)

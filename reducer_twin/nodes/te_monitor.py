@@ -29,7 +29,7 @@ from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, to_multiarray
 from reducer_twin.nodes.buffers import ArrivalBatches
-from reducer_twin.nodes.diagnostics import publish_diagnostics
+from reducer_twin.nodes.diagnostics import publish_diagnostics, te_status
 from reducer_twin.nodes.parameters import check_choice, declare_plain
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import encoder_qos, stream_qos, WINDOW_DEPTH
@@ -98,6 +98,8 @@ class TEMonitor(Node):
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         self.samples = 0
         self.last_features = None
+        self.silent_after_s = s.silent_after_s
+        self._last_pairs_at = None      # monotonic time of the latest encoder pairs
 
     @property
     def windows(self):
@@ -125,6 +127,7 @@ class TEMonitor(Node):
         """
         if rows.shape[0]:
             self.samples += rows.shape[0]
+            self._last_pairs_at = time.monotonic()
             if self.batches.add(rows, time.time()):
                 self._publish_te()
 
@@ -178,25 +181,11 @@ class TEMonitor(Node):
         if f is not None:
             values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
                            'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
-        level = 'OK' if self.rejects.total == 0 else 'WARN'
-        message = f'{self.windows} windows analysed'
-        analyzer = self.twin.analyzer
-        topic = joint_topic(self.joint, 'encoder_pairs')
-        reason = analyzer.not_observed_reason(topic)
-        values['observed_windows'] = analyzer.windows_observed
-        values['seconds_in_gaps'] = analyzer.gap_time_s
-        stale = analyzer.stale_reason(STALE_WINDOWS * self.twin.config.window_s, topic)
-        if reason is not None:
-            # Never OK without a lost motion: say why the reducer cannot be seen (an
-            # effort that is not the torque is a configuration to fix).
-            level = 'ERROR' if analyzer.effort_fault is not None else 'STALE'
-            message = f'not observed: {reason}'
-        elif stale is not None:
-            # Seen before, not now: the estimate stands as of then; a faulty stream warns.
-            gap, why, faulty = stale
-            values['seconds_since_lost_motion'] = gap
-            message = f'{message}; no lost motion for {gap:.0f} s: {why}'
-            level = 'WARN' if faulty else level
+        quiet = None if self._last_pairs_at is None else time.monotonic() - self._last_pairs_at
+        level, message = te_status(
+            self.twin.analyzer, joint_topic(self.joint, 'encoder_pairs'),
+            'OK' if self.rejects.total == 0 else 'WARN', f'{self.windows} windows analysed',
+            values, STALE_WINDOWS * self.twin.config.window_s, quiet, self.silent_after_s)
         return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
                  values)]
 

@@ -55,7 +55,7 @@ def simulated():
 class Monitor:
     """A TEMonitor of a fresh joint, and a probe that feeds it and listens to it."""
 
-    def __init__(self, ros):
+    def __init__(self, ros, extra=()):
         self.ros = ros
         self.joint = f'wrist{next(_ids)}'
         self.node = ros.add(TEMonitor(
@@ -63,7 +63,7 @@ class Monitor:
             parameter_overrides=[
                 Parameter('joint', value=self.joint), Parameter('aging_factor', value=AGING),
                 Parameter('analysis_period_s', value=0.05),
-                Parameter('diagnostics_period_s', value=0.1)]))
+                Parameter('diagnostics_period_s', value=0.1), *extra]))
         self.probe = ros.probe()
         self.pub = self.probe.publisher(joint_topic(self.joint, 'encoder_pairs'),
                                         Float64MultiArray, encoder_qos())
@@ -307,3 +307,16 @@ def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
     analyzer = monitor.node.twin.analyzer
     assert analyzer.windows_effort_fault >= 1
     assert analyzer.windows_observed < analyzer.windows_emitted
+
+
+def test_a_stream_that_stops_turns_the_diagnostics_to_warn_never_ok(ros, simulated):
+    # The controller stopped publishing the joint (or renamed it): the analysis stood where
+    # it was and the diagnostics kept saying OK.
+    _, rows = simulated
+    monitor = Monitor(ros, extra=[Parameter('silent_after_s', value=1.0)])
+    monitor.feed(rows)
+    monitor.status(lambda s: s.level == DiagnosticStatus.OK)
+    status = monitor.status(lambda s: 'no encoder pairs for' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    assert 'stopped publishing this joint' in status.message
+    assert float(ros.key_values(status)['seconds_since_pairs']) >= 1.0
