@@ -643,6 +643,9 @@ class _Chunks:
             scatter = 1.4826 * float(np.median(np.abs(steps - period)))
             self.step_scatter.setdefault(topic, []).append((period, scatter))
 
+    def _say(self, text):
+        self.bag.warnings.append(ReadWarning(str(self.bag.path), None, text))
+
     def _warn(self):
         """Say what the messages did wrong that the ingestion counts do not name."""
         for topic in self.topics:
@@ -650,38 +653,34 @@ class _Chunks:
             if repeats >= 2 and repeats * 100 >= n:   # 1 % or more: a clock that stands
                 zeros, clashes = self.zero_stamps[topic], self.stamp_clashes[topic]
                 if not zeros and clashes * 2 >= repeats:
-                    self.bag.warnings.append(ReadWarning(
-                        str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages '
-                        f'on {topic} repeat the header stamp of the message before, '
-                        f'{clashes:,} with other positions: two streams under one clock, as '
-                        'when the clock is set back while recording; the first message of '
-                        'each stamp is read, and the operating time the others cover is '
-                        'not counted'))
+                    self._say(f'{repeats:,} of {n:,} JointState messages on {topic} repeat '
+                              f'the header stamp of the message before, {clashes:,} with '
+                              'other positions: two streams under one clock, as when the '
+                              'clock is set back while recording; the first message of each '
+                              'stamp is read, and the operating time the others cover is not '
+                              'counted')
                 else:
                     kind = 'all zero' if zeros == n else (
                         f'{zeros:,} of them zero' if zeros else
                         'a frozen clock, or each message logged twice')
-                    self.bag.warnings.append(ReadWarning(
-                        str(self.bag.path), None, f'{repeats:,} of {n:,} JointState messages '
-                        f'on {topic} carry the header stamp of the message before (stamps '
-                        f'that do not advance: {kind}); their samples are dropped as '
-                        'duplicates'))
+                    self._say(f'{repeats:,} of {n:,} JointState messages on {topic} carry the '
+                              'header stamp of the message before (stamps that do not '
+                              f'advance: {kind}); their samples are dropped as duplicates')
             scatter = self.step_scatter.get(topic)
             if scatter:
                 period, spread = np.median(np.array(scatter), axis=0).tolist()
                 if period > 0 and spread >= STAMP_SCATTER * period:
-                    self.bag.warnings.append(ReadWarning(
-                        str(self.bag.path), None, f'the header stamps on {topic} scatter by '
-                        f'{spread * 1e-6:.3g} ms about their {period * 1e-6:.3g} ms period '
-                        f'({100 * spread / period:.0f} %): stamped when a message arrived '
-                        'rather than when the encoders were read? Speeds, the torque '
-                        "smoothing and the encoders' time offset rest on the stamps: each "
-                        "window's lost motion is noisier, and the wear can read low"))
+                    self._say(f'the header stamps on {topic} scatter by {spread * 1e-6:.3g} ms '
+                              f'about their {period * 1e-6:.3g} ms period '
+                              f'({100 * spread / period:.0f} %): stamped when a message '
+                              'arrived rather than when the encoders were read? Speeds, the '
+                              "torque smoothing and the encoders' time offset rest on the "
+                              "stamps: each window's lost motion is noisier, and the wear can "
+                              'read low')
             if self.repeated_names[topic]:
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'{self.repeated_names[topic]:,} JointState '
-                    f'entries on {topic} named a joint their message had named before; those '
-                    'entries were dropped (the first entry of a name counts)'))
+                self._say(f'{self.repeated_names[topic]:,} JointState entries on {topic} named '
+                          'a joint their message had named before; those entries were dropped '
+                          '(the first entry of a name counts)')
 
 
 def merge_partial_messages(batch):
