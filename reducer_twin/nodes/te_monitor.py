@@ -1,22 +1,20 @@
 """
 te_monitor: transmission error and per-window health features of one joint.
 
-Subscribes to ``/reducer_twin/<joint>/encoder_pairs`` (clean, aligned
-motor/link samples from ``encoder_ingest``). TE is computed on arrival,
-``theta_link - theta_motor/i`` (ingest has already unwrapped and aligned the
-streams), and published in batches on ``/reducer_twin/<joint>/te``. Every
-``analysis_period_s`` the accumulated samples go through the joint's
-:class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the learnt
-link-encoder time offset, the window analysis); each completed window is
-published on ``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost
-motion, order amplitudes, duty). The window length, gap bridging, aging and
-analysis period are the fields of :class:`~reducer_twin.core.joint_twin.TwinConfig`.
+Subscribes to ``/reducer_twin/<joint>/encoder_pairs`` (clean, aligned motor/link samples
+from ``encoder_ingest``). TE is computed on arrival, ``theta_link - theta_motor/i`` (ingest
+has already unwrapped and aligned the streams), and published in batches on
+``/reducer_twin/<joint>/te``. Every ``analysis_period_s`` the accumulated samples go through
+the joint's :class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the learnt
+link-encoder time offset, the window analysis); each completed window is published on
+``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost motion, order amplitudes,
+duty). Window length, gap bridging, aging and analysis period: the fields of
+:class:`~reducer_twin.core.joint_twin.TwinConfig`.
 
-In ``twin_bringup`` the ingest node of the same process hands the pairs
-over directly (:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE
-batches are published only while something subscribes to them. The node
-measures how long samples take from their stamp to their TE
-(``latency_stats()``, and the ``latency_p99_ms`` diagnostic over each report's period).
+In ``twin_bringup`` the ingest node of the same process hands the pairs over directly
+(:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE batches are published only
+while something subscribes to them. The node measures how long samples take from their
+stamp to their TE (``latency_stats()``, ``latency_p99_ms`` over each report's period).
 """
 
 import time
@@ -98,7 +96,7 @@ class TEMonitor(Node):
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         self.samples = 0
         self.last_features = None
-        self.silent_after_s = s.silent_after_s
+        self.silent_after_s, self._said = s.silent_after_s, None
         self._last_pairs_at = None      # monotonic time of the latest encoder pairs
 
     @property
@@ -160,6 +158,10 @@ class TEMonitor(Node):
         if learnt is None and self.twin.calibration.applied is not None:
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
+        fault = self.twin.analyzer.effort_fault
+        if fault is not None and self._said is None:    # on stderr once, and in /diagnostics
+            self._said = fault
+            self.get_logger().error(f'{self.joint}: not observed: {fault}')
         for f in windows:
             self.last_features = f
             rec = self.twin.record(f)
@@ -173,7 +175,6 @@ class TEMonitor(Node):
         return self.latency.stats(last)
 
     def _statuses(self):
-        # The p99 of the samples since the last report (the ring holds the last 131 k).
         f = self.last_features
         values = {'samples': self.samples, 'windows': self.windows,
                   'rejected_messages': self.rejects.total,

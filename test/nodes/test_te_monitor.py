@@ -288,7 +288,7 @@ def test_effort_that_stops_after_a_lost_motion_turns_the_diagnostics_to_warn_say
 
 
 def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
-        ros, simulated):
+        ros, simulated, capfd):
     # A drive that reports its effort with the other sign gave a wear of a few um with an
     # sd of 10 um, presented as observed.
     _, rows = simulated
@@ -307,6 +307,9 @@ def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
     analyzer = monitor.node.twin.analyzer
     assert analyzer.windows_effort_fault >= 1
     assert analyzer.windows_observed < analyzer.windows_emitted
+    # Said once on the node's log (stderr) too.
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'opposite sign' in x]
+    assert len(logged) == 1 and '[ERROR]' in logged[0] and monitor.joint in logged[0]
 
 
 def test_a_stream_that_stops_turns_the_diagnostics_to_warn_never_ok(ros, simulated):
