@@ -549,6 +549,11 @@ def _pick(bag, settings, link, motor, available, motor_names):
 # --------------------------------------------------------------------------- reading
 
 
+def _say(bag, text):
+    """Add a warning about the bag (printed as ``WARNING: <bag>: <text>``)."""
+    bag.warnings.append(ReadWarning(str(bag.path), None, text))
+
+
 class _Chunks:
     """JointState messages of the plan's topics, decoded in chunks of about N messages."""
 
@@ -643,9 +648,6 @@ class _Chunks:
             scatter = 1.4826 * float(np.median(np.abs(steps - period)))
             self.step_scatter.setdefault(topic, []).append((period, scatter))
 
-    def _say(self, text):
-        self.bag.warnings.append(ReadWarning(str(self.bag.path), None, text))
-
     def _warn(self):
         """Say what the messages did wrong that the ingestion counts do not name."""
         for topic in self.topics:
@@ -653,34 +655,34 @@ class _Chunks:
             if repeats >= 2 and repeats * 100 >= n:   # 1 % or more: a clock that stands
                 zeros, clashes = self.zero_stamps[topic], self.stamp_clashes[topic]
                 if not zeros and clashes * 2 >= repeats:
-                    self._say(f'{repeats:,} of {n:,} JointState messages on {topic} repeat '
-                              f'the header stamp of the message before, {clashes:,} with '
-                              'other positions: two streams under one clock, as when the '
-                              'clock is set back while recording; the first message of each '
-                              'stamp is read, and the operating time the others cover is not '
-                              'counted')
+                    _say(self.bag, f'{repeats:,} of {n:,} JointState messages on {topic} repeat '
+                         f'the header stamp of the message before, {clashes:,} with '
+                         'other positions: two streams under one clock, as when the '
+                         'clock is set back while recording; the first message of each '
+                         'stamp is read, and the operating time the others cover is not '
+                         'counted')
                 else:
                     kind = 'all zero' if zeros == n else (
                         f'{zeros:,} of them zero' if zeros else
                         'a frozen clock, or each message logged twice')
-                    self._say(f'{repeats:,} of {n:,} JointState messages on {topic} carry the '
-                              'header stamp of the message before (stamps that do not '
-                              f'advance: {kind}); their samples are dropped as duplicates')
+                    _say(self.bag, f'{repeats:,} of {n:,} JointState messages on {topic} '
+                         'carry the header stamp of the message before (stamps that do not '
+                         f'advance: {kind}); their samples are dropped as duplicates')
             scatter = self.step_scatter.get(topic)
             if scatter:
                 period, spread = np.median(np.array(scatter), axis=0).tolist()
                 if period > 0 and spread >= STAMP_SCATTER * period:
-                    self._say(f'the header stamps on {topic} scatter by {spread * 1e-6:.3g} ms '
-                              f'about their {period * 1e-6:.3g} ms period '
-                              f'({100 * spread / period:.0f} %): stamped when a message '
-                              'arrived rather than when the encoders were read? Speeds, the '
-                              "torque smoothing and the encoders' time offset rest on the "
-                              "stamps: each window's lost motion is noisier, and the wear can "
-                              'read low')
+                    _say(self.bag, f'the header stamps on {topic} scatter by '
+                         f'{spread * 1e-6:.3g} ms about their {period * 1e-6:.3g} ms period '
+                         f'({100 * spread / period:.0f} %): stamped when a message '
+                         'arrived rather than when the encoders were read? Speeds, the '
+                         "torque smoothing and the encoders' time offset rest on the "
+                         "stamps: each window's lost motion is noisier, and the wear can "
+                         'read low')
             if self.repeated_names[topic]:
-                self._say(f'{self.repeated_names[topic]:,} JointState entries on {topic} named '
-                          'a joint their message had named before; those entries were dropped '
-                          '(the first entry of a name counts)')
+                _say(self.bag, f'{self.repeated_names[topic]:,} JointState entries on {topic} '
+                     'named a joint their message had named before; those entries were dropped '
+                     '(the first entry of a name counts)')
 
 
 def merge_partial_messages(batch):
@@ -1015,11 +1017,10 @@ def _bag_aging_factor(bag, settings):
         if truth:
             # A simulator's recording ages its reducers faster than its clock; the factor
             # lives in metadata.yaml's custom_data, which a bare storage file has lost.
-            bag.warnings.append(ReadWarning(
-                str(bag.path), None, f'the recording carries the simulated truth {truth[0]} but '
-                f'no {AGING_KEY} in its metadata: aging factor 1 assumed (operating seconds '
-                'per stream second); if it was simulated faster, remaining life and wear '
-                'rates are off by that factor: set twin.aging_factor with --config'))
+            _say(bag, f'the recording carries the simulated truth {truth[0]} but '
+                 f'no {AGING_KEY} in its metadata: aging factor 1 assumed (operating seconds '
+                 'per stream second); if it was simulated faster, remaining life and wear '
+                 'rates are off by that factor: set twin.aging_factor with --config')
         return 1.0
     try:
         value = float(text)
@@ -1240,9 +1241,8 @@ class _Run:
             self._against_config('motor_direction', int(sense), joint,
                                  f'step {"with" if sense > 0 else "against"} the link')
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'the motor encoder of {joint} counts against '
-                    'the link (a negative reduction): its angles are taken reversed'))
+                _say(self.bag, f'the motor encoder of {joint} counts against '
+                     'the link (a negative reduction): its angles are taken reversed')
             found = 'raw' if r > math.sqrt(ratio) else 'output'
             self._note_resolution(joint, x_link, x_motor / (ratio if found == 'raw' else 1.0))
             self._against_config('motor_angles', found, joint,
@@ -1259,11 +1259,10 @@ class _Run:
                 continue
             step = float(np.percentile(steps, 0.1))     # the smallest move it reports
             if step > COARSE_STEP_RAD:
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'the {side} encoder of {joint} moves in steps '
-                    f'of {math.degrees(step) * 60:.2g} arcmin at the output, coarser than the '
-                    f'{math.degrees(COARSE_STEP_RAD) * 60:g} arcmin the lost motion is read '
-                    'to: its lost motion and wear are uncertain by about that much'))
+                _say(self.bag, f'the {side} encoder of {joint} moves in steps '
+                     f'of {math.degrees(step) * 60:.2g} arcmin at the output, coarser than the '
+                     f'{math.degrees(COARSE_STEP_RAD) * 60:g} arcmin the lost motion is read '
+                     'to: its lost motion and wear are uncertain by about that much')
 
     def _against_config(self, key, found, joint, seen):
         """Refuse a ``twin.<key>`` of ``--config`` that the data of ``joint`` contradict."""
@@ -1411,10 +1410,8 @@ class _Run:
             self.results[joint].truth = np.array(values) if values else None
 
     def _not_observed(self, front, counts, sides):
-        """Why a joint gave no lost motion, naming the topic; None when it did."""
-        if front.analyzer.effort_fault is not None:
-            return front.analyzer.effort_fault
-        if front.analyzer.windows_observed:
+        """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
+        if front.analyzer.windows_observed and front.analyzer.effort_fault is None:
             return None
         plan = self.plan
         for side, _, _ in sides:
@@ -1443,14 +1440,13 @@ class _Run:
         first, last = (t * 1e-9 for t in self.span[joint])
         if a.gap_time_s < GAP_SHARE * max(last - first, 1e-9):
             return
-        self.bag.warnings.append(ReadWarning(
-            str(self.bag.path), None, f'{joint}: {a.gap_time_s:,.1f} s of its '
-            f'{last - first:,.1f} s stream ({100 * a.gap_time_s / (last - first):.0f} %) fall '
-            f'in {a.gaps:,} hole{"s" if a.gaps > 1 else ""} longer than '
-            f'{self.settings.max_gap_s:g} s without samples '
-            '(lost messages, or a pause in publishing): that time is not counted as '
-            'operation; if the robot ran meanwhile, its wear rate per operating hour reads '
-            'high and its remaining life short by up to that share'))
+        _say(self.bag, f'{joint}: {a.gap_time_s:,.1f} s of its '
+             f'{last - first:,.1f} s stream ({100 * a.gap_time_s / (last - first):.0f} %) fall '
+             f'in {a.gaps:,} hole{"s" if a.gaps > 1 else ""} longer than '
+             f'{self.settings.max_gap_s:g} s without samples '
+             '(lost messages, or a pause in publishing): that time is not counted as '
+             'operation; if the robot ran meanwhile, its wear rate per operating hour reads '
+             'high and its remaining life short by up to that share')
 
     def _partial(self, joint, front):
         """
@@ -1495,23 +1491,20 @@ class _Run:
         if self.settings.motor_angles == 'auto':
             unknown = [j for j in plan.joints if j not in self.angles]
             if unknown:     # never a silent guess: say what was assumed and how to say it
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'motor angles of {", ".join(unknown)} could not '
-                    f'be told raw from output (the link moved less than '
-                    f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
-                    'twin.motor_angles in --config'))
+                _say(self.bag, f'motor angles of {", ".join(unknown)} could not '
+                     f'be told raw from output (the link moved less than '
+                     f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
+                     'twin.motor_angles in --config')
         for topic, cleaner in ((plan.link_topic, link_clean), (plan.motor_topic, motor_clean)):
             late = cleaner.counts['out_of_order'] if cleaner is not None else 0
             if late and late * 100 >= chunks.messages[topic]:   # a loss that size is said
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'{late:,} of {chunks.messages[topic]:,} '
-                    f'JointState messages on {topic} were logged after a later stamp (out of '
-                    'stamp order) and were dropped, as encoder_ingest drops them live'))
+                _say(self.bag, f'{late:,} of {chunks.messages[topic]:,} '
+                     f'JointState messages on {topic} were logged after a later stamp (out of '
+                     'stamp order) and were dropped, as encoder_ingest drops them live')
         for topic, count in chunks.malformed.items():
             if count:   # as Bag.read_joint_states reports them
-                self.bag.warnings.append(ReadWarning(
-                    str(self.bag.path), None, f'{count} malformed JointState message(s) on '
-                    f'{topic} skipped; the first: {chunks.first_problem.get(topic)}'))
+                _say(self.bag, f'{count} malformed JointState message(s) on '
+                     f'{topic} skipped; the first: {chunks.first_problem.get(topic)}')
         statuses = []
         last_ns = 0
         for k, (joint, front) in enumerate(self.fronts.items()):
