@@ -8,6 +8,7 @@ all). A form the twin can read must give the original's estimate; a form it cann
 declared not observed, with the reason, a WARNING line and exit status 3.
 """
 
+from dataclasses import replace
 import json
 
 import numpy as np
@@ -362,6 +363,37 @@ def test_an_effort_that_is_not_the_output_torque_is_refused_and_the_config_reads
     config.write_text(f'twin:\n  effort_scale: {scale}\n')
     result = analyze_bag(bag, tmp_path / 'd_scaled', AnalysisSettings.from_config(config))
     _assert_same_estimate(result, original, rel=1e-6)
+
+
+@pytest.fixture(scope='module')
+def original_1khz(tmp_path_factory):
+    """Simulate the same joints at 1 kHz (their loads fill the bins near zero torque)."""
+    root = tmp_path_factory.mktemp('forms_1khz')
+    simulate_bag(root / 'bag', replace(SPEC, rate_hz=1000.0))
+    with open_bag(root / 'bag') as bag:
+        return bag.read_joint_states()['/joint_states']
+
+
+def test_an_effort_offset_from_the_torque_is_refused_naming_the_offset(
+        original_1khz, tmp_path, capsys):
+    js = original_1khz
+    effort = js.effort.copy()
+    effort[:, _link_columns(js)] += 150.0     # a drive's uncalibrated torque estimate
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'offset', effort=effort), tmp_path,
+                               capsys)
+    # Read as the torque, such an effort gave the wear 59-71 % low, or 2-3 times high,
+    # with exit 0 and nothing said.
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert 'the effort is offset from the torque' in got['reason']
+        named = float(got['reason'].split('zero lies about ')[1].split()[0])
+        assert named == pytest.approx(150.0, rel=0.2)
+        assert any(x.startswith(f'WARNING: {joint}: not observed') and 'offset' in x
+                   for x in err.splitlines())
+    # The recording as the drive should have published it is read.
+    code, out, _ = _cli_json(_rewrite(js, tmp_path, 'zeroed'), tmp_path / 'z', capsys)
+    assert code == 0 and all(got['observed'] for got in out['joints'].values())
 
 
 def test_positions_in_degrees_are_refused_naming_the_units(
