@@ -102,7 +102,13 @@ the lost motion, a rate many times the model's), the components are spread
 again over the prior range of ``θ``, weighted about the current estimate,
 and the wear variance is raised so that the innovation is one standard
 deviation; the data then move the rate and the wear. Both count as a
-recovery.
+recovery. Both tests take the normalised innovation as its normal score
+under the noise scale's own uncertainty: a Student-t of as many degrees of
+freedom as the innovations ``ρ`` is learnt from (the prior's
+:data:`NOISE_PRIOR_WINDOWS` included), the prediction's share by
+Satterthwaite's rule (:func:`_normal_score`), so a unit's first windows, whose
+scatter ``ρ`` does not know yet, are not taken for a jump. Predictions made
+while a respread settles (:data:`SCORE_AFTER` usable windows) are not scored.
 
 Prior of a reducer met without state: with probability
 ``new_unit_probability`` it is new (``w ~ N(initial_wear,

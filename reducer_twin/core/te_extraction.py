@@ -807,7 +807,7 @@ class WindowAnalyzer:
         Lowest and highest bin edge as fractions of rated torque.
     min_bin_samples : int
         Samples needed under each torque sign for a bin to count, at
-        :data:`LOW_RATE_HZ` and above; below it, those of the same stream time
+        :data:`FLANK_RATE_HZ` and above; below it, those of the same stream time
         (at least :data:`LOW_RATE_MIN_FLANK_SAMPLES`; see :meth:`flank_samples`).
     min_bins : int
         Usable bins needed for a lost-motion value.
@@ -2192,14 +2192,14 @@ class WindowAnalyzer:
         """
         Return the samples a flank (a ``|T|`` bin under one torque sign) needs to count.
 
-        ``min_bin_samples`` at :data:`LOW_RATE_HZ` and above. Below it, a window is
-        lengthened to ``min_window_samples`` (10 s at 100 Hz), yet the bins near the
-        lost-motion test torque are those the load passes through quickly at each
+        ``min_bin_samples`` at :data:`FLANK_RATE_HZ` and above. Below it the bins near
+        the lost-motion test torque are those the load passes through quickly at each
         reversal (a joint under gravity crosses zero torque at full speed): at 100 Hz
         they kept 5-20 samples each and were dropped, so the lost motion was read by
-        extrapolating the bins from 15 % of rated torque on, along the model's curve.
-        There a flank needs the samples of the same stream time as at
-        :data:`LOW_RATE_HZ` (``min_bin_samples/LOW_RATE_HZ``), at least
+        extrapolating the bins from 15 % of rated torque on, along the model's curve
+        (a window holds at least ``min_window_samples``, 10 s at 100 Hz). There a
+        flank needs the samples of the same stream time as at :data:`FLANK_RATE_HZ`
+        (``min_bin_samples/FLANK_RATE_HZ``), at least
         :data:`LOW_RATE_MIN_FLANK_SAMPLES`; its standard error counts its samples.
 
         Returns
@@ -2209,9 +2209,9 @@ class WindowAnalyzer:
 
         """
         rate = self.rate_hz
-        if not (math.isfinite(rate) and rate < LOW_RATE_HZ):
+        if not (math.isfinite(rate) and rate < FLANK_RATE_HZ):
             return self.min_bin_samples
-        same_time = math.ceil(self.min_bin_samples * rate / LOW_RATE_HZ - 1e-9)
+        same_time = math.ceil(self.min_bin_samples * rate / FLANK_RATE_HZ - 1e-9)
         return min(self.min_bin_samples, max(same_time, LOW_RATE_MIN_FLANK_SAMPLES))
 
     def _borrow_flanks(self, own, beta, flanks, groups):
@@ -2614,13 +2614,22 @@ effort in other units.
 
 LOW_RATE_HZ = 200.0
 """
-Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly,
-and a flank of the hysteresis needs fewer samples (:meth:`WindowAnalyzer.flank_samples`).
+Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly.
+"""
+
+FLANK_RATE_HZ = 500.0
+"""
+Below this sample rate [Hz] a flank of the hysteresis needs the samples of the same stream
+time as here (:meth:`WindowAnalyzer.flank_samples`).
+
+Was :data:`LOW_RATE_HZ`: a 250 Hz recording of the model's simulator (its own, or 1 kHz
+thinned) kept only the bins from 200 N*m on and read the wear 14-20 % low, with P10-P90
+missing the truth on both joints; with this rule 1-2 % (README figures).
 """
 
 LOW_RATE_MIN_FLANK_SAMPLES = 10
 """
-Fewest samples a flank needs below :data:`LOW_RATE_HZ` (a flank line takes 3).
+Fewest samples a flank needs below :data:`FLANK_RATE_HZ` (a flank line takes 3).
 
 Measured on bench_lost_motion.py recordings forced to 100 and 125 Hz (24 truths, seeds
 4000-4011 and 5000-5011, 1 % effort noise): the forearms' median-of-windows lost motion
