@@ -12,10 +12,9 @@ three seeds are fixed regression cases, not evidence for the issue's 95 % floor.
 """
 
 import json
-import subprocess
-import sys
 
 from bench_scripts import load
+from cli_runs import analyze_process
 import numpy as np
 import pytest
 from reducer_twin.core.params import ReducerParams
@@ -32,9 +31,7 @@ def test_lost_motion_is_within_10_percent_of_truth_at_2_percent_effort_noise(tmp
     spec = gen.Spec(seed=seed, kinds=('base', 'shoulder', 'forearm'), hours=150.0 / 3600.0,
                     start_fraction=0.3, effort_noise_pct=2.0)
     truth = gen.generate_bag(spec, tmp_path / 'bag')
-    done = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
-                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out'), '--json'],
-                          capture_output=True, text=True)
+    done = analyze_process(tmp_path / 'bag', tmp_path / 'out')
     assert done.returncode == 0 and 'Traceback' not in done.stderr, done.stderr[-500:]
     reported = json.loads(done.stdout)['joints']
     errors = {}
@@ -185,9 +182,7 @@ def test_analyze_says_it_pairs_the_generators_jittered_stamps_by_controller_tick
     spec = gen.Spec(seed=2023, kinds=('base', 'forearm'), hours=20.0 / 3600.0,
                     start_fraction=0.3, effort_noise_pct=1.0)
     gen.generate_bag(spec, tmp_path / 'bag')
-    done = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
-                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'out'), '--json'],
-                          capture_output=True, text=True)
+    done = analyze_process(tmp_path / 'bag', tmp_path / 'out')
     assert done.returncode == 0, done.stderr[-500:]
     for name, joint in json.loads(done.stdout)['joints'].items():
         assert joint['pairing'].startswith('tick: the stamps of one controller tick differ by '

@@ -8,10 +8,9 @@ beside motor angles divided by the ratio.
 """
 
 import json
-import subprocess
-import sys
 
 from bench_scripts import load
+from cli_runs import analyze_process
 import pytest
 
 gen = load('third_generator')
@@ -31,9 +30,7 @@ def test_a_motor_torque_taken_for_the_output_torque_is_named_and_the_setting_rea
     gen.generate_bag(spec, tmp_path / 'bag')
 
     def analyze(out, *extra):
-        return subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
-                               str(tmp_path / 'bag'), '--out', str(tmp_path / out), '--json',
-                               *extra], capture_output=True, text=True)
+        return analyze_process(tmp_path / 'bag', tmp_path / out, *extra)
 
     done = analyze('auto')
     assert done.returncode == 3, done.stderr[-500:]
@@ -57,9 +54,7 @@ def test_a_base_loaded_by_its_accelerations_alone_is_not_refused_for_its_effort(
     spec = gen.Spec(seed=8, kinds=('base', 'shoulder', 'forearm', 'wrist'), hours=400.0,
                     aging_factor=3600.0, start_fraction=0.1)
     gen.generate_bag(spec, tmp_path / 'bag')
-    done = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze',
-                           str(tmp_path / 'bag'), '--out', str(tmp_path / 'd'), '--json'],
-                          capture_output=True, text=True)
+    done = analyze_process(tmp_path / 'bag', tmp_path / 'd')
     assert done.returncode == 0, done.stderr[-500:]
     for name, joint in json.loads(done.stdout)['joints'].items():
         assert joint['observed'] and joint['reason'] is None, (name, joint['reason'])

@@ -1,4 +1,7 @@
-"""Run the ``reducer-twin`` command in the test's own process (shared by several test modules)."""
+"""Run the ``reducer-twin`` command in the test's process or as its own (for test modules)."""
+
+import subprocess
+import sys
 
 from reducer_twin.cli import main
 
@@ -26,3 +29,18 @@ def run_cli(argv, capsys):
         code = exit_.code
     captured = capsys.readouterr()
     return code, captured.out, captured.err
+
+
+def analyze_process(bag, out, *extra):
+    """
+    Run ``reducer-twin analyze BAG --out OUT --json EXTRA...`` as a process of its own.
+
+    Returns
+    -------
+    subprocess.CompletedProcess
+        With the text it printed on stdout and stderr.
+
+    """
+    return subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze', str(bag),
+                           '--out', str(out), '--json', *map(str, extra)],
+                          capture_output=True, text=True)
