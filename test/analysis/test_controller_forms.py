@@ -396,6 +396,22 @@ def test_an_effort_offset_from_the_torque_is_refused_naming_the_offset(
     assert code == 0 and all(got['observed'] for got in out['joints'].values())
 
 
+def test_an_effort_offset_beyond_the_loads_is_not_taken_for_an_estimate(
+        original_1khz, tmp_path, capsys):
+    js = original_1khz
+    effort = js.effort.copy()
+    effort[:, _link_columns(js)] += 1000.0    # beyond every load: no flank ever changes
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'offset', effort=effort), tmp_path,
+                               capsys)
+    # Every window's fit lay on the table's lower bound and none was used: the prior's
+    # wear (3.2 +- 17 um) and 0 .. 100 000 h were reported as observed, with exit 0.
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert "read a play beyond a new nominal unit's" in got['reason']
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
+
+
 def test_positions_in_degrees_are_refused_naming_the_units(
         original, tmp_path):
     js = original[0]
