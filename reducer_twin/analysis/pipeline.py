@@ -1411,7 +1411,7 @@ class _Run:
 
     def _not_observed(self, front, counts, sides):
         """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
-        if front.analyzer.windows_observed and front.analyzer.effort_fault is None:
+        if front.analyzer.windows_read and front.analyzer.effort_fault is None:
             return None
         plan = self.plan
         for side, _, _ in sides:
@@ -1544,7 +1544,7 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._not_observed(front, counts, sides) or _no_update(res)
+            res.reason = self._not_observed(front, counts, sides)
             res.partial = self._partial(joint, front)
             self._note_gaps(joint, front)
             bad = sum(v for k, v in counts.items()
@@ -1557,24 +1557,6 @@ class _Run:
         if statuses and last_ns:
             self.out.raw(self.out.diagnostics, [last_ns],
                          [encode_diagnostic_array(last_ns, statuses)])
-
-
-def _no_update(res):
-    """
-    Why a joint whose windows all read a lost motion gave the estimator none, or None.
-
-    A window whose wear fit lies on the table's lower bound (no play beyond a new nominal
-    unit's) is censored, not used: if every one is, the estimate is the prior's alone.
-    """
-    if not res.windows or res.wear is None or not len(res.wear):
-        return None
-    if res.wear[-1][WEAR_ESTIMATE.fields.index('updates')] > 0:
-        return None
-    return (f'none of its {res.windows} windows with a lost motion read a play beyond a new '
-            "nominal unit's (their wear fits lie on the table's lower bound, and the estimate "
-            "would be the prior's alone): a unit built tighter than nominal, read once its "
-            'play has grown past that, or an effort whose zero lies beyond the loads (an '
-            'offset from the torque)')
 
 
 def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False,

@@ -926,6 +926,7 @@ class WindowAnalyzer:
         self.samples_seen = 0
         self.windows_emitted = 0
         self.windows_observed = 0
+        self.windows_censored = 0       # of those, fits on the table's lower bound
         self.windows_friction_unknown = 0
         self.windows_implausible = 0
         self.largest_te_span = 0.0
@@ -1044,13 +1045,23 @@ class WindowAnalyzer:
         return self._emit(final=False)
 
     @property
+    def windows_read(self):
+        """
+        Windows whose lost motion tells the wear: observed, their fit above the table's bound.
+
+        A fit on the lower bound (no play beyond a new nominal unit's) is censored by the
+        estimator, not used (:meth:`.estimator.WearEstimator.update`).
+        """
+        return self.windows_observed - self.windows_censored
+
+    @property
     def rate_hz(self):
         """Sample rate of the stream [Hz] (median stamp step), NaN before 17 samples."""
         return 1.0 / self._period_s if self._period_s else math.nan
 
     def not_observed_reason(self, effort_source='the joint states'):
         """
-        Say why no window has given a lost motion yet, or None once one has.
+        Say why no window has given a lost motion the wear is read from, or None once one has.
 
         An effort found not to be the output torque (:attr:`effort_fault`) is said
         even after windows gave lost motions: they were read with that effort. Encoders
@@ -1068,7 +1079,7 @@ class WindowAnalyzer:
 
         """
         fault = self.effort_fault
-        if fault is None and self.windows_observed:
+        if fault is None and self.windows_read:
             return None
         if fault is not None and not self.windows_implausible:
             return fault
@@ -1091,6 +1102,12 @@ class WindowAnalyzer:
                     'wrong reduction ratio or motor_angles')
         if fault is not None:
             return fault
+        if self.windows_observed:       # every one censored
+            return (f'none of its {self.windows_observed} windows with a lost motion read a '
+                    "play beyond a new nominal unit's (their wear fits lie on the table's "
+                    "lower bound, and the estimate would be the prior's alone): a unit built "
+                    'tighter than nominal, read once its play has grown past that, or an '
+                    'effort whose zero lies beyond the loads (an offset from the torque)')
         rate = self.rate_hz
         if math.isfinite(rate) and rate < LOW_RATE_HZ:
             return (f'{rate:.0f} Hz: too few samples per torque reversal in '
@@ -1216,6 +1233,8 @@ class WindowAnalyzer:
             found = self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
             self.windows_emitted += len(found)
             self.windows_observed += sum(math.isfinite(f.lost_motion) for f in found)
+            self.windows_censored += sum(math.isfinite(f.lost_motion) and f.wear_fit <= 0.0
+                                         for f in found)
             for f in found:
                 if math.isfinite(f.lost_motion):
                     self.last_observed_t = f.t_end
