@@ -55,7 +55,8 @@ from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, s
 from reducer_twin.analysis.stages import te_values, WorkerBacks
 from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, motor_effort_scale
+from reducer_twin.core.ingest import CLOCK_SCATTER, EFFORT_SOURCES, IngestConfig
+from reducer_twin.core.ingest import motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS, StreamCleaner
 from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TOPIC_NAMESPACE
@@ -668,21 +669,29 @@ class _Chunks:
                     _say(self.bag, f'{repeats:,} of {n:,} JointState messages on {topic} '
                          'carry the header stamp of the message before (stamps that do not '
                          f'advance: {kind}); their samples are dropped as duplicates')
-            scatter = self.step_scatter.get(topic)
-            if scatter:
-                period, spread = np.median(np.array(scatter), axis=0).tolist()
-                if period > 0 and spread >= STAMP_SCATTER * period:
-                    _say(self.bag, f'the header stamps on {topic} scatter by '
-                         f'{spread * 1e-6:.3g} ms about their {period * 1e-6:.3g} ms period '
-                         f'({100 * spread / period:.0f} %): stamped when a message '
-                         'arrived rather than when the encoders were read? Speeds, the '
-                         "torque smoothing and the encoders' time offset rest on the "
-                         "stamps: each window's lost motion is noisier, and the wear can "
-                         'read low')
             if self.repeated_names[topic]:
                 _say(self.bag, f'{self.repeated_names[topic]:,} JointState entries on {topic} '
                      'named a joint their message had named before; those entries were dropped '
                      '(the first entry of a name counts)')
+
+
+def _stamp_scatter(bag, topic, scatter, clock):
+    """Say that a topic's stamps scatter about their period, and whether they were re-timed."""
+    if not scatter:
+        return
+    period, spread = np.median(np.array(scatter), axis=0).tolist()
+    if not (period > 0 and spread >= CLOCK_SCATTER * period) and not clock.active:
+        return
+    said = (f'the header stamps on {topic} scatter by {spread * 1e-6:.3g} ms about their '
+            f'{period * 1e-6:.3g} ms period ({100 * spread / period:.0f} %): stamped when a '
+            'message arrived rather than when the encoders were read')
+    if clock.active:
+        _say(bag, f'{said}; their steps alternate (correlation {clock.correlation:.2f}), '
+             'as about a regular clock: the samples were re-timed on it, in the order they '
+             'arrived')
+    else:
+        _say(bag, f"{said}? Speeds, the torque smoothing and the encoders' time offset rest "
+             "on the stamps: each window's lost motion is noisier, and the wear can read low")
 
 
 def merge_partial_messages(batch):
@@ -757,6 +766,7 @@ def _read_worker(chunks, queue):
         queue.put((_END, {'messages': chunks.messages, 'malformed': chunks.malformed,
                           'name_messages': chunks.name_messages,
                           'first_problem': chunks.first_problem,
+                          'step_scatter': chunks.step_scatter,
                           'warnings': list(chunks.bag.warnings)}))
     except BaseException as err:  # noqa: B902 - reported to the parent, which raises
         import traceback
@@ -780,6 +790,7 @@ class _ForkedChunks:
         self.malformed = chunks.malformed
         self.name_messages = chunks.name_messages
         self.first_problem = chunks.first_problem
+        self.step_scatter = chunks.step_scatter
         self._queue = ctx.Queue(maxsize=3)
         self._proc = ctx.Process(target=_read_worker, name='reducer-twin-reader',
                                  args=(chunks, self._queue), daemon=True)
@@ -798,6 +809,7 @@ class _ForkedChunks:
             self.malformed = payload['malformed']
             self.name_messages = payload['name_messages']
             self.first_problem = payload['first_problem']
+            self.step_scatter = payload['step_scatter']
             for warning in payload['warnings']:
                 if warning not in self.bag.warnings:
                     self.bag.warnings.append(warning)
@@ -1041,16 +1053,6 @@ def _motor_scale(settings, joint, angles=None, direction=1.0):
 
 GAP_SHARE = 0.05
 """Share of a joint's stream in holes without samples from which the time lost is said."""
-
-STAMP_SCATTER = 0.25
-"""
-Scatter of the stamp steps (robust sd) about their period from which stamps are said to jitter.
-
-A controller that stamps when its encoders are read keeps its period to a few %; stamps taken
-when a message arrives scatter with the transport. Measured on a 1 kHz recording stamped with
-0.3 ms sd (the steps' scatter 42-47 %): each window's lost motion 3.5 times noisier, the
-wear 21-35 % low; with 0.17 ms (26 %) within 4-7 %.
-"""
 
 PARTIAL_SHARE = 0.2
 """Share of a joint's stream after its last lost motion from which the estimate is partial."""
@@ -1496,6 +1498,8 @@ class _Run:
                      f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
                      'twin.motor_angles in --config')
         for topic, cleaner in ((plan.link_topic, link_clean), (plan.motor_topic, motor_clean)):
+            if cleaner is not None:
+                _stamp_scatter(self.bag, topic, chunks.step_scatter.get(topic), cleaner.clock)
             late = cleaner.counts['out_of_order'] if cleaner is not None else 0
             if late and late * 100 >= chunks.messages[topic]:   # a loss that size is said
                 _say(self.bag, f'{late:,} of {chunks.messages[topic]:,} '
@@ -1518,6 +1522,7 @@ class _Run:
                 for reason, count in cleaner.counts_for(columns).items():
                     counts[f'{side}_{reason}'] = int(count)
                 counts[f'{side}_missing'] = int(cleaner.missing)
+                counts[f'{side}_retimed'] = int(cleaner.clock.retimed)
             counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
             counts.update(front.pairer.ticks.facts() if motor_clean is not None else
                           {'pairing': SHARED_STAMPS, 'tick_paired': 0})

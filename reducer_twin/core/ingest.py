@@ -11,6 +11,8 @@ across calls):
 ================  ==========================================================
 reason            what happens
 ================  ==========================================================
+(stamps)          stamps that scatter about a regular clock (taken when a
+                  message arrived) are re-timed on it (:class:`StampClock`)
 ``non_finite``    NaN/inf position or stamp: the sample is dropped
 ``duplicate``     same stamp as the previous sample: dropped
 ``out_of_order``  stamp earlier than the newest seen (by less than
@@ -58,6 +60,38 @@ WRAP_PERIODS = 3
 
 SPIKE_REASONS = ('spike', 'step')
 """Reasons a sample is dropped or repaired, in the order of the table above."""
+
+CLOCK_STEPS = 256
+"""Stamp steps (in arrival order) from which a stream's clock is judged (:class:`StampClock`)."""
+
+CLOCK_SCATTER = 0.25
+"""
+Scatter of the stamp steps (robust sd over the period) from which stamps may be re-timed.
+
+A controller that stamps when its encoders are read keeps its period to a few %; stamps taken
+when a message arrives scatter with the transport. Measured on a 1 kHz recording stamped with
+0.3 ms sd (the steps' scatter 42-47 %): each window's lost motion 3.5 times noisier, the wear
+21-35 % low; with 0.17 ms (26 %) within 4-7 %.
+"""
+
+CLOCK_CORRELATION = -0.25
+"""
+Correlation of successive stamp steps at or below which the stamps scatter about a clock.
+
+Stamps ``t_k = k·P + e_k`` with independent errors ``e`` give steps ``P + e_k - e_(k-1)``
+whose neighbours correlate by -0.5; stamps that are the true times of an irregular
+sampling give independent steps (0). Over :data:`CLOCK_STEPS` steps the estimate's sd is
+about 0.06.
+"""
+
+CLOCK_MEDIAN = 31
+"""Stamps of the trailing median that follows the clock's phase (drift, missed ticks)."""
+
+CLOCK_REBASE = 3.0
+"""A stamp this many periods off the clock's phase restarts it (a gap or a clock reset)."""
+
+CLOCK_BLOCK = 4096
+"""Stamps re-timed per pass (bounds the work a restart repeats)."""
 
 
 @dataclass(frozen=True)
@@ -130,6 +164,141 @@ class CleanStream:
                            self.effort[ok, k], self.segment[ok])
 
 
+class StampClock:
+    """
+    Re-time stamps that scatter about a regular controller clock (stamped on arrival).
+
+    A driver that stamps a message when it is received, not when its encoders
+    were read, gives stamps ``t_k = t_0 + k·P + e_k``: the transport's delay
+    ``e`` scatters them (a few tenths of a millisecond on a loaded computer),
+    the messages still arrive in the order the controller sent them. The first
+    :data:`CLOCK_STEPS` steps in arrival order decide: when their robust scatter
+    is at least :data:`CLOCK_SCATTER` of their median period ``P`` and successive
+    steps correlate by :data:`CLOCK_CORRELATION` or less (the signature of
+    errors about a clock; an irregular sampling whose stamps are true has
+    independent steps), every later stamp is replaced by
+    ``t_0 + k·P + median(r)``, ``r_k = t_k - t_0 - k·P`` over the last
+    :data:`CLOCK_MEDIAN` stamps: the clock's tick in arrival order, its phase
+    following drift and missed ticks (a missed tick moves ``r`` by ``P``; the
+    median takes the new level after half its length). A stamp
+    :data:`CLOCK_REBASE` periods off the phase (a pause, a clock reset)
+    restarts the clock there. Otherwise stamps pass unchanged. Causal, and the
+    same however the stream is cut into calls.
+
+    Attributes
+    ----------
+    active : bool or None
+        Whether stamps are re-timed (None until decided).
+    retimed : int
+        Stamps re-timed so far.
+    window_missing : int
+        Ticks missing from the deciding stamps (their span against the clock's period).
+    raw_head : int
+        Stamps of the call that decided which were returned as they came.
+    period_ns, scatter_ns, correlation : float or None
+        The deciding steps' median, robust sd and lag-1 correlation.
+
+    """
+
+    def __init__(self):
+        self.active = None
+        self.retimed = self.window_missing = self.raw_head = 0
+        self.period_ns = self.scatter_ns = self.correlation = None
+        self._first = []        # raw stamps until the decision
+        self._t0 = None         # stamp of clock index 0 [ns]
+        self._k = 0             # clock index of the next stamp
+        self._recent = np.zeros(0)  # latest residuals [ns] (at most CLOCK_MEDIAN - 1)
+
+    def retime(self, t):
+        """
+        Return the stamps of a chunk, re-timed when the stream's clock is active.
+
+        Parameters
+        ----------
+        t : ndarray of int64
+            Stamps [ns] in arrival order.
+
+        Returns
+        -------
+        ndarray of int64
+            Stamps [ns]: ``t`` itself unless re-timed.
+
+        """
+        if self.active is False or t.size == 0:
+            return t
+        if self.active is None:
+            need = CLOCK_STEPS + 1 - len(self._first)
+            self._first.extend(t[:need].tolist())
+            if len(self._first) <= CLOCK_STEPS:
+                return t
+            self._decide(np.array(self._first, dtype=np.int64))
+            self._first = []
+            self.raw_head = need
+            if not self.active:
+                return t
+            head, rest = t[:need], t[need:]
+            self._t0, self._k, self._recent = int(head[-1]), 1, np.zeros(1)
+            return np.concatenate([head, self._retime(rest)]) if rest.size else t
+        return self._retime(t)
+
+    def _decide(self, stamps):
+        steps = np.diff(stamps).astype(float)
+        period = float(np.median(steps))
+        scatter = 1.4826 * float(np.median(np.abs(steps - period)))
+        self.period_ns, self.scatter_ns = period, scatter
+        clipped = np.clip(steps, period - 3.0 * scatter, period + 3.0 * scatter) - period
+        a, b = clipped[1:], clipped[:-1]
+        norm = math.sqrt(float(a @ a) * float(b @ b))
+        self.correlation = float(a @ b) / norm if norm > 0.0 else 0.0
+        self.active = bool(period > 0.0 and scatter >= CLOCK_SCATTER * period
+                           and self.correlation <= CLOCK_CORRELATION)
+        if self.active:
+            # The clock's period from the line through the stamps (the median step is
+            # a few tenths of a percent off: its phase would drift and the trailing
+            # median lag behind it).
+            k = np.arange(stamps.size) - 0.5 * (stamps.size - 1)
+            line = float(k @ (stamps - stamps[0]).astype(float)) / float(k @ k)
+            if abs(line - period) <= 3.0 * scatter:
+                self.period_ns = line
+            span = float(stamps[-1] - stamps[0]) / self.period_ns
+            self.window_missing = max(0, int(round(span)) - (stamps.size - 1))
+
+    def _retime(self, t):
+        out = np.empty_like(t)
+        self.retimed += t.size
+        done = 0
+        while done < t.size:
+            part = t[done:done + CLOCK_BLOCK]
+            ticks = self._k + np.arange(part.size)
+            r = (part - self._t0).astype(float) - self.period_ns * ticks
+            keep = self._recent
+            series = np.concatenate([keep, r])
+            # The trailing median at each stamp: the first ones after a (re)start over
+            # fewer stamps.
+            pad = min(CLOCK_MEDIAN - 1 - keep.size, part.size)
+            phase = np.empty(part.size)
+            for i in range(pad):
+                phase[i] = np.median(series[:keep.size + i + 1])
+            if part.size > pad:
+                windows = np.lib.stride_tricks.sliding_window_view(series, CLOCK_MEDIAN)
+                phase[pad:] = np.median(windows, axis=1)
+            # The phase before each stamp: a stamp far off it restarts the clock there.
+            before = np.concatenate([[np.median(keep) if keep.size else r[0]], phase[:-1]])
+            off = np.flatnonzero(np.abs(r - before) > CLOCK_REBASE * self.period_ns)
+            stop = part.size if not off.size else int(off[0])
+            if stop == 0:   # restart at this stamp
+                self._t0, self._k, self._recent = int(part[0]), 1, np.zeros(1)
+                out[done] = part[0]
+                done += 1
+                continue
+            out[done:done + stop] = self._t0 + np.round(
+                self.period_ns * ticks[:stop] + phase[:stop]).astype(np.int64)
+            self._recent = series[:keep.size + stop][-(CLOCK_MEDIAN - 1):]
+            self._k += stop
+            done += stop
+        return out
+
+
 class StreamCleaner:
     """
     Apply the ingestion rules to angle streams, chunk by chunk.
@@ -162,6 +331,7 @@ class StreamCleaner:
         self._wrap_prev = None  # (stamp, segment) of the last row seen by the wrap rule
         self.column_counts = None   # per-column counts of the value rules
         self._ndim = None
+        self.clock = StampClock()   # re-times stamps that scatter about a clock
 
     def process(self, t_ns, position, velocity=None, effort=None):
         """
@@ -187,7 +357,8 @@ class StreamCleaner:
             If the arrays do not match in shape.
 
         """
-        t = np.asarray(t_ns, dtype=np.int64).ravel()
+        undecided = self.clock.active is None
+        t = self.clock.retime(np.asarray(t_ns, dtype=np.int64).ravel())
         pos = np.asarray(position, dtype=float)
         n = t.size
         one_d = pos.ndim == 1
@@ -206,11 +377,20 @@ class StreamCleaner:
         if n == 0:
             out = CleanStream(t, pos, vel, eff, np.zeros(0, np.int64))
             return _squeeze(out) if one_d else out
-        if n <= FAST_ROWS:
+        if n <= FAST_ROWS and not undecided:
             out = self._fast(t, pos, vel, eff)
             if out is not None:
                 return _squeeze(out) if one_d else out
-        self._count_missing(t)
+        if undecided and self.clock.active:
+            # The deciding stamps scattered: their holes are those of the clock's line,
+            # the later ones those of the re-timed stamps.
+            head = self.clock.raw_head
+            self.missing, self.period_ns, self._diffs = self.clock.window_missing, \
+                self.clock.period_ns, []
+            self._raw_prev_t = int(t[head - 1])
+            self._count_missing(t[head:])
+        else:
+            self._count_missing(t)
         finite = np.isfinite(pos)
         self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
         if self.column_counts is None:

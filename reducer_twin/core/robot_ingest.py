@@ -176,6 +176,7 @@ class RobotIngest:
             for reason, count in cleaner.counts_for(columns).items():
                 c[f'{side}_{reason}'] = count
             c[f'{side}_missing'] = cleaner.missing
+            c[f'{side}_retimed'] = cleaner.clock.retimed
         c['unpaired'] = self.pairers[k].unpaired
         c.update(self.pairers[k].ticks.facts() if self.split else
                  {'pairing': SHARED_STAMPS, 'tick_paired': 0})
