@@ -27,6 +27,7 @@ noise, within 5 % at 1 %).
 Usage::
 
     .venv/bin/python bench/bench_lost_motion.py [--runs 24] [--noise 2,1] [--duration-s 150]
+        [--stamp-jitter-us 300]
 """
 
 import argparse
@@ -83,7 +84,7 @@ def window_lost_motion(derived, joints):
     return result
 
 
-def run_one(tmp, seed, noise_pct, duration_s, kinds):
+def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -99,6 +100,9 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds):
         Stream length [s].
     kinds : tuple of str
         Joint kinds.
+    stamp_jitter_us : float, optional
+        Sd of the header stamps about the sample times [us] (stamped on arrival); the
+        generator's 10-50 us when None.
 
     Returns
     -------
@@ -109,7 +113,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds):
     """
     start_fraction = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
     spec = gen.Spec(seed=seed, kinds=kinds, hours=duration_s / gen.HOUR, aging_factor=1.0,
-                    start_fraction=start_fraction, effort_noise_pct=noise_pct, layout='split')
+                    start_fraction=start_fraction, effort_noise_pct=noise_pct, layout='split',
+                    stamp_jitter_us=stamp_jitter_us)
     bag = tmp / f'bag-{seed}-{noise_pct:g}'
     derived = tmp / f'out-{seed}-{noise_pct:g}'
     truth = gen.generate_bag(spec, bag)
@@ -201,6 +206,9 @@ def main(argv=None):
     parser.add_argument('--duration-s', type=float, default=150.0,
                         help='stream length per recording [s] (default 150)')
     parser.add_argument('--kinds', default=','.join(KINDS), help='joint kinds')
+    parser.add_argument('--stamp-jitter-us', type=float, default=None,
+                        help='sd of the header stamps about the sample times [us] (stamped '
+                        "on arrival; default the generator's 10-50 us)")
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
     levels = [float(x) for x in args.noise.split(',')]
@@ -212,7 +220,8 @@ def main(argv=None):
         for i in range(args.runs):
             seed = args.seed0 + i
             for level in levels:
-                run = run_one(Path(tmp), seed, level, args.duration_s, kinds)
+                run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
+                              args.stamp_jitter_us)
                 results[level].append(run)
                 if args.quiet:
                     continue

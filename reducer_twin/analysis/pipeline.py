@@ -58,7 +58,7 @@ from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import CLOCK_SCATTER, EFFORT_SOURCES, IngestConfig
 from reducer_twin.core.ingest import motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, PAIRING_FACTS
-from reducer_twin.core.ingest import SHARED_STAMPS, StreamCleaner
+from reducer_twin.core.ingest import retimed_message, SHARED_STAMPS, StreamCleaner
 from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TOPIC_NAMESPACE
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
@@ -677,21 +677,18 @@ class _Chunks:
 
 def _stamp_scatter(bag, topic, scatter, clock):
     """Say that a topic's stamps scatter about their period, and whether they were re-timed."""
+    if clock.active:
+        _say(bag, retimed_message(topic, clock))
+        return
     if not scatter:
         return
     period, spread = np.median(np.array(scatter), axis=0).tolist()
-    if not (period > 0 and spread >= CLOCK_SCATTER * period) and not clock.active:
-        return
-    said = (f'the header stamps on {topic} scatter by {spread * 1e-6:.3g} ms about their '
-            f'{period * 1e-6:.3g} ms period ({100 * spread / period:.0f} %): stamped when a '
-            'message arrived rather than when the encoders were read')
-    if clock.active:
-        _say(bag, f'{said}; their steps alternate (correlation {clock.correlation:.2f}), '
-             'as about a regular clock: the samples were re-timed on it, in the order they '
-             'arrived')
-    else:
-        _say(bag, f"{said}? Speeds, the torque smoothing and the encoders' time offset rest "
-             "on the stamps: each window's lost motion is noisier, and the wear can read low")
+    if period > 0 and spread >= CLOCK_SCATTER * period:
+        _say(bag, f'the header stamps on {topic} scatter by {spread * 1e-6:.3g} ms about '
+             f'their {period * 1e-6:.3g} ms period ({100 * spread / period:.0f} %): stamped '
+             'when a message arrived rather than when the encoders were read? Speeds, the '
+             "torque smoothing and the encoders' time offset rest on the stamps: each "
+             "window's lost motion is noisier, and the wear can read low")
 
 
 def merge_partial_messages(batch):
@@ -1288,8 +1285,10 @@ class _Run:
     def run(self):
         plan = self.plan
         chunks = self.chunks
-        link_clean = StreamCleaner(self.settings.ingest)
-        motor_clean = StreamCleaner(self.settings.ingest) if plan.motor_topic else None
+        # Stamps are re-timed only where one message carries both encoders (StampClock).
+        link_clean = StreamCleaner(self.settings.ingest, retime=not plan.motor_topic)
+        motor_clean = StreamCleaner(self.settings.ingest, retime=False) \
+            if plan.motor_topic else None
         link_names = [x for j, m in zip(plan.joints, plan.motor_names) for x in (j, m)] \
             if not plan.motor_topic else list(plan.joints)
         for chunk in chunks:

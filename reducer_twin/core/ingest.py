@@ -185,6 +185,19 @@ class StampClock:
     restarts the clock there. Otherwise stamps pass unchanged. Causal, and the
     same however the stream is cut into calls.
 
+    Only a stream that carries both encoders of a joint is re-timed: its TE does not
+    depend on the stamps. The stamps of two topics (link and motor apart) are each
+    re-timed with their own wander (the median's tenth of a millisecond), which the
+    interpolation between them turns into TE. Measured on the independent generator at
+    1 kHz with 0.3 ms of scatter (4 recordings of two topics, 12 joints): re-timed, the
+    lost motion moved by up to 3 % either way against raw; with a median of 63 stamps
+    one joint read 10 % high.
+
+    Parameters
+    ----------
+    enabled : bool
+        Whether the stream may be re-timed (False: its stamps always pass).
+
     Attributes
     ----------
     active : bool or None
@@ -200,8 +213,8 @@ class StampClock:
 
     """
 
-    def __init__(self):
-        self.active = None
+    def __init__(self, enabled=True):
+        self.active = None if enabled else False
         self.retimed = self.window_missing = self.raw_head = 0
         self.period_ns = self.scatter_ns = self.correlation = None
         self._first = []        # raw stamps until the decision
@@ -299,6 +312,31 @@ class StampClock:
         return out
 
 
+def retimed_message(topic, clock):
+    """
+    Say that the stamps of ``topic`` were re-timed on the clock they scatter about.
+
+    Parameters
+    ----------
+    topic : str
+        The stream's topic.
+    clock : StampClock
+        Its clock, active.
+
+    Returns
+    -------
+    str
+        One sentence with the scatter, the period and the steps' correlation.
+
+    """
+    return (f'the header stamps on {topic} scatter by {clock.scatter_ns * 1e-6:.3g} ms about '
+            f'their {clock.period_ns * 1e-6:.3g} ms period '
+            f'({100 * clock.scatter_ns / clock.period_ns:.0f} %): stamped when a message '
+            'arrived rather than when the encoders were read; their steps alternate '
+            f'(correlation {clock.correlation:.2f}), as about a regular clock: the samples '
+            'were re-timed on it, in the order they arrived')
+
+
 class StreamCleaner:
     """
     Apply the ingestion rules to angle streams, chunk by chunk.
@@ -312,10 +350,13 @@ class StreamCleaner:
     ----------
     config : IngestConfig
         Thresholds.
+    retime : bool
+        Whether stamps that scatter about a clock may be re-timed (:class:`StampClock`:
+        a stream that carries both encoders of its joints).
 
     """
 
-    def __init__(self, config=None):
+    def __init__(self, config=None, retime=True):
         self.config = config or IngestConfig()
         self.counts = dict.fromkeys(REASONS, 0)
         self.accepted = 0
@@ -331,7 +372,7 @@ class StreamCleaner:
         self._wrap_prev = None  # (stamp, segment) of the last row seen by the wrap rule
         self.column_counts = None   # per-column counts of the value rules
         self._ndim = None
-        self.clock = StampClock()   # re-times stamps that scatter about a clock
+        self.clock = StampClock(retime)   # re-times stamps that scatter about a clock
 
     def process(self, t_ns, position, velocity=None, effort=None):
         """

@@ -89,8 +89,8 @@ class RobotIngest:
         self.effort_source = effort_source
         self.effort_scale = motor_direction * motor_effort_scale(motor_effort_units,
                                                                  motor_angles, ratio)
-        self.link = StreamCleaner(config)
-        self.motor = StreamCleaner(config) if self.split else None
+        self.link = StreamCleaner(config, retime=not self.split)
+        self.motor = StreamCleaner(config, retime=False) if self.split else None
         self.spikes = SpikeFilterBank(ratio, len(self.joints), config)
         self.pairers = [Pairer(config, self.scale, effort=effort_source,
                                motor_effort_scale=self.effort_scale, ratio=ratio,

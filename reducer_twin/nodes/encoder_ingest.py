@@ -22,6 +22,7 @@ communication does; the topic is then published only while something subscribes.
 from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_UNITS
+from reducer_twin.core.ingest import retimed_message
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
@@ -74,6 +75,8 @@ class EncoderIngest(Node):
             PAIRED_SAMPLES) for joint in self.joints}
         self._raw = {'link': [], 'motor': []}
         self._raw_since = None
+        self._retimed_said = False
+        self._link_topic = p['link_topic']
         qos = encoder_qos(p['reliable'])
         # The controller streams are taken as their serialised bytes and read by a
         # JointStateReader: no JointState object (names, arrays) is built per message.
@@ -132,6 +135,9 @@ class EncoderIngest(Node):
         motor, self._raw['motor'] = self._raw['motor'], []
         for k, rows in self.ingest.process(link, motor):
             self.outputs[self.joints[k]].emit(rows)
+        if self.ingest.link.clock.active and not self._retimed_said:
+            self._retimed_said = True
+            self.get_logger().warning(retimed_message(self._link_topic, self.ingest.link.clock))
 
     def attach(self, joint, sink):
         """

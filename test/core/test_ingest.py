@@ -195,6 +195,16 @@ def test_an_irregular_sampling_whose_stamps_are_true_is_not_re_timed():
     assert cleaner.clock.active is False and abs(cleaner.clock.correlation) < 0.2
 
 
+def test_a_stream_of_one_encoder_side_is_not_re_timed():
+    # Link and motor on two topics: each re-timed clock would wander by its own tenth of
+    # a millisecond, which the interpolation between them turns into TE.
+    _, stamps, pos = arrival_stamped(2000, 0.3)
+    cleaner = StreamCleaner(retime=False)
+    out = cleaner.process(stamps, pos)
+    assert cleaner.clock.active is False and cleaner.clock.retimed == 0
+    assert np.isin(out.t_ns, stamps).all() and cleaner.counts['out_of_order'] > 0
+
+
 def test_a_pause_restarts_the_re_timed_clock_after_it():
     # One second without messages: the stamps after it are the clock's from there on,
     # not the old phase's (which would put them a second early until its median caught up).
