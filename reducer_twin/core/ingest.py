@@ -252,7 +252,31 @@ class StampClock:
             head, rest = t[:need], t[need:]
             self._t0, self._k, self._recent = int(head[-1]), 1, np.zeros(1)
             return np.concatenate([head, self._retime(rest)]) if rest.size else t
+        if t.size <= FAST_ROWS and self._recent.size == CLOCK_MEDIAN - 1:
+            out = self._retime_few(t)
+            if out is not None:
+                return out
         return self._retime(t)
+
+    def _retime_few(self, t):
+        """Re-time a few stamps in plain Python (the live case): as :meth:`_retime` does."""
+        recent = self._recent.tolist()
+        period, t0, k = self.period_ns, self._t0, self._k
+        middle = sorted(recent)[CLOCK_MEDIAN // 2 - 1:CLOCK_MEDIAN // 2 + 1]
+        before = (middle[0] + middle[1]) / 2.0
+        out = []
+        for tk in t.tolist():
+            r = float(tk - t0) - period * k
+            if abs(r - before) > CLOCK_REBASE * period:
+                return None     # a restart: the vectorised path takes the chunk
+            recent.append(r)
+            before = sorted(recent)[CLOCK_MEDIAN // 2]
+            out.append(t0 + int(round(period * k + before)))
+            del recent[0]
+            k += 1
+        self._recent, self._k = np.array(recent), k
+        self.retimed += t.size
+        return np.array(out, dtype=np.int64)
 
     def _decide(self, stamps):
         steps = np.diff(stamps).astype(float)
