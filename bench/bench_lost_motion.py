@@ -27,7 +27,11 @@ noise, within 5 % at 1 %).
 Usage::
 
     .venv/bin/python bench/bench_lost_motion.py [--runs 24] [--noise 2,1] [--duration-s 150]
-        [--stamp-jitter-us 300]
+        [--stamp-jitter-us 300] [--generator third]
+
+``--generator third`` runs the same on ``bench/third_generator.py`` (a catalogue-style
+torsional curve whose play may still open beyond the test torque, its own effort noise
+and controller).
 """
 
 import argparse
@@ -43,6 +47,7 @@ import time
 
 import independent_generator as gen
 import numpy as np
+import third_generator
 
 KINDS = ('base', 'shoulder', 'forearm')
 
@@ -84,7 +89,7 @@ def window_lost_motion(derived, joints):
     return result
 
 
-def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None):
+def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -103,6 +108,9 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None):
     stamp_jitter_us : float, optional
         Sd of the header stamps about the sample times [us] (stamped on arrival); the
         generator's 10-50 us when None.
+    source : module
+        ``independent_generator`` or ``third_generator`` (which draws its effort noise:
+        ``noise_pct`` None).
 
     Returns
     -------
@@ -112,12 +120,13 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None):
 
     """
     start_fraction = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
-    spec = gen.Spec(seed=seed, kinds=kinds, hours=duration_s / gen.HOUR, aging_factor=1.0,
-                    start_fraction=start_fraction, effort_noise_pct=noise_pct, layout='split',
-                    stamp_jitter_us=stamp_jitter_us)
-    bag = tmp / f'bag-{seed}-{noise_pct:g}'
-    derived = tmp / f'out-{seed}-{noise_pct:g}'
-    truth = gen.generate_bag(spec, bag)
+    spec = source.Spec(seed=seed, kinds=kinds, hours=duration_s / gen.HOUR,
+                       aging_factor=1.0, start_fraction=start_fraction,
+                       effort_noise_pct=noise_pct, layout='split',
+                       stamp_jitter_us=stamp_jitter_us)
+    bag = tmp / f'bag-{seed}-{noise_pct}'
+    derived = tmp / f'out-{seed}-{noise_pct}'
+    truth = source.generate_bag(spec, bag)
     t0 = time.perf_counter()
     proc = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze', str(bag),
                            '--out', str(derived), '--json'], capture_output=True, text=True)
@@ -161,8 +170,11 @@ def _stats(errors):
 
 def summarise(runs, noise_pct):
     """Print the distribution of the errors of one noise level."""
-    print(f'\n== effort noise {noise_pct:g} % of rated torque '
-          f'({noise_pct / 100 * gen.RATED_TORQUE_NM:.1f} N*m): {len(runs)} recordings ==')
+    if noise_pct is None:
+        print(f'\n== effort noise drawn by the generator: {len(runs)} recordings ==')
+    else:
+        print(f'\n== effort noise {noise_pct:g} % of rated torque '
+              f'({noise_pct / 100 * gen.RATED_TORQUE_NM:.1f} N*m): {len(runs)} recordings ==')
     for source in ('reported', 'window'):
         label = ('reported lost_motion_arcmin (--json)' if source == 'reported'
                  else 'median of the per-window observations (te_features)')
@@ -209,9 +221,13 @@ def main(argv=None):
     parser.add_argument('--stamp-jitter-us', type=float, default=None,
                         help='sd of the header stamps about the sample times [us] (stamped '
                         "on arrival; default the generator's 10-50 us)")
+    parser.add_argument('--generator', choices=('independent', 'third'), default='independent',
+                        help='truth generator (third: catalogue-style curve, its own effort '
+                        'noise; --noise is then not used)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
-    levels = [float(x) for x in args.noise.split(',')]
+    source = gen if args.generator == 'independent' else third_generator
+    levels = [float(x) for x in args.noise.split(',')] if source is gen else [None]
     kinds = tuple(k.strip() for k in args.kinds.split(','))
     os.environ.setdefault('PYTHONPATH', str(Path(__file__).resolve().parents[1]))
     start = time.perf_counter()
@@ -221,14 +237,15 @@ def main(argv=None):
             seed = args.seed0 + i
             for level in levels:
                 run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
-                              args.stamp_jitter_us)
+                              args.stamp_jitter_us, source)
                 results[level].append(run)
                 if args.quiet:
                     continue
                 parts = [f"{n} {j['kind'][:4]} {j['truth']:.3f}->{j['reported']:.3f}"
                          f" ({100 * (j['reported'] - j['truth']) / j['truth']:+.0f} %)"
                          for n, j in run['joints'].items()]
-                print(f"seed {seed} noise {level:g} % {run['rate_hz']:4.0f} Hz "
+                noise = 'drawn' if level is None else f'{level:g} %'
+                print(f"seed {seed} noise {noise} {run['rate_hz']:4.0f} Hz "
                       f"start {100 * run['start_fraction']:2.0f} % of life rc {run['rc']}: "
                       + '; '.join(parts), flush=True)
                 for line in run['stderr']:
