@@ -221,6 +221,7 @@ class StampClock:
         self._t0 = None         # stamp of clock index 0 [ns]
         self._k = 0             # clock index of the next stamp
         self._recent = np.zeros(0)  # latest residuals [ns] (at most CLOCK_MEDIAN - 1)
+        self._last_raw = self._last_out = None   # the latest stamp as it came, as given
 
     def retime(self, t):
         """
@@ -251,7 +252,25 @@ class StampClock:
                 return t
             head, rest = t[:need], t[need:]
             self._t0, self._k, self._recent = int(head[-1]), 1, np.zeros(1)
-            return np.concatenate([head, self._retime(rest)]) if rest.size else t
+            self._last_raw = self._last_out = int(head[-1])
+            return np.concatenate([head, self._with_repeats(rest)]) if rest.size else t
+        return self._with_repeats(t)
+
+    def _with_repeats(self, t):
+        """Re-time ``t``; a stamp that repeats the one before keeps the stamp given before."""
+        repeat = t == np.concatenate([[self._last_raw], t[:-1]])
+        if repeat.any():    # a message logged twice: the cleaner drops it as a duplicate
+            fresh = np.flatnonzero(~repeat)
+            given = self._retimed(t[fresh]) if fresh.size else t[:0]
+            last = np.maximum.accumulate(np.where(repeat, -1, np.arange(t.size)))
+            out = np.where(last >= 0, np.concatenate([given, [0]])[
+                np.searchsorted(fresh, np.maximum(last, 0))], self._last_out)
+        else:
+            out = self._retimed(t)
+        self._last_raw, self._last_out = int(t[-1]), int(out[-1])
+        return out
+
+    def _retimed(self, t):
         if t.size <= FAST_ROWS and self._recent.size == CLOCK_MEDIAN - 1:
             out = self._retime_few(t)
             if out is not None:
@@ -279,6 +298,8 @@ class StampClock:
         return np.array(out, dtype=np.int64)
 
     def _decide(self, stamps):
+        # A message logged twice repeats the stamp before: not a step of the clock.
+        stamps = stamps[np.concatenate([[True], stamps[1:] != stamps[:-1]])]
         steps = np.diff(stamps).astype(float)
         period = float(np.median(steps))
         scatter = 1.4826 * float(np.median(np.abs(steps - period)))

@@ -205,6 +205,23 @@ def test_a_stream_of_one_encoder_side_is_not_re_timed():
     assert np.isin(out.t_ns, stamps).all() and cleaner.counts['out_of_order'] > 0
 
 
+@pytest.mark.parametrize('sizes', [[3], [6000]])
+def test_messages_logged_twice_are_not_steps_of_the_clock(sizes):
+    # Each message twice (a recorder subscribed twice): a clean clock is not taken for
+    # stamps that alternate, and a re-timed stream drops the copies as duplicates.
+    true, stamps, pos = arrival_stamped(3000, 0.3)
+    clean = StreamCleaner()
+    out = in_chunks(clean, np.repeat(true, 2), np.repeat(pos, 2), sizes)
+    assert clean.clock.active is False and clean.counts['duplicate'] == 3000
+    np.testing.assert_array_equal(out.t_ns, true)
+    twice = StreamCleaner()
+    out = in_chunks(twice, np.repeat(stamps, 2), np.repeat(pos, 2), sizes)
+    assert twice.clock.active and twice.counts['duplicate'] >= 2990
+    assert out.t_ns.size >= 2990 and np.all(np.diff(out.t_ns) > 0)
+    err = (out.t_ns - np.interp(out.position, pos, true)).astype(float)[300:]
+    assert np.std(err) < 0.1 * MS and abs(np.median(err)) < 0.2 * MS
+
+
 def test_a_pause_restarts_the_re_timed_clock_after_it():
     # One second without messages: the stamps after it are the clock's from there on,
     # not the old phase's (which would put them a second early until its median caught up).
