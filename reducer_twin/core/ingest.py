@@ -301,6 +301,9 @@ class StampClock:
         # A message logged twice repeats the stamp before: not a step of the clock.
         stamps = stamps[np.concatenate([[True], stamps[1:] != stamps[:-1]])]
         steps = np.diff(stamps).astype(float)
+        if steps.size < PERIOD_STEPS:   # a clock that stands: nothing to re-time on
+            self.active = False
+            return
         period = float(np.median(steps))
         scatter = 1.4826 * float(np.median(np.abs(steps - period)))
         self.period_ns, self.scatter_ns = period, scatter

@@ -222,6 +222,14 @@ def test_messages_logged_twice_are_not_steps_of_the_clock(sizes):
     assert np.std(err) < 0.1 * MS and abs(np.median(err)) < 0.2 * MS
 
 
+@pytest.mark.filterwarnings('error::RuntimeWarning')
+def test_a_clock_that_stands_is_not_re_timed():
+    _, pos = ramp(600)
+    cleaner = StreamCleaner()
+    cleaner.process(np.zeros(600, np.int64), pos)
+    assert cleaner.clock.active is False and cleaner.counts['duplicate'] == 599
+
+
 def test_a_pause_restarts_the_re_timed_clock_after_it():
     # One second without messages: the stamps after it are the clock's from there on,
     # not the old phase's (which would put them a second early until its median caught up).
