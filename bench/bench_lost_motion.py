@@ -27,7 +27,7 @@ noise, within 5 % at 1 %).
 Usage::
 
     .venv/bin/python bench/bench_lost_motion.py [--runs 24] [--noise 2,1] [--duration-s 150]
-        [--stamp-jitter-us 300] [--generator third]
+        [--stamp-jitter-us 300 --layout combined --rate-hz 1000] [--generator third]
 
 ``--generator third`` runs the same on ``bench/third_generator.py`` (a catalogue-style
 torsional curve whose play may still open beyond the test torque, its own effort noise
@@ -89,7 +89,8 @@ def window_lost_motion(derived, joints):
     return result
 
 
-def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen):
+def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen,
+            layout='split', rate_hz=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -111,6 +112,10 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
     source : module
         ``independent_generator`` or ``third_generator`` (which draws its effort noise:
         ``noise_pct`` None).
+    layout : str
+        ``'split'`` (link and motor on two topics) or ``'combined'`` (one message).
+    rate_hz : float, optional
+        Sample rate [Hz]; drawn in 100-1000 Hz when None.
 
     Returns
     -------
@@ -122,7 +127,7 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
     start_fraction = float(np.random.default_rng([seed, 7]).uniform(0.05, 0.8))
     spec = source.Spec(seed=seed, kinds=kinds, hours=duration_s / gen.HOUR,
                        aging_factor=1.0, start_fraction=start_fraction,
-                       effort_noise_pct=noise_pct, layout='split',
+                       effort_noise_pct=noise_pct, layout=layout, rate_hz=rate_hz,
                        stamp_jitter_us=stamp_jitter_us)
     bag = tmp / f'bag-{seed}-{noise_pct}'
     derived = tmp / f'out-{seed}-{noise_pct}'
@@ -146,7 +151,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
         joints[name] = {'kind': t['kind'], 'truth': t['lost_motion_end_arcmin'],
                         'reported': float(lm) if isinstance(lm, (int, float)) else math.nan,
                         'window': windows.get(name, math.nan), 'observed': observed is not False
-                        and isinstance(lm, (int, float)), 'reason': r.get('reason')}
+                        and isinstance(lm, (int, float)), 'reason': r.get('reason'),
+                        'knee_pct': t.get('knee_torque_pct')}
         change = max(change, abs(t['lost_motion_end_arcmin'] - t['lost_motion_start_arcmin'])
                      / t['lost_motion_end_arcmin'])
     for path in (bag, derived):
@@ -168,6 +174,20 @@ def _stats(errors):
             f'{np.mean(e <= 0.05) * 100:5.1f} %')
 
 
+def _by_knee(runs, source):
+    """Print the signed errors by where the play is taken up (third generator's knee)."""
+    joints = [j for r in runs for j in r['joints'].values()
+              if j['knee_pct'] is not None and j['observed'] and math.isfinite(j[source])]
+    test_pct = 100.0 * gen.TEST_TORQUE_FRACTION
+    for lo, hi in ((0.0, 1.1), (1.1, 1.4), (1.4, math.inf)):
+        band = [100.0 * (j[source] - j['truth']) / j['truth'] for j in joints
+                if lo < j['knee_pct'] / test_pct <= hi]
+        if band:
+            where = f'beyond {lo:g}x' if hi == math.inf else f'{lo:g}-{hi:g}x'
+            print(f'      knee {where} the test torque: {len(band)} joints, signed '
+                  f'error {min(band):+.0f} .. {max(band):+.0f} %')
+
+
 def summarise(runs, noise_pct):
     """Print the distribution of the errors of one noise level."""
     if noise_pct is None:
@@ -186,6 +206,7 @@ def summarise(runs, noise_pct):
             errors = [(j[source] - j['truth']) / j['truth'] for j in seen]
             print(f'    {kind:8s} n={len(joints):3d} not observed {len(joints) - len(seen):2d}  '
                   f'{_stats(errors)}')
+        _by_knee(runs, source)
         for tol in (0.10, 0.05):
             ok = sum(all(j['observed'] and math.isfinite(j[source])
                          and abs(j[source] - j['truth']) <= tol * j['truth']
@@ -224,6 +245,10 @@ def main(argv=None):
     parser.add_argument('--generator', choices=('independent', 'third'), default='independent',
                         help='truth generator (third: catalogue-style curve, its own effort '
                         'noise; --noise is then not used)')
+    parser.add_argument('--layout', choices=('split', 'combined'), default='split',
+                        help='link and motor on two topics (split) or in one message')
+    parser.add_argument('--rate-hz', type=float, default=None,
+                        help='sample rate [Hz] (default drawn in 100-1000 Hz)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
     source = gen if args.generator == 'independent' else third_generator
@@ -237,7 +262,7 @@ def main(argv=None):
             seed = args.seed0 + i
             for level in levels:
                 run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
-                              args.stamp_jitter_us, source)
+                              args.stamp_jitter_us, source, args.layout, args.rate_hz)
                 results[level].append(run)
                 if args.quiet:
                     continue

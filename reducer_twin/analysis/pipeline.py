@@ -58,7 +58,8 @@ from reducer_twin.core.errors import BagError, InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import CLOCK_SCATTER, EFFORT_SOURCES, IngestConfig
 from reducer_twin.core.ingest import motor_effort_scale
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS, pair_columns, PAIRING_FACTS
-from reducer_twin.core.ingest import retimed_message, SHARED_STAMPS, StreamCleaner
+from reducer_twin.core.ingest import retimed_message, SHARED_STAMPS, step_scatter
+from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import estimate_numbers, joint_topic, TOPIC_NAMESPACE
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
@@ -644,10 +645,8 @@ class _Chunks:
         self._last_stamp[topic] = stamps[-1]
         steps = np.diff(stamps)
         steps = steps[steps > 0]
-        if steps.size >= 64:     # the period and the scatter of the steps about it (MAD)
-            period = float(np.median(steps))
-            scatter = 1.4826 * float(np.median(np.abs(steps - period)))
-            self.step_scatter.setdefault(topic, []).append((period, scatter))
+        if steps.size >= 64:     # the period and the scatter of the steps about it
+            self.step_scatter.setdefault(topic, []).append(step_scatter(steps))
 
     def _warn(self):
         """Say what the messages did wrong that the ingestion counts do not name."""
@@ -1285,10 +1284,7 @@ class _Run:
     def run(self):
         plan = self.plan
         chunks = self.chunks
-        # Stamps are re-timed only where one message carries both encoders (StampClock).
-        link_clean = StreamCleaner(self.settings.ingest, retime=not plan.motor_topic)
-        motor_clean = StreamCleaner(self.settings.ingest, retime=False) \
-            if plan.motor_topic else None
+        link_clean, motor_clean = stream_cleaners(self.settings.ingest, bool(plan.motor_topic))
         link_names = [x for j, m in zip(plan.joints, plan.motor_names) for x in (j, m)] \
             if not plan.motor_topic else list(plan.joints)
         for chunk in chunks:

@@ -164,6 +164,37 @@ class CleanStream:
                            self.effort[ok, k], self.segment[ok])
 
 
+def step_scatter(steps):
+    """
+    Return the period of stamp steps and their scatter about it.
+
+    Parameters
+    ----------
+    steps : ndarray
+        Differences of successive stamps [ns].
+
+    Returns
+    -------
+    tuple of float
+        The median step and the robust sd of the steps about it (1.4826 x MAD) [ns].
+
+    """
+    period = float(np.median(steps))
+    return period, 1.4826 * float(np.median(np.abs(steps - period)))
+
+
+def stream_cleaners(config, split):
+    """
+    Return the cleaners of a robot's link stream and of its motor stream (None if one).
+
+    Only a stream that carries both encoders of its joints may be re-timed
+    (:class:`StampClock`): two topics keep their stamps.
+    """
+    if split:
+        return StreamCleaner(config, retime=False), StreamCleaner(config, retime=False)
+    return StreamCleaner(config), None
+
+
 class StampClock:
     """
     Re-time stamps that scatter about a regular controller clock (stamped on arrival).
@@ -304,8 +335,7 @@ class StampClock:
         if steps.size < PERIOD_STEPS:   # a clock that stands: nothing to re-time on
             self.active = False
             return
-        period = float(np.median(steps))
-        scatter = 1.4826 * float(np.median(np.abs(steps - period)))
+        period, scatter = step_scatter(steps)
         self.period_ns, self.scatter_ns = period, scatter
         clipped = np.clip(steps, period - 3.0 * scatter, period + 3.0 * scatter) - period
         a, b = clipped[1:], clipped[:-1]

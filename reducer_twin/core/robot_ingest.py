@@ -19,7 +19,7 @@ import numpy as np
 
 from .errors import InvalidParameter
 from .ingest import choose_effort, IngestConfig, motor_effort_scale, Pairer, SpikeFilter
-from .ingest import SHARED_STAMPS, SpikeFilterBank, StreamCleaner
+from .ingest import SHARED_STAMPS, SpikeFilterBank, stream_cleaners
 
 
 STREAMS = {
@@ -89,8 +89,7 @@ class RobotIngest:
         self.effort_source = effort_source
         self.effort_scale = motor_direction * motor_effort_scale(motor_effort_units,
                                                                  motor_angles, ratio)
-        self.link = StreamCleaner(config, retime=not self.split)
-        self.motor = StreamCleaner(config, retime=False) if self.split else None
+        self.link, self.motor = stream_cleaners(config, self.split)
         self.spikes = SpikeFilterBank(ratio, len(self.joints), config)
         self.pairers = [Pairer(config, self.scale, effort=effort_source,
                                motor_effort_scale=self.effort_scale, ratio=ratio,
