@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """
-Benchmark of reading ros2_control's DynamicJointState and ROS 1 bags (a script, not a test).
+Benchmark of reading the recording forms a robot leaves (a script, not a test).
 
 Simulates a 6-joint robot (one combined ``/joint_states``), rewrites it as
 ``/dynamic_joint_states`` (each joint: position, velocity, effort, motor_position and a
-temperature, written by rosbags' rosbag2 writer) and as a ROS 1 ``.bag`` (rosbags'
-converter), then measures for each form: read and decode with ``Bag.iter_joint_states``
+temperature, written by rosbags' rosbag2 writer), as a ROS 1 ``.bag`` (rosbags'
+converter) and with rosbag2's zstd file and message compression (rosbags' writer), then
+measures for each form: read and decode with ``Bag.iter_joint_states``
 (best of ``--repeat``), rosbags' own reader and deserializer on a slice, and ``analyze``
 end to end in this process.
 
@@ -73,6 +74,19 @@ def write_ros1(src, dst, store, noetic):
             exclude_topics=[], include_topics=[], exclude_msgtypes=[], include_msgtypes=[])
 
 
+def write_compressed(src, dst, mode):
+    """Rewrite the bag with rosbag2's zstd compression of ``mode`` (rosbags' writer)."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
+    writer = Writer(dst, version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode[mode.upper()], CompressionFormat.ZSTD)
+    with Reader(src) as reader, writer:
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data,
+                                           rihs01=c.digest) for c in reader.connections}
+        for connection, stamp, raw in reader.messages():
+            writer.write(out[connection.id], stamp, raw)
+
+
 def ours(path, topic, repeat):
     """Best read+decode rate of Bag.iter_joint_states [msg/s] and the message count."""
     best, count = 0.0, 0
@@ -114,13 +128,17 @@ def main():
         simulate_bag(tmp / 'robot', spec)
         write_djs(tmp / 'robot', tmp / 'djs', store)
         write_ros1(tmp / 'robot', tmp / 'robot.bag', store, noetic)
+        for mode in ('file', 'message'):
+            write_compressed(tmp / 'robot', tmp / mode, mode)
         settings = AnalysisSettings(aging_factor=AGING)
         print(f'6 joints, {args.messages:,} messages at {RATE_HZ:g} Hz')
         for label, path, topic in (('rosbag2 MCAP JointState', tmp / 'robot', '/joint_states'),
                                    ('DynamicJointState (MCAP)', tmp / 'djs',
                                     '/dynamic_joint_states'),
                                    ('ROS 1 .bag JointState', tmp / 'robot.bag',
-                                    '/joint_states')):
+                                    '/joint_states'),
+                                   ('rosbag2 file zstd', tmp / 'file', '/joint_states'),
+                                   ('rosbag2 message zstd', tmp / 'message', '/joint_states')):
             rate, count = ours(path, topic, args.repeat)
             base = rosbags_rate(path, topic, store, 20_000)
             start = time.perf_counter()

@@ -3,7 +3,9 @@ rosbag2 bags: open any recording the analysis may get, write the ones it produce
 
 ``open_bag`` accepts a bag directory (``metadata.yaml`` of version 1 to 9, possibly split
 over several storage files), a bare ``.mcap`` file, an sqlite3 ``.db3`` bag of older
-distributions, or a ROS 1 ``.bag`` file (:mod:`reducer_twin.io.rosbag1`). QoS may be
+distributions, or a ROS 1 ``.bag`` file (:mod:`reducer_twin.io.rosbag1`); rosbag2's zstd
+file and message compression are read too (:mod:`reducer_twin.io.rosbag2_compression`,
+the recording left as it is). QoS may be
 written with integer or string policies. The returned :class:`Bag` lists topics and reads
 joint state topics as vectorised
 :class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateBatch` es
@@ -36,6 +38,8 @@ from reducer_twin.io.mcap_format import MAGIC
 from reducer_twin.io.mcap_reader import McapBagReader, RawBatch, ReadWarning
 from reducer_twin.io.rosbag1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZATION as ROS1
 from reducer_twin.io.rosbag1 import VERSION as ROS1_VERSION
+from reducer_twin.io.rosbag2_compression import check_compression, DecompressedFiles
+from reducer_twin.io.rosbag2_compression import inflate_batch, is_zstd_file
 from reducer_twin.io.rosbag2_metadata import custom_data_strings, load_yaml
 from reducer_twin.io.rosbag2_metadata import parse_qos_profiles
 from reducer_twin.msg_adapters import dynamic_joint_state as djs
@@ -278,8 +282,10 @@ class Bag:
     """
 
     def __init__(self, path, storage, files, info, validate_crc=True, interfaces=None,
-                 motor_suffix='_motor'):
+                 motor_suffix='_motor', copies=None):
         self.path = Path(path)
+        self._copies = copies or DecompressedFiles()
+        self._undecompressed = {}
         self.storage = storage
         self.info = info or {}
         self.warnings = []
@@ -298,7 +304,7 @@ class Bag:
             raise errors[0]
         for err in errors:
             self._warn(f'{err}; skipping that file')
-        self.files = [f.path for f in self._files]
+        self.files = [Path(self._copies.origin.get(str(f.path), f.path)) for f in self._files]
         self._collect()
 
     # ----------------------------------------------------------------- public API
@@ -400,7 +406,7 @@ class Bag:
         """
         names = self._known_topics(topics)
         for handle in self._files:
-            for batch in handle.iter_batches(names):
+            for batch in self._batches(handle, names):
                 for name, sub in self._split(handle, batch).items():
                     if self.topic_details[name].serialization_format == ROS1:
                         sub = self._ros1_to_cdr(handle, name, sub)
@@ -408,10 +414,11 @@ class Bag:
             self._take_warnings(handle)
 
     def close(self):
-        """Release all files."""
+        """Release all files (and delete the decompressed copies of compressed ones)."""
         for handle in self._files:
             handle.close()
         self._files = []
+        self._copies.close()
 
     def __enter__(self):
         """Return the bag."""
@@ -427,9 +434,27 @@ class Bag:
         self.warnings.append(ReadWarning(str(path or self.path), offset, message))
 
     def _take_warnings(self, handle):
+        origin = self._copies.origin.get(str(handle.path))
         for warning in handle.warnings:
+            if origin is not None:   # said of the recording's file, not of its copy
+                warning = ReadWarning(origin, None, f'(decompressed) {warning.message}')
             if warning not in self.warnings:
                 self.warnings.append(warning)
+        failed = self._undecompressed.pop(str(handle.path), 0)
+        if failed:
+            self._warn(f'{failed:,} message payload(s) are zstd frames that do not decompress '
+                       '(rosbag2 message compression); skipping them',
+                       self._copies.origin.get(str(handle.path), handle.path))
+
+    def _batches(self, handle, names):
+        """Read raw batches of a file, with payloads of message compression decompressed."""
+        for batch in handle.iter_batches(names):
+            if self.storage != 'rosbag1':   # a CDR payload starts with 0, a zstd frame not
+                batch, failed = inflate_batch(batch)
+                if failed:
+                    key = str(handle.path)
+                    self._undecompressed[key] = self._undecompressed.get(key, 0) + failed
+            yield batch
 
     def _collect(self):
         details = {}
@@ -516,7 +541,7 @@ class Bag:
 
     def _iter_joint_states(self, names, errors):
         for handle in self._files:
-            for batch in handle.iter_batches(names):
+            for batch in self._batches(handle, names):
                 for name, sub in self._split(handle, batch).items():
                     decode = self._decoder(handle, name)
                     decoded = decode(sub.data, sub.offsets, sub.lengths, errors)
@@ -711,7 +736,7 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
     ------
     BagError
         If the path does not exist, holds no storage file, is neither MCAP, sqlite3 nor
-        an indexed ROS 1 bag, uses rosbag2 file or message compression, or its
+        an indexed ROS 1 bag, uses a rosbag2 compression other than zstd, or its
         metadata.yaml is unreadable or lists only missing files.
 
     """
@@ -730,7 +755,8 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
             _check_metadata(meta, info, warnings)
             files = _files_of_directory(path, info, warnings)
         else:
-            files = sorted([*path.glob('*.mcap'), *path.glob('*.db3')], key=_natural_key)
+            files = sorted([*path.glob('*.mcap'), *path.glob('*.db3'), *path.glob('*.mcap.zstd'),
+                            *path.glob('*.db3.zstd')], key=_natural_key)
             if not files:
                 ros1 = sorted(p.name for p in path.glob('*.bag'))
                 hint = f'; ROS 1 bags are given as files: {ros1[:3]}' if ros1 else ''
@@ -741,18 +767,23 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
     else:
         files = [path]
     kinds, readable, errors = set(), [], []
+    copies = DecompressedFiles()   # of files rosbag2 compressed whole (file mode)
     for file in files:
         try:
+            if is_zstd_file(file):
+                file = copies.decompress(file)
             kinds.add(_sniff(file))
             readable.append(file)
         except BagError as err:
             errors.append(err)
     if not readable:
+        copies.close()
         raise errors[0]
     for err in errors:  # a split bag with one damaged file: read the others
         warnings.append(ReadWarning(str(path), None, f'{err}; skipping that file'))
     files = readable
     if len(kinds) > 1:
+        copies.close()
         raise BagError(f'{path} mixes {" and ".join(sorted(kinds))} files; expected one '
                        'storage format')
     storage = kinds.pop()
@@ -761,7 +792,11 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
         warnings.append(ReadWarning(str(path), None, f'metadata.yaml says storage '
                                     f'{declared!r} but the files are {storage}; reading them '
                                     f'as {storage}'))
-    bag = Bag(path, storage, files, info, validate_crc, interfaces, motor_suffix)
+    try:
+        bag = Bag(path, storage, files, info, validate_crc, interfaces, motor_suffix, copies)
+    except BaseException:
+        copies.close()
+        raise
     bag.warnings[:0] = warnings
     return bag
 
@@ -774,11 +809,7 @@ def _check_metadata(meta, info, warnings):
         warnings.append(ReadWarning(str(meta), None, f'metadata version {version} is newer than '
                                     f'{MAX_METADATA_VERSION}; reading it as version '
                                     f'{MAX_METADATA_VERSION}'))
-    mode = str(info.get('compression_mode') or '').lower()
-    if mode in ('file', 'message'):
-        raise BagError(f'{meta}: rosbag2 {mode} compression '
-                       f'({info.get("compression_format")!r}) is not supported; expected '
-                       "compression_mode '' (MCAP chunk compression is supported)")
+    check_compression(meta, info)
     storage = info.get('storage_identifier')
     if storage not in ('mcap', 'sqlite3'):
         raise BagError(f"{meta}: storage_identifier must be 'mcap' or 'sqlite3', "

@@ -290,10 +290,11 @@ BAD_BAGS = [
     ('metadata.yaml of something else', lambda tmp: _bag_dir_with(tmp, 'other',
                                                                   metadata='a: 1'),
      'no rosbag2_bagfile_information'),
-    ('file compression', lambda tmp: _bag_dir_with(
+    ('file compression other than zstd', lambda tmp: _bag_dir_with(
         tmp, 'compressed', metadata='rosbag2_bagfile_information:\n  version: 5\n'
         '  storage_identifier: sqlite3\n  compression_mode: FILE\n'
-        '  compression_format: zstd\n  relative_file_paths: [a.db3.zstd]\n'), 'compression'),
+        '  compression_format: bz2\n  relative_file_paths: [a.db3.bz2]\n'),
+     "compression 'bz2' cannot be read; expected compression_format zstd"),
     ('unknown storage', lambda tmp: _bag_dir_with(
         tmp, 'storage', metadata='rosbag2_bagfile_information:\n  version: 9\n'
         '  storage_identifier: hdf5\n  relative_file_paths: [a.h5]\n'), 'storage_identifier'),
