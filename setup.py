@@ -39,6 +39,7 @@ setup(
         'mcap',
         'lz4',
         "backports.zstd; python_version < '3.14'",
+        'zstandard',
         'pyyaml',
         'rich',
         'matplotlib',

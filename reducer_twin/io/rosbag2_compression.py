@@ -25,6 +25,7 @@ import tempfile
 import numpy as np
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.mcap_reader import RawBatch
+import zstandard
 
 try:  # Python >= 3.14
     from compression import zstd as _zstd  # pragma: no cover
@@ -222,6 +223,10 @@ def inflate_batch(batch):
     """
     Decompress the zstd-compressed payloads of a batch (rosbag2 message compression).
 
+    One decompression context (python-zstandard's, the mcap library's own) serves the
+    whole batch: a context per frame, as ``compression.zstd.decompress`` makes, took
+    twice as long per message.
+
     Parameters
     ----------
     batch : RawBatch
@@ -231,27 +236,41 @@ def inflate_batch(batch):
     -------
     tuple
         ``(RawBatch, failed)``: the batch with plain payloads (a payload that does not
-        decompress is left out) and the number left out.
+        decompress to the end of its frame is left out) and the number left out.
 
     """
     packed = compressed_payloads(batch)
     if not packed.any():
         return batch, 0
-    raw = batch.data
+    context = zstandard.ZstdDecompressor()
+    view = memoryview(batch.data)
     parts, keep = [], np.ones(len(batch), bool)
     rows = zip(batch.offsets.tolist(), batch.lengths.tolist(), packed.tolist())
     for i, (start, length, zipped) in enumerate(rows):
-        piece = raw[start:start + length]
+        piece = view[start:start + length]
         if zipped:
-            try:
-                piece = np.frombuffer(_zstd.decompress(piece), np.uint8)
-            except (_zstd.ZstdError, EOFError):
+            piece = _frame(context, piece)
+            if piece is None:
                 keep[i] = False
                 continue
         parts.append(piece)
-    lengths = np.fromiter((p.size for p in parts), np.int64, len(parts))
+    lengths = np.fromiter(map(len, parts), np.int64, len(parts))
     offsets = np.zeros(lengths.size, np.int64)
     np.cumsum(lengths[:-1], out=offsets[1:])
-    data = np.concatenate(parts) if parts else np.zeros(0, np.uint8)
+    data = np.frombuffer(b''.join(parts), np.uint8)
     return RawBatch(batch.channel_id[keep], batch.sequence[keep], batch.log_time_ns[keep],
                     batch.publish_time_ns[keep], data, offsets, lengths), int((~keep).sum())
+
+
+def _frame(context, frame):
+    """Decompress one whole frame, or return None (damaged, or cut short)."""
+    try:
+        return context.decompress(frame)
+    except zstandard.ZstdError:   # no content size in the header (a streamed frame)
+        pass
+    try:
+        stream = context.decompressobj()
+        out = stream.decompress(frame)
+    except zstandard.ZstdError:
+        return None
+    return out if stream.eof else None

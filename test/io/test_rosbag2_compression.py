@@ -149,6 +149,20 @@ def test_inflating_keeps_plain_payloads_and_leaves_out_frames_that_do_not_decomp
     assert inflate_batch(plain) == (plain, 0), 'a batch without frames is passed through'
 
 
+def _streamed(payload):
+    """Compress as a streaming compressor does: no content size in the frame's header."""
+    compressor = _zstd.ZstdCompressor()
+    return compressor.compress(payload) + compressor.flush()
+
+
+def test_frames_with_and_without_their_size_inflate_and_a_cut_one_is_left_out():
+    payloads = [b'\x00\x01\x00\x00' + bytes([i % 7]) * (40 + 13 * i) for i in range(6)]
+    frames = [_zstd.compress(p) for p in payloads[:3]] + [_streamed(p) for p in payloads[3:]]
+    batch, failed = inflate_batch(_raw(frames + [frames[4][:-3]]))
+    assert failed == 1
+    assert [batch.payload(i) for i in range(len(batch))] == payloads
+
+
 def test_a_frame_that_does_not_decompress_is_counted_in_one_warning(tmp_path):
     packed = _compressed_copy(_plain_bag(tmp_path / 'plain', n=50), tmp_path / 'packed',
                               'message', 'sqlite3')
