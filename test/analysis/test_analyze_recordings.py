@@ -1,5 +1,5 @@
 """
-reducer-twin analyze on ros2_control's DynamicJointState and on ROS 1 bags.
+reducer-twin analyze on ros2_control's DynamicJointState, ROS 1 bags and rosbag2-compressed bags.
 
 Each recording is the simulator's bag rewritten by an independent writer (rosbags'
 rosbag2 and rosbag1 writers, and its ROS 2 to ROS 1 converter): the analysis must agree
@@ -17,12 +17,14 @@ import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.core.errors import BagError
+from reducer_twin.io.bag import open_bag
 from reducer_twin.msg_adapters.dynamic_joint_state import MSGTYPE as DJS
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from rosbags.convert import convert
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag1 import Writer as Writer1
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import get_types_from_msg, get_typestore, Stores
 
 AGING = 180_000.0
@@ -273,3 +275,37 @@ def test_a_ros1_bag_without_joint_states_is_refused_naming_its_topics(tmp_path):
     with pytest.raises(BagError, match=r'no sensor_msgs/msg/JointState topic; found: '
                                        r'/chatter \(std_msgs/msg/String\)'):
         analyze_bag(path, tmp_path / 'out')
+
+
+# --------------------------------------------------------------------------- rosbag2 compression
+
+
+def _digests(root):
+    return {p.name: p.read_bytes() for p in sorted(root.iterdir())}
+
+
+@pytest.mark.parametrize('mode', ['file', 'message'])
+def test_a_recording_rosbag2_compressed_analyses_as_the_original_and_is_left_as_it_was(
+        combined, tmp_path, capsys, mode):
+    with open_bag(combined[0]) as bag:
+        custom = bag.metadata
+    writer = Writer(tmp_path / 'packed', version=9, storage_plugin=StoragePlugin.MCAP)
+    writer.set_compression(CompressionMode[mode.upper()], CompressionFormat.ZSTD)
+    for key, value in custom.items():   # the aging factor, as the recorder was given it
+        writer.set_custom_data(key, value)
+    with Reader(combined[0]) as reader, writer:
+        out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data,
+                                           rihs01=c.digest) for c in reader.connections}
+        for connection, stamp, raw in reader.messages():
+            writer.write(out[connection.id], stamp, raw)
+    before = _digests(tmp_path / 'packed')
+    code, text, err = _run(['analyze', tmp_path / 'packed', '--out', tmp_path / 'derived',
+                            '--json'], capsys)
+    assert code == 0, err
+    assert 'WARNING' not in err
+    got = json.loads(text)['joints']
+    for joint, want in combined[2].joints.items():
+        for key in ('wear_um', 'lost_motion_arcmin', 'rul_p50_h'):
+            assert got[joint][key] == pytest.approx(want.summary()[key], rel=1e-9), key
+        assert got[joint]['messages'] == len(combined[1])
+    assert _digests(tmp_path / 'packed') == before
