@@ -857,8 +857,11 @@ def _fault_of(batch, effort=1.0, angles=1.0, offset=0.0):
 @pytest.mark.parametrize('effort, angles, said', [
     (-1.0, 1.0, 'the effort has the opposite sign'),
     (0.1, 1.0, 'the effort is not the output torque'),
+    (5.0, 1.0, 'the effort is not the output torque'),
+    (10.0, 1.0, 'the effort is not the output torque'),
     (1.0, 180.0 / math.pi, 'the encoders do not read radians'),
-], ids=['effort reversed', 'a tenth of the torque', 'angles in degrees'])
+], ids=['effort reversed', 'a tenth of the torque', 'five times the torque',
+        'ten times the torque', 'angles in degrees'])
 def test_an_effort_or_angles_in_other_units_stop_the_lost_motion_with_the_reason(
         effort, angles, said):
     _, b = simulated()
