@@ -267,8 +267,11 @@ def main(argv=None):
                 if args.quiet:
                     continue
                 parts = [f"{n} {j['kind'][:4]} {j['truth']:.3f}->{j['reported']:.3f}"
-                         f" ({100 * (j['reported'] - j['truth']) / j['truth']:+.0f} %)"
-                         for n, j in run['joints'].items()]
+                         f" ({100 * (j['reported'] - j['truth']) / j['truth']:+.0f} %; windows "
+                         f"{100 * (j['window'] - j['truth']) / j['truth']:+.0f} %"
+                         + ('' if j['knee_pct'] is None else
+                            f", knee {j['knee_pct'] / (100 * gen.TEST_TORQUE_FRACTION):.1f}x")
+                         + ')' for n, j in run['joints'].items()]
                 noise = 'drawn' if level is None else f'{level:g} %'
                 print(f"seed {seed} noise {noise} {run['rate_hz']:4.0f} Hz "
                       f"start {100 * run['start_fraction']:2.0f} % of life rc {run['rc']}: "
