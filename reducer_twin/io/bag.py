@@ -40,6 +40,7 @@ from reducer_twin.io.rosbag1 import MAGIC as ROS1_MAGIC, Rosbag1File, SERIALIZAT
 from reducer_twin.io.rosbag1 import VERSION as ROS1_VERSION
 from reducer_twin.io.rosbag2_compression import check_compression, DecompressedFiles
 from reducer_twin.io.rosbag2_compression import inflate_batch, is_zstd_file
+from reducer_twin.io.rosbag2_compression import without_unfinished
 from reducer_twin.io.rosbag2_metadata import custom_data_strings, load_yaml
 from reducer_twin.io.rosbag2_metadata import parse_qos_profiles
 from reducer_twin.msg_adapters import dynamic_joint_state as djs
@@ -755,8 +756,12 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
             _check_metadata(meta, info, warnings)
             files = _files_of_directory(path, info, warnings)
         else:
-            files = sorted([*path.glob('*.mcap'), *path.glob('*.db3'), *path.glob('*.mcap.zstd'),
-                            *path.glob('*.db3.zstd')], key=_natural_key)
+            files, unfinished = without_unfinished(sorted(
+                [*path.glob('*.mcap'), *path.glob('*.db3'), *path.glob('*.mcap.zstd'),
+                 *path.glob('*.db3.zstd')], key=_natural_key))
+            for file in unfinished:
+                warnings.append(ReadWarning(str(file), None, f'{file.name[:-5]} is there too '
+                                            '(a compression that did not finish): reading that'))
             if not files:
                 ros1 = sorted(p.name for p in path.glob('*.bag'))
                 hint = f'; ROS 1 bags are given as files: {ros1[:3]}' if ros1 else ''
@@ -776,6 +781,7 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
             readable.append(file)
         except BagError as err:
             errors.append(err)
+    warnings += copies.warnings
     if not readable:
         copies.close()
         raise errors[0]

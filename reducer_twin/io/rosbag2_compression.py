@@ -24,7 +24,7 @@ import tempfile
 
 import numpy as np
 from reducer_twin.core.errors import BagError
-from reducer_twin.io.mcap_reader import RawBatch
+from reducer_twin.io.mcap_reader import RawBatch, ReadWarning
 import zstandard
 
 try:  # Python >= 3.14
@@ -116,11 +116,14 @@ class DecompressedFiles:
     ----------
     origin : dict of str to str
         Decompressed copy -> the recording's file.
+    warnings : list of ReadWarning
+        Files read only up to where their compression was cut.
 
     """
 
     def __init__(self):
         self.origin = {}
+        self.warnings = []
         self._directory = None
         self._owner = os.getpid()
 
@@ -141,8 +144,10 @@ class DecompressedFiles:
         Raises
         ------
         BagError
-            If the file is not a whole zstd stream, or the temporary directory has no
-            room for the copy.
+            If the file is not a zstd stream, ends before any of it decompresses, or the
+            temporary directory has no room for the copy. A stream cut later (a recording
+            whose compression stopped) is kept up to the cut, with a warning; the storage
+            reader then reads it as a file cut short.
 
         """
         if self._directory is None:
@@ -158,16 +163,22 @@ class DecompressedFiles:
                            f'{self._directory.parent}, which has {free / 1e6:,.0f} MB free; '
                            'set TMPDIR to a larger disk')
         try:
-            with _zstd.open(path, 'rb') as src, open(target, 'wb') as dst:
-                shutil.copyfileobj(src, dst, 1 << 22)
+            with open(path, 'rb') as src, open(target, 'wb') as dst:
+                _stream(src, dst)
         except _zstd.ZstdError as err:
             target.unlink(missing_ok=True)
             raise BagError(f'{path} is not a readable zstd-compressed storage file: {err}; '
                            'expected a file rosbag2 compressed in file mode') from None
         except EOFError:
-            target.unlink(missing_ok=True)
-            raise BagError(f'{path} ends inside a zstd frame (a recording cut short while '
-                           'it was compressed); nothing of it can be read') from None
+            kept = target.stat().st_size if target.exists() else 0
+            if not kept:
+                target.unlink(missing_ok=True)
+                raise BagError(f'{path} ends inside a zstd frame before any of it '
+                               'decompresses (its compression was cut short); nothing of it '
+                               'can be read') from None
+            self.warnings.append(ReadWarning(str(path), None, (
+                f'ends inside a zstd frame (its compression was cut short): read up to the '
+                f'cut, {kept:,} bytes decompressed')))
         except OSError as err:
             target.unlink(missing_ok=True)
             if err.errno == errno.ENOSPC:
@@ -190,6 +201,43 @@ class DecompressedFiles:
         if self._directory is not None and os.getpid() == self._owner:
             shutil.rmtree(self._directory, ignore_errors=True)
             self._directory = None
+
+
+def _stream(src, dst, block=1 << 20):
+    """
+    Decompress the zstd frames of ``src`` into ``dst`` as they come.
+
+    Everything that decompresses is written before a cut is met (EOFError then: a whole
+    file read at once would lose the last read's output).
+    """
+    decompressor, pending = _zstd.ZstdDecompressor(), b''
+    while True:
+        data = pending or src.read(block)
+        pending = b''
+        if not data:
+            break
+        dst.write(decompressor.decompress(data))
+        if decompressor.eof:    # the frame ends: the next one (if any) starts afresh
+            pending, decompressor = decompressor.unused_data, _zstd.ZstdDecompressor()
+            if not pending:
+                pending = src.read(block)
+                if not pending:
+                    return
+    if not decompressor.eof:
+        raise EOFError('the last zstd frame is cut short')
+
+
+def without_unfinished(files):
+    """
+    Leave out ``X.zstd`` where ``X`` is there too; return the files kept and those left out.
+
+    rosbag2 compresses a storage file once it is closed and then deletes it: both are
+    there when that was interrupted, and the compressed one may be cut short. The
+    uncompressed file holds the same messages whole.
+    """
+    names = {f.name for f in files}
+    unfinished = [f for f in files if f.name.endswith('.zstd') and f.name[:-5] in names]
+    return [f for f in files if f not in unfinished], unfinished
 
 
 def compressed_payloads(batch):

@@ -15,7 +15,8 @@ import pytest
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.bag import open_bag, write_bag_dir
 from reducer_twin.io.mcap_reader import RawBatch
-from reducer_twin.io.rosbag2_compression import _zstd, inflate_batch, ZSTD_MAGIC
+from reducer_twin.io.rosbag2_compression import _zstd, DecompressedFiles, inflate_batch
+from reducer_twin.io.rosbag2_compression import ZSTD_MAGIC
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
@@ -107,14 +108,35 @@ def test_message_compressed_payloads_are_recognised_without_metadata(tmp_path):
     assert np.isfinite(got.position).all()
 
 
-def test_a_compressed_file_cut_short_is_a_bag_error_naming_it(tmp_path, private_tmp):
-    packed = _compressed_copy(_plain_bag(tmp_path / 'plain'), tmp_path / 'packed', 'file',
-                              'mcap')
+def test_a_compressed_file_cut_short_is_read_up_to_the_cut_with_a_warning(tmp_path, private_tmp):
+    packed = _compressed_copy(_plain_bag(tmp_path / 'plain', n=20_000), tmp_path / 'packed',
+                              'file', 'mcap')
     file = packed / 'packed.mcap.zstd'
-    file.write_bytes(file.read_bytes()[:file.stat().st_size // 2])
-    with pytest.raises(BagError, match='packed.mcap.zstd ends inside a zstd frame'):
+    whole = file.read_bytes()
+    file.write_bytes(whole[:len(whole) * 3 // 4])
+    got, warnings, _ = _joint_states(packed)
+    assert 0 < len(got) < 20_000
+    np.testing.assert_array_equal(np.diff(got.stamps_ns), 1_000_000)
+    said = [str(w) for w in warnings]
+    assert any(w.startswith('packed.mcap.zstd: ends inside a zstd frame') for w in said), said
+    assert list(private_tmp.iterdir()) == []
+    # Cut inside its first block, nothing decompresses: one error naming the file.
+    file.write_bytes(whole[:20])
+    with pytest.raises(BagError, match='packed.mcap.zstd ends inside a zstd frame before any'):
         open_bag(packed)
     assert list(private_tmp.iterdir()) == []
+
+
+def test_a_compression_left_unfinished_beside_its_input_reads_the_input_once(tmp_path):
+    # rosbag2 compresses a closed file, then deletes it: interrupted between the two, both
+    # are there, the compressed one maybe cut short (and no metadata.yaml yet).
+    plain = _plain_bag(tmp_path / 'plain')
+    packed = _compressed_copy(plain, tmp_path / 'packed', 'file', 'mcap')
+    (packed / 'metadata.yaml').unlink()
+    (packed / 'packed.mcap').write_bytes(next(plain.glob('*.mcap')).read_bytes())
+    got, warnings, files = _joint_states(packed)
+    assert len(got) == 3000 and files == [packed / 'packed.mcap']
+    assert any('packed.mcap is there too' in str(w) for w in warnings)
 
 
 def test_a_compression_rosbag2_does_not_ship_is_refused_with_the_one_it_does(tmp_path):
@@ -187,4 +209,19 @@ def test_the_decompressed_copy_is_not_made_beside_the_recording(tmp_path, privat
         assert sorted(p.name for p in packed.iterdir()) == ['metadata.yaml',
                                                             'packed.mcap.zstd']
         assert bag.topics['/joint_states'].count == 3000
+    assert list(private_tmp.iterdir()) == []
+
+
+def test_a_file_of_several_frames_decompresses_whole_and_a_cut_keeps_what_came_before(
+        tmp_path, private_tmp):
+    first, second = bytes(range(256)) * 3000, b'second frame ' * 50_000
+    whole = _zstd.compress(first) + _zstd.compress(second)
+    (tmp_path / 'a.mcap.zstd').write_bytes(whole)
+    (tmp_path / 'b.mcap.zstd').write_bytes(whole[:-10])
+    copies = DecompressedFiles()
+    assert copies.decompress(tmp_path / 'a.mcap.zstd').read_bytes() == first + second
+    kept = copies.decompress(tmp_path / 'b.mcap.zstd').read_bytes()
+    assert kept.startswith(first) and len(kept) < len(first) + len(second)
+    assert [w.path for w in copies.warnings] == [str(tmp_path / 'b.mcap.zstd')]
+    copies.close()
     assert list(private_tmp.iterdir()) == []
