@@ -203,12 +203,14 @@ class DecompressedFiles:
             self._directory = None
 
 
-def _stream(src, dst, block=1 << 20):
+def _stream(src, dst, block=1 << 16):
     """
     Decompress the zstd frames of ``src`` into ``dst`` as they come.
 
     Everything that decompresses is written before a cut is met (EOFError then: a whole
-    file read at once would lose the last read's output).
+    file read at once would lose the last read's output). 64 KiB of input at a time:
+    171 MB of MCAP in 0.20 s, against 0.54 s with 1 MiB (larger outputs to allocate) and
+    0.32-0.49 s through ``ZstdFile``.
     """
     decompressor, pending = _zstd.ZstdDecompressor(), b''
     while True:
