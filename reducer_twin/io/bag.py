@@ -771,8 +771,20 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
                                         f'the {len(files)} storage file(s) found'))
     else:
         files = [path]
-    kinds, readable, errors = set(), [], []
     copies = DecompressedFiles()   # of files rosbag2 compressed whole (file mode)
+    try:    # whatever stops the opening (an error, Ctrl-C while decompressing) removes them
+        bag = _open_storage(path, files, info, warnings, copies, validate_crc, interfaces,
+                            motor_suffix)
+    except BaseException:
+        copies.close()
+        raise
+    bag.warnings[:0] = warnings
+    return bag
+
+
+def _open_storage(path, files, info, warnings, copies, validate_crc, interfaces, motor_suffix):
+    """Sniff the storage files (decompressing compressed ones into ``copies``); open the bag."""
+    kinds, readable, errors = set(), [], []
     for file in files:
         try:
             if is_zstd_file(file):
@@ -783,13 +795,11 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
             errors.append(err)
     warnings += copies.warnings
     if not readable:
-        copies.close()
         raise errors[0]
     for err in errors:  # a split bag with one damaged file: read the others
         warnings.append(ReadWarning(str(path), None, f'{err}; skipping that file'))
     files = readable
     if len(kinds) > 1:
-        copies.close()
         raise BagError(f'{path} mixes {" and ".join(sorted(kinds))} files; expected one '
                        'storage format')
     storage = kinds.pop()
@@ -798,13 +808,7 @@ def open_bag(path, validate_crc=True, interfaces=None, motor_suffix='_motor'):
         warnings.append(ReadWarning(str(path), None, f'metadata.yaml says storage '
                                     f'{declared!r} but the files are {storage}; reading them '
                                     f'as {storage}'))
-    try:
-        bag = Bag(path, storage, files, info, validate_crc, interfaces, motor_suffix, copies)
-    except BaseException:
-        copies.close()
-        raise
-    bag.warnings[:0] = warnings
-    return bag
+    return Bag(path, storage, files, info, validate_crc, interfaces, motor_suffix, copies)
 
 
 def _check_metadata(meta, info, warnings):

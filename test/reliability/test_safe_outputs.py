@@ -33,6 +33,7 @@ from reducer_twin.io import mcap_array_writer, mcap_writer, outputs
 from reducer_twin.io.bag import open_bag
 from reducer_twin.io.bag_writer import foreign_bag_entries
 from reducer_twin.io.outputs import DiskFull, OutputDir, TEMP_TAG
+from reducer_twin.io.rosbag2_compression import _zstd
 import yaml
 
 pytestmark = pytest.mark.timeout(300, method='thread')
@@ -370,6 +371,46 @@ def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
     assert proc.returncode == code and said in err and 'Traceback' not in err, err
     assert not out.exists() and temporaries(tmp_path) == [], 'no bag, temporary or lock'
     assert snapshot(rec) == before
+
+
+@pytest.mark.parametrize('sig, code', [(signal.SIGTERM, 143), (signal.SIGINT, 130)],
+                         ids=['SIGTERM', 'SIGINT'])
+def test_analyze_stopped_while_decompressing_a_recording_leaves_no_copy_behind(
+        tmp_path, sig, code):
+    # A file-compressed recording is decompressed into TMPDIR before it is read; stopped
+    # then, the copy (here 256 MiB) stayed there.
+    rec = tmp_path / 'rec'
+    rec.mkdir()
+    compressor = _zstd.ZstdCompressor()
+    with open(rec / 'rec_0.mcap.zstd', 'wb') as stream:
+        for _ in range(4):
+            stream.write(compressor.compress(bytes(1 << 26)))
+        stream.write(compressor.flush())
+    before = snapshot(rec)
+    scratch = tmp_path / 'scratch'
+    scratch.mkdir()
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen(program('analyze', rec, '--out', tmp_path / 'd'),
+                                env={**os.environ, 'TMPDIR': str(scratch)},
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        deadline = time.monotonic() + 120
+        seen = False
+        while not seen and proc.poll() is None and time.monotonic() < deadline:
+            seen = any(f.stat().st_size > 0 for f in scratch.glob('reducer-twin-bag-*/*'))
+            time.sleep(0.001)
+        assert seen, 'the run ended before its copy was seen'
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    assert proc.returncode == code and 'Traceback' not in err, err
+    assert list(scratch.iterdir()) == [], 'no decompressed copy left'
+    assert snapshot(rec) == before and not (tmp_path / 'd').exists()
 
 
 # --------------------------------------------------------------------------- full disks
