@@ -335,6 +335,34 @@ def test_analyze_killed_mid_write_leaves_a_named_temporary_the_next_run_removes(
     assert temporaries(tmp_path) == [], 'the stale temporary and the lock are gone'
 
 
+def _stopped_once(argv, sig, ready, what, env=None):
+    """
+    Run the command as from a terminal, send ``sig`` once ``ready()``; return code, stderr.
+
+    A test run started in the background (a shell's background job ignores SIGINT, and a
+    child inherits that) would otherwise start it deaf to Ctrl-C.
+    """
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        deadline = time.monotonic() + 120
+        seen = False
+        while not seen and proc.poll() is None and time.monotonic() < deadline:
+            seen = ready()
+            time.sleep(0.001)
+        assert seen, f'the run ended before {what} was seen'
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    return proc.returncode, err
+
+
 @pytest.mark.parametrize('sig, code, said', [
     (signal.SIGTERM, 143, 'ERROR: terminated (SIGTERM)'),
     (signal.SIGINT, 130, 'ERROR: interrupted'),
@@ -346,29 +374,11 @@ def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
     simulate_bag(rec, SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1, seed=5))
     before = snapshot(rec)
     out = tmp_path / 'd'
-    # The command as started from a terminal: a test run started in the background (a
-    # shell's background job ignores SIGINT, and a child inherits that) would otherwise
-    # start it deaf to Ctrl-C.
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        proc = subprocess.Popen(program('analyze', rec, '--out', out),
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    try:
-        deadline = time.monotonic() + 120
-        seen = False
-        while not seen and proc.poll() is None and time.monotonic() < deadline:
-            seen = any(f.stat().st_size > 0 for tmp in
-                       tmp_path.glob(f'.d.{TEMP_TAG}-incomplete-*') for f in tmp.glob('*.mcap'))
-            time.sleep(0.001)
-        assert seen, 'the run ended before a partial derived bag was seen'
-        proc.send_signal(sig)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-        proc.wait()
-    assert proc.returncode == code and said in err and 'Traceback' not in err, err
+    returncode, err = _stopped_once(
+        program('analyze', rec, '--out', out), sig,
+        lambda: any(f.stat().st_size > 0 for tmp in tmp_path.glob(f'.d.{TEMP_TAG}-incomplete-*')
+                    for f in tmp.glob('*.mcap')), 'a partial derived bag')
+    assert returncode == code and said in err and 'Traceback' not in err, err
     assert not out.exists() and temporaries(tmp_path) == [], 'no bag, temporary or lock'
     assert snapshot(rec) == before
 
@@ -389,29 +399,13 @@ def test_analyze_stopped_while_decompressing_a_recording_leaves_no_copy_behind(
     before = snapshot(rec)
     scratch = tmp_path / 'scratch'
     scratch.mkdir()
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        proc = subprocess.Popen(program('analyze', rec, '--out', tmp_path / 'd'),
-                                env={**os.environ, 'TMPDIR': str(scratch)},
-                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    try:
-        deadline = time.monotonic() + 120
-        seen = False
-        while not seen and proc.poll() is None and time.monotonic() < deadline:
-            seen = any(f.stat().st_size > 0 for f in scratch.glob('reducer-twin-bag-*/*'))
-            time.sleep(0.001)
-        assert seen, 'the run ended before its copy was seen'
-        proc.send_signal(sig)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-        proc.wait()
-    assert proc.returncode == code and 'Traceback' not in err, err
+    returncode, err = _stopped_once(
+        program('analyze', rec, '--out', tmp_path / 'd'), sig,
+        lambda: any(f.stat().st_size > 0 for f in scratch.glob('reducer-twin-bag-*/*')),
+        'its copy', env={**os.environ, 'TMPDIR': str(scratch)})
+    assert returncode == code and 'Traceback' not in err, err
     assert list(scratch.iterdir()) == [], 'no decompressed copy left'
     assert snapshot(rec) == before and not (tmp_path / 'd').exists()
-
 
 # --------------------------------------------------------------------------- full disks
 
