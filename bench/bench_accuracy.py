@@ -87,9 +87,10 @@ from reducer_twin.core.pipeline import EstimatorStage, features_from_record  # n
 from reducer_twin.core.pipeline import features_record, LifeStage  # noqa: E402
 from reducer_twin.core.pipeline import state_from_record, TimeOffsetCalibration  # noqa: E402
 from reducer_twin.core.simulator import JointSimulator, SimConfig  # noqa: E402
-from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer  # noqa: E402
+from reducer_twin.core.te_extraction import TEExtractor  # noqa: E402
 from reducer_twin.core.transmission_error import model_tables  # noqa: E402
 from reducer_twin.core.units import ARCMIN, HOUR, UM  # noqa: E402
+from reducer_twin.core.window_analysis import WindowAnalyzer  # noqa: E402
 from reducer_twin.msg_adapters.layouts import TE_FEATURES  # noqa: E402
 import third_generator as third  # noqa: E402
 

@@ -12,7 +12,7 @@ the effort in other units), and the third generator's robot of seed 1007, whose 
 (35 arcsec of link eccentricity under 178 N*m of gravity) was refused as an effort 4.2
 times the torque before the allowance.
 
-The figures are read from ``WindowAnalyzer._effort_window``'s arguments (wrapped here).
+The figures are read from ``EffortCheck._window``'s arguments (wrapped here).
 
 Usage (from the checkout)::
 
@@ -26,7 +26,7 @@ import tempfile
 import numpy as np
 from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
-from reducer_twin.core import te_extraction
+from reducer_twin.core import effort_check
 import third_generator
 
 AGING = 3600.0
@@ -35,12 +35,12 @@ AGING = 3600.0
 def _recorded():
     """Wrap the effort check's per-window step; return the list it fills per analyzer."""
     seen = {}
-    step = te_extraction.WindowAnalyzer._effort_window
+    step = effort_check.EffortCheck._window
 
     def recording(self, level, slope, share, offset):
         seen.setdefault(id(self), []).append((slope, share))
         return step(self, level, slope, share, offset)
-    te_extraction.WindowAnalyzer._effort_window = recording
+    effort_check.EffortCheck._window = recording
     return seen
 
 

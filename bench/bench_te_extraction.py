@@ -31,9 +31,10 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 import numpy as np  # noqa: E402
 from reducer_twin.core.params import ReducerParams  # noqa: E402
 from reducer_twin.core.simulator import JointSimulator, SimConfig  # noqa: E402
-from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer  # noqa: E402
+from reducer_twin.core.te_extraction import compute_te  # noqa: E402
 from reducer_twin.core.transmission_error import lost_motion, model_tables  # noqa: E402
 from reducer_twin.core.units import ARCMIN, ARCSEC, UM  # noqa: E402
+from reducer_twin.core.window_analysis import WindowAnalyzer  # noqa: E402
 
 CASES = (('robot', 'gravity'), ('paper', 'gravity'), ('paper', 'constant'))
 WEARS = (0.0, 5e-6, 10e-6, 20e-6, 30e-6)   # m

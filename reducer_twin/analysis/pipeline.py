@@ -10,7 +10,7 @@ The same core objects the live nodes run, in the same order, on whole arrays:
   :class:`~reducer_twin.core.ingest.SpikeFilter`;
 * ``te_monitor``: :class:`~reducer_twin.core.te_extraction.TEExtractor`,
   :class:`~reducer_twin.core.pipeline.TimeOffsetCalibration` and
-  :class:`~reducer_twin.core.te_extraction.WindowAnalyzer`, records by
+  :class:`~reducer_twin.core.window_analysis.WindowAnalyzer`, records by
   :func:`~reducer_twin.core.pipeline.features_record`;
 * ``wear_estimator`` and ``life_publisher``: :class:`~reducer_twin.core.pipeline.
   EstimatorStage` and :class:`~reducer_twin.core.pipeline.LifeStage` per window.

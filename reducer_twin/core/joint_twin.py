@@ -5,7 +5,7 @@ A joint's processing is written here once. :class:`JointTwin` runs it whole
 (:class:`TwinFront`: TE extraction, the learnt encoder time offset and the
 window analysis; then :class:`TwinBack`: the Kalman wear estimate and the
 remaining-life prediction), and returns frozen results:
-:class:`~reducer_twin.core.te_extraction.WindowFeatures` per window,
+:class:`~reducer_twin.core.window_analysis.WindowFeatures` per window,
 :class:`WearEstimate`, :class:`LifeEstimate` and :class:`HealthSummary`.
 
 The live ROS nodes are shells over these pieces on separate topics
@@ -30,8 +30,9 @@ from .kinematics import total_ratio
 from .params import _Validated, spec
 from .pipeline import EstimatorStage, features_from_record, features_record, LifeConfig
 from .pipeline import LifeStage, TimeOffsetCalibration
-from .te_extraction import TEExtractor, WindowAnalyzer
+from .te_extraction import TEExtractor
 from .units import HOUR, m_to_um, rad_to_arcmin
+from .window_analysis import WindowAnalyzer
 
 TOPIC_NAMESPACE = 'reducer_twin'
 """Namespace of every derived topic."""

@@ -17,7 +17,8 @@ from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
-from reducer_twin.core.te_extraction import TEExtractor, WindowAnalyzer
+from reducer_twin.core.te_extraction import TEExtractor
+from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.io.bag import open_bag, write_bag_dir
 from reducer_twin.io.mcap_array_writer import McapBagWriter
 from reducer_twin.io.rosbag2_metadata import bag_metadata, dump_yaml

@@ -18,7 +18,8 @@ from cli_runs import analyze_process
 import numpy as np
 import pytest
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.te_extraction import compute_te
+from reducer_twin.core.window_analysis import WindowAnalyzer
 
 gen = load('independent_generator')
 

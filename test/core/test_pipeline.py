@@ -20,9 +20,9 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
 from reducer_twin.core.pipeline import state_from_record
-from reducer_twin.core.te_extraction import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
+from reducer_twin.core.window_analysis import DutySummary
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 PARAMS = ReducerParams()

@@ -19,9 +19,10 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
-from reducer_twin.core.te_extraction import compute_te, WindowAnalyzer
+from reducer_twin.core.te_extraction import compute_te
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
+from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, from_multiarray, to_multiarray
 from reducer_twin.nodes.qos import encoder_qos

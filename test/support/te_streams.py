@@ -1,0 +1,47 @@
+"""Simulated joint streams and their window analysis, shared by the TE and window tests."""
+
+from functools import lru_cache
+import math
+
+import numpy as np
+from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.simulator import JointSimulator, SimConfig
+from reducer_twin.core.te_extraction import compute_te
+from reducer_twin.core.window_analysis import WindowAnalyzer
+
+PARAMS = ReducerParams()
+RATIO = total_ratio(PARAMS.geometry)   # 81, paper Table 4
+TWO_PI = 2.0 * math.pi
+
+
+@lru_cache(maxsize=None)
+def simulated(profile='robot', load='gravity', wear=8e-6, samples=40000, exact=True, seed=5,
+              aging=0.0, scale=1.0):
+    """Simulate one joint (cached: several tests read the same stream)."""
+    cfg = SimConfig(profile=profile, load=load, initial_wear_m=wear, aging_factor=aging,
+                    wear_rate_scale=scale, exact_mesh=exact, seed=seed, link_zero_offset_rad=0.4)
+    sim = JointSimulator(PARAMS, cfg)
+    return sim, sim.step(samples)
+
+
+def analyse(batch, **kw):
+    """Extract TE (stamps taken as exact) and return all window features."""
+    stream = compute_te(batch.t, batch.motor_angle, batch.t, batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, **kw)
+    return analyzer.update(stream, batch.effort, batch.link_velocity) + analyzer.flush()
+
+
+def analyzed(batch, **kw):
+    """Return the analyzer after a whole simulated batch (stamps taken as exact)."""
+    stream = compute_te(batch.t, batch.motor_angle, batch.t, batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, **kw)
+    analyzer.update(stream, batch.effort, batch.link_velocity)
+    analyzer.flush()
+    return analyzer
+
+
+def rms_without_offset(err):
+    """RMS after removing the constant (the encoders' unknown zero offset)."""
+    err = err[np.isfinite(err)]
+    return float(np.sqrt(np.mean((err - err.mean()) ** 2)))
