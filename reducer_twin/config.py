@@ -26,7 +26,8 @@ DEFAULTS = {
     'twin': {**{name: (list(default) if isinstance(default, list) else default)
                 for name, (default, _) in STREAMS.items()},
              'aging_factor': _TWIN.aging_factor,
-             'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s, 'state_dir': '',
+             'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s,
+             'friction_in_effort': _TWIN.friction_in_effort, 'state_dir': '',
              'simulate': False, 'intra_process': True, 'robot': '', 'store': '',
              'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
@@ -168,6 +169,7 @@ def yaml_error_line(path, err):
 _BOOLEANS = ('simulate', 'intra_process')
 _STRINGS = ('link_topic', 'motor_topic', 'motor_suffix', 'motor_angles', 'state_dir')
 _NUMBERS = ('aging_factor', 'window_s', 'max_gap_s')
+_WHOLE_NUMBERS = ('friction_in_effort',)
 
 
 def as_number(name, value, integer=False):
@@ -223,6 +225,8 @@ def _check_values(path, config):
     try:
         for key in _NUMBERS:
             twin[key] = as_number(f'twin.{key}', twin[key])
+        for key in _WHOLE_NUMBERS:
+            twin[key] = as_number(f'twin.{key}', twin[key], integer=True)
         life = config['life']
         for key in life:
             life[key] = as_number(f'life.{key}', life[key], integer=key == 'n_samples')
@@ -281,7 +285,7 @@ def twin_config(config):
     """
     twin = config['twin']
     return TwinConfig(aging_factor=twin['aging_factor'], window_s=twin['window_s'],
-                      max_gap_s=twin['max_gap_s'])
+                      max_gap_s=twin['max_gap_s'], friction_in_effort=twin['friction_in_effort'])
 
 
 def joint_reducers(config, path=None):

@@ -15,7 +15,7 @@ import pytest
 from reducer_twin.analysis.pipeline import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
-from reducer_twin.config import default_config, joint_reducers, load_config
+from reducer_twin.config import default_config, joint_reducers, load_config, twin_config
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.params import ReducerParams
@@ -188,11 +188,25 @@ def test_a_bad_joint_reducer_is_refused_naming_the_joint(tmp_path, text, message
     assert str(err.value).startswith(str(path)) and message in str(err.value), err.value
 
 
+def test_friction_in_effort_is_0_or_1_and_reaches_the_window_analysis(tmp_path):
+    config = load_config(_file(tmp_path, 'twin:\n  friction_in_effort: 0\n'))
+    assert twin_config(config).friction_in_effort == 0
+    assert AnalysisSettings.from_config(_file(tmp_path, 'twin:\n  friction_in_effort: 0\n')
+                                        ).friction_in_effort == 0
+    for bad, said in (('2', 'must be in [0, 1], got 2'), ('0.5', 'must be a whole number'),
+                      ('torque_sensor', 'must be a whole number')):
+        path = _file(tmp_path, f'twin:\n  friction_in_effort: {bad}\n')
+        with pytest.raises(InvalidParameter) as err:
+            load_config(path)
+        assert str(err.value).startswith(f'{path}: twin.friction_in_effort {said}'), err.value
+
+
 def test_the_twin_defaults_are_the_core_spec_of_a_joints_processing():
     config = load_config(None)
     spec = TwinConfig()
     assert (config['twin']['window_s'], config['twin']['max_gap_s'],
-            config['twin']['aging_factor']) == (spec.window_s, spec.max_gap_s,
-                                                spec.aging_factor)
+            config['twin']['aging_factor'], config['twin']['friction_in_effort']) == (
+        spec.window_s, spec.max_gap_s, spec.aging_factor, spec.friction_in_effort)
     settings = AnalysisSettings()
-    assert (settings.window_s, settings.max_gap_s) == (spec.window_s, spec.max_gap_s)
+    assert (settings.window_s, settings.max_gap_s, settings.friction_in_effort) == (
+        spec.window_s, spec.max_gap_s, spec.friction_in_effort)

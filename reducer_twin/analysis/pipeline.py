@@ -158,6 +158,9 @@ class AnalysisSettings:
         Analysis window [s of stream].
     max_gap_s : float
         Largest stamp gap TE extraction bridges inside a window [s].
+    friction_in_effort : int
+        1: the effort is the drive's torque, whose friction and efficiency are fitted
+        and taken out; 0: a torque sensor at the reducer's output (``twin.friction_in_effort``).
     params : ReducerParams
         Reducer parameters of every joint without its own.
     joint_params : tuple of (str, ReducerParams)
@@ -189,6 +192,7 @@ class AnalysisSettings:
     aging_factor: float = None
     window_s: float = TwinConfig().window_s
     max_gap_s: float = TwinConfig().max_gap_s
+    friction_in_effort: int = TwinConfig().friction_in_effort
     params: ReducerParams = field(default_factory=ReducerParams)
     joint_params: tuple = ()
     life: LifeConfig = field(default_factory=LifeConfig)
@@ -270,7 +274,8 @@ class AnalysisSettings:
                    motor_effort_units=twin['motor_effort_units'],
                    effort_scale=check_effort_scale(twin['effort_scale'], f'{path}: twin.'),
                    interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
-                   max_gap_s=spec.max_gap_s, params=params,
+                   max_gap_s=spec.max_gap_s, friction_in_effort=spec.friction_in_effort,
+                   params=params,
                    joint_params=tuple(joint_params.items()), life=life)
 
 

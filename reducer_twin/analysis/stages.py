@@ -67,9 +67,9 @@ class JointFront:
         params = settings.params_of(joint)
         self.joint = joint
         self.params = params
-        self.twin = TwinFront(params, TwinConfig(aging_factor=aging_factor,
-                                                 window_s=settings.window_s,
-                                                 max_gap_s=settings.max_gap_s))
+        self.twin = TwinFront(params, TwinConfig(
+            aging_factor=aging_factor, window_s=settings.window_s, max_gap_s=settings.max_gap_s,
+            friction_in_effort=settings.friction_in_effort))
         self.ratio = self.twin.ratio
         self.extractor = self.twin.extractor
         self.calibration = self.twin.calibration

@@ -57,6 +57,10 @@ class TwinConfig(_Validated):
     analysis_period_s: float = spec(0.5, 's', 0.0, 3600.0,
                                     'period of the live window analysis (features of a window '
                                     'come at most this late)', lo_open=True)
+    friction_in_effort: int = spec(1, '', 0, 1, "1: the effort is the drive's torque (motor "
+                                   'current), whose friction and efficiency are fitted and '
+                                   'taken out; 0: a torque sensor at the output (nothing is)',
+                                   integer=True)
 
 
 @dataclass(frozen=True)
@@ -309,7 +313,8 @@ class TwinFront:
         self.extractor = TEExtractor(self.ratio, max_gap_s=config.max_gap_s)
         self.calibration = TimeOffsetCalibration(self.extractor)
         self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
-                                       aging_factor=config.aging_factor)
+                                       aging_factor=config.aging_factor,
+                                       friction=bool(config.friction_in_effort))
         self.windows = 0
 
     def te(self, t_s, motor, link):

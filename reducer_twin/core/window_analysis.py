@@ -578,7 +578,8 @@ class WindowAnalyzer:
                     f'{self.windows_friction_unknown} of {self.windows_emitted} windows had '
                     'torque reversals, but the joint has not yet moved both ways in a fifth '
                     'of the samples each, and a motor friction in the effort would pick the '
-                    'flank')
+                    'flank (an effort measured by a torque sensor at the output carries no '
+                    'friction: set twin.friction_in_effort to 0)')
         return (f'no torque reversal at equal |T| above the effort noise in '
                 f'{self.windows_emitted} windows (the joint did not reverse under load)')
 

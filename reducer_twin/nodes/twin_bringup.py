@@ -86,7 +86,8 @@ def build_nodes(config, sim_overrides=None):
             f'te_monitor_{joint}', params=reducer, subscribe=not local, parameter_overrides=[
                 Parameter('joint', value=joint),
                 *(Parameter(name, value=float(getattr(spec, name)))
-                  for name in ('aging_factor', 'window_s', 'max_gap_s'))])
+                  for name in ('aging_factor', 'window_s', 'max_gap_s')),
+                Parameter('friction_in_effort', value=int(spec.friction_in_effort))])
         if local:
             nodes['ingest'].attach(joint, nodes['te'][joint].take_pairs)
         store = [Parameter('store', value=str(twin['store'])),

@@ -20,6 +20,8 @@ from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSp
 from reducer_twin.cli import main
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.transmission_error import lost_motion
+from reducer_twin.core.units import ARCMIN
 from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
 from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
@@ -217,8 +219,9 @@ def test_two_publishers_of_one_topic_each_with_its_joints_lose_no_sample(
     _assert_same_estimate(result, original, rel=0.005)
 
 
-def _cli_json(bag, tmp_path, capsys):
-    code = main(['analyze', str(bag), '--out', str(tmp_path / 'd'), '--json'])
+def _cli_json(bag, tmp_path, capsys, *extra, out='d'):
+    code = main(['analyze', str(bag), '--out', str(tmp_path / out), '--json',
+                 *(str(x) for x in extra)])
     captured = capsys.readouterr()
     return code, json.loads(captured.out), captured.err
 
@@ -486,6 +489,29 @@ def test_an_observed_joint_reports_its_windows_and_no_reason(original):
         assert got['observed'] is True and got['reason'] is None
         assert got['windows'] == int(np.isfinite(
             res.features[:, pipeline.TE_FEATURES.fields.index('lost_motion_rad')]).sum())
+
+
+def test_a_torque_sensors_effort_is_read_before_the_joint_has_moved_both_ways(tmp_path, capsys):
+    # A torque sensor at the output carries no motor friction. Read as a motor current, the
+    # first windows of a joint that has moved one way only are withheld (the friction could
+    # not yet be told from the load), and the reason names the setting that reads them.
+    spec = SimulationSpec(hours=2.5, aging_factor=3600.0, joints=1, rate_hz=1000.0, seed=5,
+                          start_hours=6000.0)
+    wear = simulate_bag(tmp_path / 'bag', spec).truth['joint_1']['true_wear_um'] * 1e-6
+    code, out, err = _cli_json(tmp_path / 'bag', tmp_path, capsys)
+    got = out['joints']['joint_1']
+    assert code == 3 and got['observed'] is False and got['lost_motion_arcmin'] is None
+    assert got['reason'].startswith('the friction in the effort could not yet be told')
+    assert 'set twin.friction_in_effort to 0' in got['reason']
+    assert any('twin.friction_in_effort' in x for x in err.splitlines())
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  friction_in_effort: 0\n')
+    code, out, err = _cli_json(tmp_path / 'bag', tmp_path, capsys, '--config', config,
+                               out='d_sensor')
+    got = out['joints']['joint_1']
+    assert code == 0 and got['observed'] is True and got['reason'] is None
+    truth = lost_motion(wear, ReducerParams()) / ARCMIN
+    assert got['lost_motion_arcmin'] == pytest.approx(truth, rel=0.15)
 
 
 def test_effort_source_and_units_come_from_the_config(tmp_path):
