@@ -1,0 +1,48 @@
+"""The flanks of a window's hysteresis and the harmonics pooled with them, by the simulator."""
+
+import math
+
+import numpy as np
+import pytest
+from reducer_twin.core.transmission_error import lost_motion, model_tables
+from reducer_twin.core.units import ARCSEC
+from te_streams import analyse, PARAMS, simulated
+
+
+def test_a_window_whose_reversal_fell_into_its_neighbour_reads_the_pooled_flanks():
+    # Windows of 2 s cut a slow cycle so that some meet their loads under one sign only:
+    # 4 of 15 windows had no lost motion. The pool's flank lines (recent windows, this one
+    # included) complete their bins, both flanks from the same samples.
+    # The first window is read before the friction can be told from the load: none.
+    _, b = simulated(wear=10e-6, samples=30000)
+    lm = np.array([f.lost_motion for f in analyse(b)])
+    assert np.isfinite(lm[1:]).all() and lm.size == 15
+    np.testing.assert_allclose(lm[1:], lost_motion(10e-6, PARAMS), rtol=0.03)
+
+
+def test_hysteresis_widths_follow_the_model_at_the_true_wear():
+    _, b = simulated(wear=15e-6, samples=20000)
+    tables = model_tables(PARAMS)
+    for f in analyse(b):
+        if f.hysteresis.size:
+            model = tables.hysteresis(f.hysteresis_torque, 15e-6)
+            # Unidentified 1x harmonic (8.4 arcsec) leaks in proportion to |T|: 3 % of H.
+            np.testing.assert_allclose(f.hysteresis, model, rtol=0.03, atol=1.0 * ARCSEC)
+            assert (f.hysteresis_std > 0.0).all()
+
+
+def test_constant_speed_and_load_give_orders_but_no_lost_motion_or_time_offset():
+    _, b = simulated(profile='paper', load='constant', samples=24000)
+    feats = analyse(b)
+    assert {f.end_reason for f in feats[:-1]} == {'revolution'}
+    m = PARAMS.manufacturing
+    for f in feats[:-1]:
+        assert math.isnan(f.lost_motion) and math.isnan(f.lost_motion_std)
+        assert math.isnan(f.time_offset_s)        # omega is constant: an offset like any other
+        # Fitted against the output angle over one revolution: within 0.3 arcsec of the
+        # manufacturing harmonics (mesh ripple 0.3 arcsec p-p, noise 0.2 arcsec).
+        assert f.orders[1] == pytest.approx(m.order1_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[2] == pytest.approx(m.order2_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[40] == pytest.approx(m.crank_amplitude, abs=0.3 * ARCSEC)
+        assert f.orders[39] < 0.3 * ARCSEC
+        assert f.te_max >= f.te_mean >= f.te_min and f.te_pp == f.te_max - f.te_min
