@@ -51,11 +51,11 @@ time-compressed window spans much wear), ``σ_z`` the window fit's standard
 error and ``ρ`` learnt from the innovations
 (covariance matching in the manner of Mehra 1972, made robust): the
 ``ρ`` that puts the median of the differences of the last
-:data:`NOISE_MEMORY` successive innovations, normalised, at the median of
+:data:`.noise_scale.NOISE_MEMORY` successive innovations, normalised, at the median of
 χ²₁ (a bias the model misses cancels in them, so it is not taken for
 noise; each difference weighted by what it says about ``ρ``), shrunk
 towards 1 while few are known and kept within a factor 25 either way
-(:data:`NOISE_SCALE_RANGE`). The fit's standard error may understate the
+(:data:`.noise_scale.NOISE_SCALE_RANGE`). The fit's standard error may understate the
 window-to-window scatter (a noisy effort: ``ρ`` up to 25) or overstate it
 (its shape allowance is common to a unit's windows: ``ρ`` 0.05-0.9 on the
 model's simulator), and the factor differs between joints and duties. The
@@ -105,7 +105,7 @@ deviation; the data then move the rate and the wear. Both count as a
 recovery. Both tests take the normalised innovation as its normal score
 under the noise scale's own uncertainty: a Student-t of as many degrees of
 freedom as the innovations ``ρ`` is learnt from (the prior's
-:data:`NOISE_PRIOR_WINDOWS` included), the prediction's share by
+:data:`.noise_scale.NOISE_PRIOR_WINDOWS` included), the prediction's share by
 Satterthwaite's rule (:func:`_normal_score`), so a unit's first windows, whose
 scatter ``ρ`` does not know yet, are not taken for a jump. Predictions made
 while a respread settles (:data:`SCORE_AFTER` usable windows) are not scored.
@@ -162,8 +162,10 @@ import math
 
 import numpy as np
 
+from .duty_rate import DutyRate
 from .errors import InvalidInput, StateFileError
 from .growth import GrowthTrend, window_terms
+from .noise_scale import NoiseScale
 from .params import _Validated, spec
 from .sigma_points import merwe_weights
 from .transmission_error import model_tables
@@ -188,27 +190,6 @@ SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA = 1.0, 2.0, 0.0
 RATE_GRID = (-6.0, 14.0, 0.5, 0.3)
 """Components of the prior on ``θ``: from, to (relative to ln s0), spacing and sd."""
 
-NOISE_MEMORY = 41
-"""Innovations kept to learn the observation-noise scale ``ρ``."""
-
-NOISE_PRIOR_WINDOWS = 3.0
-"""Weight, in innovations, of the prior ``ρ = 1`` in the noise-scale estimate."""
-
-NOISE_SCALE_RANGE = (1.0 / 25.0, 25.0)
-"""
-Bounds of the learnt noise scale ``ρ``: the reported sd is trusted within a factor 5 either way.
-
-The ceiling keeps a trend the model misses from drowning the data in noise. The floor
-was 0.5 until measured: the window fit's reported sd overstates the window-to-window
-scatter on many units (bench_accuracy prints the learnt value: 0.05-0.9 on the model
-generator, median 0.10-0.19; 0.05-7.4 on the independent one, median 0.37-0.87, seeds
-1-2: the reported sd carries the fit's shape allowance, an error common to a unit's
-windows). With
-0.5, R was up to 10x too large: the model generator's NIS mean 0.26 (median 0.08), the
-independent generator's P10-P90 coverage 81-88 % (seeds 1-4). With the floor at 1/25 (and
-the differences weighted, :attr:`WearEstimator.noise_scale`): NIS 0.84-0.85 on the model
-generator, coverage 76-85 % with each tail 6-14 % on the independent one.
-"""
 
 MERGE_DISTANCE = 1.0 / 3.0
 """Mahalanobis distance of two components' means below which they are merged."""
@@ -257,11 +238,6 @@ alpha-lambda 84/84 -> 88/88 %; seed 2 alpha-lambda 83/90 -> 86/90 %; the model g
 unchanged.
 """
 
-DUTY_UNKNOWN_REL_STD = 0.1
-"""Relative sd of the duty rate before three batches show it (the twin's former allowance)."""
-
-DUTY_BATCH_WINDOWS = 10
-"""Windows per batch of the duty rate's standard error (batch means)."""
 
 INTERP_SEARCH_BELOW = 1000
 """
@@ -271,9 +247,6 @@ The division takes a few more passes over the values and wins only where the 15 
 of a search over the map's 20 001 points cost more than those (measured: 150 values
 6.6 against 8.6 µs, 2000 values 28 against 17 µs).
 """
-
-_CHI2_1_MEDIAN = 0.454936423119572
-"""Median of the χ² distribution with one degree of freedom."""
 
 
 @dataclass(frozen=True)
@@ -635,12 +608,6 @@ def prior_components(config, new_unit_probability=None):
     return lw - _logsumexp(lw), np.array(means), np.array(covs)
 
 
-def _new_duty():
-    """Empty duty sums: recent rate, the batch being filled and the batch-means sums."""
-    return {'increment': 0.0, 'exposure': 0.0, 'batch': [0.0, 0.0, 0],
-            'sums': [0.0, 0.0, 0.0, 0.0]}
-
-
 def _consider_bias(m, P, m0, P0, which):
     """
     Hold the fit's bias ``c`` at its prior moments: a consider state (Schmidt 1966).
@@ -802,12 +769,12 @@ class WearEstimator:
         self._recent = []
         self._recent_terms = []
         self._observed_exposure = None
-        self._noise = []
+        self._noise = NoiseScale()
         self._trend = 0.0
         self._trend_count = 0
         self._exposure_s = 0.0
         self._exposure_since_reset_s = 0.0
-        self._duty = _new_duty()
+        self._duty = DutyRate(self.config.duty_horizon_s, self.config.duty_min_windows)
         self._t_end = None
         self._counters = {'predictions': 0, 'updates': 0, 'rejected': 0, 'skipped': 0,
                           'censored': 0, 'recoveries': 0, 'consecutive_rejected': 0}
@@ -891,30 +858,7 @@ class WearEstimator:
         self._exposure_since_reset_s += exposure
         self._archard += increment
         self._growth.advance(self._archard)
-        # The horizon spans duty_horizon_s of operation, or duty_min_windows windows when
-        # they are longer (a time-compressed recording), so that the mean covers many cycles.
-        c = self.config
-        d = self._duty
-        decay = max(math.exp(-exposure / c.duty_horizon_s), 1.0 - 1.0 / c.duty_min_windows)
-        d['increment'] = decay * d['increment'] + increment
-        d['exposure'] = decay * d['exposure'] + exposure
-        # Batch means (windows tile a periodic duty, so they are not independent draws):
-        # the standard error of the recent rate from the scatter of batches of windows.
-        batch = d['batch']
-        batch[0] += increment
-        batch[1] += exposure
-        batch[2] += 1
-        if batch[2] >= DUTY_BATCH_WINDOWS and batch[1] > 0.0:
-            rate = batch[0] / batch[1]
-            decay_b = max(math.exp(-batch[1] / c.duty_horizon_s),
-                          1.0 - DUTY_BATCH_WINDOWS / max(c.duty_min_windows,
-                                                         2.0 * DUTY_BATCH_WINDOWS))
-            sums = d['sums']
-            sums[0] = decay_b * sums[0] + batch[1]
-            sums[1] = decay_b * sums[1] + batch[1] * rate
-            sums[2] = decay_b * sums[2] + batch[1] * rate * rate
-            sums[3] = decay_b * decay_b * sums[3] + batch[1] * batch[1]
-            d['batch'] = [0.0, 0.0, 0]
+        self._duty.add(exposure, increment)
 
     def _predict(self, exposure, increment):
         if exposure == 0.0 and increment == 0.0:
@@ -937,50 +881,8 @@ class WearEstimator:
 
     @property
     def noise_scale(self):
-        """
-        Ratio ``ρ`` of the observed to the reported lost-motion variance (learnt).
-
-        From differences of successive innovations ``d = y_k - y_(k-1)``,
-        whose variance for white innovations is
-        ``V_k + V_(k-1) + ρ·(σ_k² + σ_(k-1)²)`` (``V`` the predicted variance
-        of the lost motion, ``σ`` the reported sd): the ``ρ`` that puts the
-        median of the normalised ``d²`` over the last :data:`NOISE_MEMORY`
-        innovations at the median of χ²₁. A bias the model misses
-        (innovations of one sign) cancels in the differences and is left to
-        the disagreement test, not taken for noise. Each difference counts
-        with the weight ``(ρs/(V + ρs))²``, ``s = σ_k² + σ_(k-1)²`` and ``V``
-        its predicted part (a weighted median, the weights at ``ρ = 1``, then
-        at the ``ρ`` they gave; their sum is the differences' effective
-        number): where the prediction is far less certain than the window (a
-        reducer's first windows) the difference says next to nothing about
-        ``ρ``. The estimate is shrunk
-        towards 1 in log with the weight of :data:`NOISE_PRIOR_WINDOWS`
-        innovations and kept in :data:`NOISE_SCALE_RANGE`: a trend the model
-        misses for long raises the differences too, and must not drown the data
-        in noise; a reported sd larger than the scatter is learnt down as far.
-        """
-        return self._noise_fit()[0]
-
-    def _noise_fit(self):
-        """Return ``ρ`` (:attr:`noise_scale`) and its weight in innovations, the prior's in."""
-        if len(self._noise) < 3:
-            return 1.0, NOISE_PRIOR_WINDOWS
-        y, v, s2 = np.array(self._noise).T
-        d2 = np.diff(y) ** 2
-        v2 = v[1:] + v[:-1]
-        s22 = s2[1:] + s2[:-1]
-        # d²/(V + ρ·σ²) exceeds the χ²₁ median exactly while ρ is below
-        # (d²/median - V)/σ²: the ρ that puts the median there is their (weighted) median.
-        limits = (d2 / _CHI2_1_MEDIAN - v2) / s22
-        order = np.argsort(limits)
-        limits, v2, s22 = limits[order], v2[order], s22[order]
-        rho = 1.0
-        for _ in range(2):   # the weights at ρ = 1, then at the ρ they gave
-            cum = np.cumsum((rho * s22 / (v2 + rho * s22)) ** 2)
-            n = float(cum[-1])
-            rho = float(limits[np.searchsorted(cum, 0.5 * n)])
-            rho = min(max(rho, NOISE_SCALE_RANGE[0]), NOISE_SCALE_RANGE[1])
-        return math.exp(n * math.log(rho) / (n + NOISE_PRIOR_WINDOWS)), n + NOISE_PRIOR_WINDOWS
+        """Return the learnt ratio ``ρ`` of the observed to the reported lost-motion variance."""
+        return self._noise.value
 
     def update(self, features):
         """
@@ -1046,7 +948,7 @@ class WearEstimator:
         c = self.config
         nu = c.robust_dof
         smear = self._smear()
-        rho, known = self._noise_fit()
+        rho, known = self._noise.fit()
         R = rho * sigma2 + smear
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
@@ -1074,7 +976,7 @@ class WearEstimator:
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
         self._project()
-        self._noise = (self._noise + [[y, v_mix, sigma2]])[-NOISE_MEMORY:]
+        self._noise.add(y, v_mix, sigma2)
         self._counters['updates'] += 1
         # The tests of disagreement take the innovation as the normal score it has while
         # rho is known from few windows (a t of those degrees of freedom, Satterthwaite).
@@ -1403,7 +1305,7 @@ class WearEstimator:
         self._settle = 0
         self._recent = []
         self._recent_terms = []
-        self._noise = []
+        self._noise = NoiseScale()
         self._trend = 0.0
         self._trend_count = 0
         self._exposure_since_reset_s = 0.0
@@ -1550,39 +1452,13 @@ class WearEstimator:
 
     @property
     def duty_rate(self):
-        """
-        Run-in-free Archard rate of the recent duty [m per operating second].
-
-        Ratio of exponentially weighted sums of ``Δa`` and ``Δe``, time
-        constant ``duty_horizon_s`` of operation; 0 before any exposure.
-        """
-        d = self._duty
-        if d['exposure'] <= 0.0:
-            return 0.0
-        return d['increment'] / d['exposure']
+        """Return the run-in-free Archard rate of the recent duty [m per operating second]."""
+        return self._duty.rate
 
     @property
     def duty_rate_rel_std(self):
-        """
-        Relative standard error of the recent duty rate, by batch means.
-
-        Windows are grouped in batches of :data:`DUTY_BATCH_WINDOWS`; with
-        ``r_b`` the rate of a batch (weighted by its exposure, exponentially
-        forgotten like the duty rate) and ``n_eff`` the effective number of
-        batches, ``sqrt(var(r_b)/n_eff)/r̄``: a few per cent for a periodic
-        duty, more for a duty that changes. Before three batches the spread is not
-        known and :data:`DUTY_UNKNOWN_REL_STD` stands for it (never 0: a duty seen for a
-        few windows is no duty known exactly).
-        """
-        w, wr, wr2, w2 = self._duty['sums']
-        if w <= 0.0 or wr <= 0.0 or w2 <= 0.0:
-            return DUTY_UNKNOWN_REL_STD
-        n_eff = w * w / w2
-        if n_eff < 2.5:
-            return DUTY_UNKNOWN_REL_STD
-        mean = wr / w
-        var = max(wr2 / w - mean * mean, 0.0)
-        return math.sqrt(var / n_eff) / mean
+        """Relative standard error of the recent duty rate (:attr:`.DutyRate.rel_std`)."""
+        return self._duty.rel_std
 
     @property
     def t_end(self):
@@ -1633,7 +1509,7 @@ class WearEstimator:
             'x': [float(v) for v in self.x],
             'P': [[float(v) for v in row] for row in self.P],
             'components': _components_state(self._lw, self._m, self._P),
-            'noise': [[float(v) for v in row] for row in self._noise],
+            'noise': self._noise.state(),
             'growth': self._growth.state(),
             'lagged': [_snapshot_state(snap) for snap in self._lagged],
             'recent': [[float(v) for v in row] for row in self._recent],
@@ -1643,11 +1519,7 @@ class WearEstimator:
             'trend': [float(self._trend), int(self._trend_count)],
             'exposure_s': self._exposure_s,
             'exposure_since_reset_s': self._exposure_since_reset_s,
-            'duty_increment': self._duty['increment'],
-            'duty_exposure': self._duty['exposure'],
-            'duty_batch': [float(v) for v in self._duty['batch'][:2]] + [
-                int(self._duty['batch'][2])],
-            'duty_batch_sums': [float(v) for v in self._duty['sums']],
+            **self._duty.state(),
             't_end': self._t_end,
             'counters': dict(self._counters),
             'events': [dict(e) for e in self._events],
@@ -1714,7 +1586,7 @@ class WearEstimator:
                 if any(len(row) != 3 for row in noise):
                     raise ValueError('noise rows must hold 3 values')
                 trend = (float(d['trend'][0]), int(d['trend'][1]))
-                est._noise = noise
+                est._noise = NoiseScale(noise)
                 growth = GrowthTrend.from_state(d['growth'], legacy_scale=est.noise_scale)
                 lagged = [_snapshot_from_state(snap) for snap in d.get('lagged', [])]
                 recent = [[float(v) for v in row] for row in d.get('recent', [])]
@@ -1754,12 +1626,11 @@ class WearEstimator:
         est._recent_terms = [window_terms(*row) for row in recent]
         est._score, est._scored = score
         est._settle = settle
-        est._noise = noise
+        est._noise = NoiseScale(noise)
         est._trend, est._trend_count = trend
         est._exposure_s = scalars['exposure_s']
         est._exposure_since_reset_s = scalars['exposure_since_reset_s']
-        est._duty = {'increment': scalars['duty_increment'],
-                     'exposure': scalars['duty_exposure'], 'batch': batch, 'sums': sums}
+        est._duty.restore(scalars['duty_increment'], scalars['duty_exposure'], batch, sums)
         est._t_end = t_end
         est._counters = counters
         est._events = events
