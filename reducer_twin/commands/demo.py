@@ -143,8 +143,11 @@ def _spin(executor, nodes, joints, args, history):
             if live is not None and now - last_view >= 0.5:
                 last_view = now
                 live.update(_table(_summary(nodes, joints, None), _title(sim, args)))
-        # The last samples reach the TE monitors and are analysed; then the windows'
-        # estimates and their remaining life (each a DDS hop, then a task on the worker).
+        # The stream is complete: the simulator stops (left running, it went on through the
+        # drain below, and the truth stood hundreds of hours past the estimate). The last
+        # samples reach the TE monitors and are analysed; then the windows' estimates and
+        # their remaining life (each a DDS hop, then a task on the worker).
+        sim.close()
         _spin_for(executor, 1.0)
         for te in nodes['te'].values():
             te.analyze_now()
@@ -206,7 +209,8 @@ def _summary(nodes, joints, _rows):
         nan = float('nan')
         out[j] = {
             'wear_um': s.get('wear_um', nan), 'wear_std_um': s.get('wear_std_um', nan),
-            'true_wear_um': m_to_um(tr.wear), 'rate_scale': s.get('rate_scale', nan),
+            'true_wear_um': m_to_um(tr.wear), 'exposure_h': tr.exposure_s / HOUR,
+            'rate_scale': s.get('rate_scale', nan),
             'true_rate_scale': tr.wear_rate_scale,
             'lost_motion_arcmin': s.get('lost_motion_arcmin', nan),
             'lost_motion_obs_arcmin': s.get('lost_motion_obs_arcmin', nan),

@@ -141,12 +141,14 @@ class JointSimulatorNode(Node):
             self._stop.wait(max(next_s, 0.0))
 
     def close(self):
-        """Stop the publishing thread (before the node is destroyed)."""
+        """Stop publishing (the thread or the timer; before the node is destroyed)."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
 
     def _tick(self):
+        if self._stop.is_set():
+            return
         now = self.get_clock().now().nanoseconds
         if self.start_ns is None:
             self.start_ns = now
