@@ -24,7 +24,8 @@ from pathlib import Path
 import tempfile
 
 import numpy as np
-from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.core import effort_check
 import third_generator

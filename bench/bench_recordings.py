@@ -21,7 +21,8 @@ import tempfile
 import time
 
 import numpy as np
-from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.io.bag import open_bag
 from reducer_twin.msg_adapters.dynamic_joint_state import MSGTYPE as DJS

@@ -12,7 +12,7 @@ an error naming the topics it has.
 from pathlib import Path
 
 import pytest
-from reducer_twin.analysis.pipeline import AnalysisSettings
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.config import default_config, joint_reducers, load_config, twin_config

@@ -182,7 +182,7 @@ def _check_outputs(args, names):
 
 
 def _settings(args):
-    from reducer_twin.analysis.pipeline import AnalysisSettings
+    from reducer_twin.analysis.settings import AnalysisSettings
     try:
         settings = AnalysisSettings.from_config(args.config)
     except InvalidParameter as err:

@@ -145,7 +145,7 @@ def inspect_bag(path, name, out, settings, robot_flag='', robot_config=''):
 
     """
     from reducer_twin.io.bag import open_bag
-    from reducer_twin.analysis.pipeline import plan_joints, robot_plans
+    from reducer_twin.analysis.joints import plan_joints, robot_plans
     from reducer_twin.analysis.simulate import ROBOT_KEY
     with open_bag(path) as bag:
         robot = robot_flag or bag.metadata.get(ROBOT_KEY, '') or robot_config

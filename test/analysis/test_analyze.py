@@ -9,7 +9,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
-from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.core.errors import BagError
 from reducer_twin.core.ingest import pair_columns, SpikeFilter, StreamCleaner

@@ -14,7 +14,8 @@ import sqlite3
 from cli_runs import run_cli as _run
 import numpy as np
 import pytest
-from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.pipeline import analyze_bag
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.bag import open_bag

@@ -14,8 +14,9 @@ import json
 import numpy as np
 import pytest
 from reducer_twin.analysis import pipeline
-from reducer_twin.analysis.pipeline import AnalysisSettings, analyze_bag
+from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.report import write_report
+from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.core.kinematics import total_ratio

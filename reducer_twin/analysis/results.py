@@ -1,0 +1,173 @@
+"""What an analysis of one bag gives: per joint (:class:`JointResult`) and per bag."""
+
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+
+import numpy as np
+from reducer_twin.analysis.joints import JointPlan
+from reducer_twin.core.joint_twin import estimate_numbers
+from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
+from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
+
+
+@dataclass
+class JointResult:
+    """
+    What the analysis found for one joint.
+
+    Attributes
+    ----------
+    name : str
+        Joint name.
+    messages : int
+        JointState messages read that carry the joint.
+    rejected : int
+        Samples the ingestion rules dropped (non-finite, duplicate, out of order,
+        unpaired, spikes) plus malformed messages skipped.
+    counts : dict
+        Count of every ingestion rule (as ``encoder_ingest`` reports them).
+    features : numpy.ndarray
+        ``te_features`` records, (windows, fields).
+    wear, life : numpy.ndarray
+        ``wear`` and ``remaining_life`` records, (windows + 1, fields) (first: start).
+    levels : list of str
+        Health level of each ``life`` record.
+    te : numpy.ndarray
+        Thinned TE samples (stamp_s, output_angle_rad, te_rad, torque_nm).
+    truth : numpy.ndarray or None
+        ``ground_truth`` records from the bag, if it has them.
+
+    """
+
+    name: str
+    messages: int = 0
+    rejected: int = 0
+    counts: dict = field(default_factory=dict)
+    features: np.ndarray = None
+    wear: np.ndarray = None
+    life: np.ndarray = None
+    levels: list = field(default_factory=list)
+    te: np.ndarray = None
+    truth: np.ndarray = None
+    windows: int = 0
+    reason: str = None
+    partial: str = None
+
+    @property
+    def observed(self):
+        """Whether windows gave a lost motion the twin trusts (the estimate rests on data)."""
+        return self.windows > 0 and self.reason is None
+
+    def summary(self):
+        """
+        Return the ``--json`` fields of this joint (edge units; NaN as None).
+
+        Returns
+        -------
+        dict
+            ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
+            ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
+            ``observed``, ``windows`` (windows with a lost motion), ``reason`` (why
+            not observed, else None), ``partial`` (why an observed estimate stands as of
+            a window well before the recording's end, else None) and ``pairing`` (how
+            link and motor samples were paired, and why).
+
+        """
+        wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
+            len(self.wear) else {}
+        life = dict(zip(REMAINING_LIFE.fields, self.life[-1])) if self.life is not None and \
+            len(self.life) else {}
+        observed = self.observed
+        out = estimate_numbers(wear, life, observed)
+        out['messages'] = int(self.messages)
+        out['rejected'] = int(self.rejected)
+        out['observed'] = observed
+        out['windows'] = int(self.windows)
+        out['reason'] = None if observed else (self.reason or 'no usable window')
+        out['partial'] = self.partial if observed else None
+        out['pairing'] = self.counts.get('pairing')
+        return out
+
+
+@dataclass
+class BagResult:
+    """
+    The analysis of one bag.
+
+    Attributes
+    ----------
+    bag : pathlib.Path
+        The input.
+    out : pathlib.Path
+        The derived bag directory.
+    plan : JointPlan
+        Topics and joints used.
+    joints : dict of str to JointResult
+        Per joint.
+    messages : int
+        JointState messages read.
+    seconds : float
+        Wall time of the analysis [s].
+    aging_factor : float
+        Aging factor applied.
+    warnings : list of ReadWarning
+        Problems met while reading.
+    damaged : bool
+        Whether reading stopped early or skipped data (truncated or corrupt files).
+    states : dict of str to dict
+        Per joint, where its estimator and life stages ended (``JointBack.state``): the
+        ``initial_states`` of the reducer's next bag.
+
+    """
+
+    bag: Path
+    out: Path
+    plan: JointPlan
+    joints: dict
+    messages: int
+    seconds: float
+    aging_factor: float
+    warnings: list
+    damaged: bool
+    states: dict = field(default_factory=dict)
+
+    @property
+    def messages_per_s(self):
+        """Return the JointState messages analysed per second of wall time."""
+        return self.messages / self.seconds if self.seconds > 0 else float('nan')
+
+    def as_json(self):
+        """Return ``{"joints": {name: {...}}, "messages_per_s": x}``."""
+        rate = self.messages_per_s
+        joints = {name: j.summary() for name, j in self.joints.items()}
+        for name, reason in self.plan.not_analysed().items():
+            joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
+                            'observed': False, 'windows': 0, 'reason': reason,
+                            'partial': None, 'pairing': None}
+        return {'joints': joints,
+                'messages_per_s': float(rate) if math.isfinite(rate) else None}
+
+
+def is_damage(warning):
+    """
+    Tell whether a read warning means data were lost (truncation, corruption).
+
+    Parameters
+    ----------
+    warning : ReadWarning
+        A warning of the bag reader.
+
+    Returns
+    -------
+    bool
+        True when reading stopped early or skipped a damaged part.
+
+    """
+    text = warning.message
+    # A file cut short (no footer), storage files missing, or fewer messages than the
+    # metadata counts: messages were lost even where everything left is readable.
+    return warning.offset is not None or any(
+        key in text for key in ('reading stopped', 'corrupt', 'skipping that file',
+                                'without a data end', 'no footer', 'do not exist',
+                                'but the storage files hold', 'but no storage file holds'))
