@@ -316,14 +316,14 @@ class WindowAnalyzer:
         self.rated_torque = params.rating.rated_torque
         self.takeup_torque = params.rating.lost_motion_torque_fraction * self.rated_torque
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
-        self.centres = np.sqrt(self.edges[1:] * self.edges[:-1])
+        memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
+        self._flanks = FlankPool(self.orders, self.edges, self.rated_torque, self.min_bins,
+                                 memory)
+        self.centres = self._flanks.centres
         self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
         self._effort = EffortCheck(self.tables, self.takeup_torque)
         self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
                                               self.compliance_prior, self.min_bins)
-        memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
-        self._flanks = FlankPool(self.orders, self.edges, self.rated_torque, self.min_bins,
-                                 memory)
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._last_t = None
         self._last_theta = None
