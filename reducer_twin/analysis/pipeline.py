@@ -537,6 +537,16 @@ class _Run:
              'operation; if the robot ran meanwhile, its wear rate per operating hour reads '
              'high and its remaining life short by up to that share')
 
+    def _velocity(self, joint, front):
+        """Say where a joint's speed came from; a velocity field that is not its rate is said."""
+        a = front.analyzer
+        if a.velocity_fault is not None:
+            warn(self.bag, f'{joint}: {a.velocity_fault}')
+        if not a.samples_seen:
+            return None
+        return 'link_angle' if a.velocity_fault is not None or \
+            a.derived_velocity >= 0.5 * a.samples_seen else 'field'
+
     def _partial(self, joint, front):
         """
         Say when an observed joint's lost motion stopped well before its stream did.
@@ -638,6 +648,7 @@ class _Run:
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
             res.partial = self._partial(joint, front)
+            res.velocity = self._velocity(joint, front)
             self._note_gaps(joint, front)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)

@@ -53,6 +53,7 @@ class JointResult:
     windows: int = 0
     reason: str = None
     partial: str = None
+    velocity: str = None
 
     @property
     def observed(self):
@@ -70,8 +71,11 @@ class JointResult:
             ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
             ``observed``, ``windows`` (windows with a lost motion), ``reason`` (why
             not observed, else None), ``partial`` (why an observed estimate stands as of
-            a window well before the recording's end, else None) and ``pairing`` (how
-            link and motor samples were paired, and why).
+            a window well before the recording's end, else None), ``pairing`` (how
+            link and motor samples were paired, and why) and ``velocity`` (``'field'``:
+            the velocity field, found to be the link angle's rate; ``'link_angle'``: the
+            rate of the link angle, where the field is missing or is not that rate; None
+            without samples).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
@@ -87,6 +91,7 @@ class JointResult:
         out['reason'] = None if observed else (self.reason or 'no usable window')
         out['partial'] = self.partial if observed else None
         out['pairing'] = self.counts.get('pairing')
+        out['velocity'] = self.velocity
         return out
 
 
@@ -144,7 +149,7 @@ class BagResult:
         for name, reason in self.plan.not_analysed().items():
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
-                            'partial': None, 'pairing': None}
+                            'partial': None, 'pairing': None, 'velocity': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

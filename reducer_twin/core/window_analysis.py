@@ -41,8 +41,10 @@ from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .flanks import FlankPool
 from .friction_fit import FrictionFit
+from .kinematics import total_ratio
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice, TWO_PI
 from .transmission_error import model_tables
+from .velocity_check import VelocityCheck
 from .wear import wear_rate
 from .wear_fit import LostMotionFit
 from .window_ops import window_mean, window_medians
@@ -322,6 +324,10 @@ class WindowAnalyzer:
         self.centres = self._flanks.centres
         self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
         self._effort = EffortCheck(self.tables, self.takeup_torque)
+        self._velocity = VelocityCheck(self.min_speed, total_ratio(g))
+        # Until the velocity check decides: the link angle's rate of the buffered samples
+        # (row 0) and whether they carry a field (row 1).
+        self._held = None
         self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
                                               self.compliance_prior, self.min_bins)
         self._buf = {name: np.empty(0) for name in _BUFFER}
@@ -420,8 +426,19 @@ class WindowAnalyzer:
         if without:
             self._recent_t = (self._recent_t[0], stream.t[fresh & ~use])
         unknown = use & ~np.isfinite(velocity)
+        rate = None
+        if not self._velocity.decided and (use & ~unknown).any():
+            # A velocity field: is it the link angle's rate? Until that is decided the
+            # rate is held beside the buffered samples, to take the field's place in
+            # them too if it is not.
+            rate = self._link_rate(stream, use)
+            if self._velocity.check(velocity[use], rate) and self._held is not None:
+                self._buf['speed'] = self._held[0].copy()
+                self.derived_velocity += int(np.count_nonzero(self._held[1]))
+        if self._velocity.replaced:
+            unknown = use
         if unknown.any():
-            velocity = self._derive_velocity(stream, use, velocity, unknown)
+            velocity = self._derive_velocity(stream, use, velocity, unknown, rate)
         self.ignored_samples += int(np.count_nonzero(stream.valid & ~use))
         if use.all():
             def pick(a):
@@ -449,6 +466,12 @@ class WindowAnalyzer:
             self._buf = {k: np.concatenate([self._buf[k], new[k]]) if self._buf[k].size
                          else new[k] for k in _BUFFER}
             self._aliased = True
+            if not self._velocity.decided:
+                held = np.vstack([new['speed'] if rate is None else rate,
+                                  ~pick(unknown) if rate is not None else np.zeros(t.size)])
+                self._held = held if self._held is None else np.hstack([self._held, held])
+        if self._velocity.decided:
+            self._held = None
         return self._emit(final=False)
 
     @property
@@ -470,6 +493,16 @@ class WindowAnalyzer:
     def effort_fault(self):
         """Return why the effort is not the output torque, once found (:mod:`.effort_check`)."""
         return self._effort.effort_fault
+
+    @property
+    def velocity_fault(self):
+        """Return why the velocity field is not the link angle's rate, once found, else None."""
+        return self._velocity.fault
+
+    @property
+    def velocity_scale(self):
+        """Return the velocity field's slope on the link angle's rate (NaN before motion)."""
+        return self._velocity.scale
 
     @property
     def coulomb_friction(self):
@@ -601,13 +634,13 @@ class WindowAnalyzer:
                          f'{math.degrees(self.largest_te_span):.3g} deg (a frozen encoder?)'), True
         return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False
 
-    def _derive_velocity(self, stream, use, velocity, unknown):
+    def _link_rate(self, stream, use):
         """
-        Output speed from the unwrapped output angle where the stream has none.
+        Rate of the unwrapped output angle at the samples in use [rad/s].
 
-        Central differences over the samples in use (one-sided at the ends; the
-        chunk's first sample reaches back to the last sample of the previous chunk
-        when it lies within ``max_gap_s``). Counted in ``derived_velocity``.
+        Central differences (one-sided at the ends; the chunk's first sample reaches
+        back to the last sample of the previous chunk when it lies within
+        ``max_gap_s``).
         """
         idx = np.flatnonzero(use)
         t, theta = stream.t[idx], stream.output_angle[idx]
@@ -619,11 +652,22 @@ class WindowAnalyzer:
             derived = np.gradient(theta, t)
         else:
             derived = np.zeros(t.size)
-        if back:
-            derived = derived[1:]
+        return derived[1:] if back else derived
+
+    def _derive_velocity(self, stream, use, velocity, unknown, rate=None):
+        """
+        Output speed from the unwrapped output angle where the stream has none.
+
+        The rate of :meth:`_link_rate` fills the samples in ``unknown``: those
+        without a velocity, or all once :class:`.velocity_check.VelocityCheck` found
+        the field not to be that rate. Counted in ``derived_velocity``.
+        """
+        idx = np.flatnonzero(use)
+        if rate is None:
+            rate = self._link_rate(stream, use)
         out = np.array(velocity, dtype=float, copy=True)
         fill = unknown[idx]
-        out[idx[fill]] = derived[fill]
+        out[idx[fill]] = rate[fill]
         self.derived_velocity += int(np.count_nonzero(fill))
         return out
 
@@ -645,6 +689,8 @@ class WindowAnalyzer:
             if self._aliased:
                 # The buffer must not alias arrays the caller may reuse.
                 self._buf = {k: v.copy() for k, v in self._buf.items()}
+                if self._held is not None:
+                    self._held = self._held.copy()
                 self._aliased = False
             return []
         out, first = [], 0
@@ -676,6 +722,8 @@ class WindowAnalyzer:
             first = last
         end = cuts[-1][1]
         self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
+        if self._held is not None:
+            self._held = self._held[:, end:].copy()
         self._aliased = False
         return out
 

@@ -1,5 +1,7 @@
 """Each node's ``/diagnostics``: the period parameter, the publisher and the report timer."""
 
+import math
+
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
 from reducer_twin.core.units import m_to_um
@@ -128,6 +130,33 @@ def ingest_statuses(counts, rejected):
     return statuses
 
 
+def say_faults(logger, joint, analyzer, said):
+    """
+    Log a joint's input faults on stderr, each kind once (``/diagnostics`` carry them on).
+
+    An effort that is not the output torque is an error (the joint is not observed); a
+    velocity field that is not the link angle's rate a warning (its rate is used).
+
+    Parameters
+    ----------
+    logger : rclpy.impl.rcutils_logger.RcutilsLogger
+        The node's logger.
+    joint : str
+        The joint's name, for the line.
+    analyzer : WindowAnalyzer
+        The joint's window analysis.
+    said : set
+        Kinds already said; updated.
+
+    """
+    for level, fault in (('error', analyzer.effort_fault and
+                          f'not observed: {analyzer.effort_fault}'),
+                         ('warning', analyzer.velocity_fault)):
+        if fault and level not in said:
+            said.add(level)
+            getattr(logger, level)(f'{joint}: {fault}')
+
+
 def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
               silent_after_s):
     """
@@ -165,6 +194,8 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
     reason = analyzer.not_observed_reason(topic)
     values['observed_windows'] = analyzer.windows_observed
     values['seconds_in_gaps'] = analyzer.gap_time_s
+    if math.isfinite(analyzer.velocity_scale):
+        values['velocity_scale'] = analyzer.velocity_scale
     stale = analyzer.stale_reason(stale_after_s, topic)
     if reason is not None:
         level = 'ERROR' if analyzer.effort_fault is not None else 'STALE'
@@ -174,6 +205,9 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
+    if analyzer.velocity_fault is not None and reason is None:
+        message = f'{message}; {analyzer.velocity_fault}'
+        level = 'WARN' if level == 'OK' else level
     if quiet_s is not None:
         values['seconds_since_pairs'] = quiet_s
         if quiet_s >= silent_after_s and level in ('OK', 'WARN'):

@@ -27,7 +27,7 @@ from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, to_multiarray
 from reducer_twin.nodes.buffers import ArrivalBatches
-from reducer_twin.nodes.diagnostics import publish_diagnostics, te_status
+from reducer_twin.nodes.diagnostics import publish_diagnostics, say_faults, te_status
 from reducer_twin.nodes.parameters import check_choice, declare_plain
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import encoder_qos, stream_qos, WINDOW_DEPTH
@@ -96,7 +96,7 @@ class TEMonitor(Node):
         self._te_msg = BatchPublisherMessage(TE_BATCH)
         self.samples = 0
         self.last_features = None
-        self.silent_after_s, self._said = s.silent_after_s, None
+        self.silent_after_s, self._said = s.silent_after_s, set()
         self._last_pairs_at = None      # monotonic time of the latest encoder pairs
 
     @property
@@ -158,10 +158,7 @@ class TEMonitor(Node):
         if learnt is None and self.twin.calibration.applied is not None:
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
-        fault = self.twin.analyzer.effort_fault
-        if fault is not None and self._said is None:    # on stderr once, and in /diagnostics
-            self._said = fault
-            self.get_logger().error(f'{self.joint}: not observed: {fault}')
+        say_faults(self.get_logger(), self.joint, self.twin.analyzer, self._said)
         for f in windows:
             self.last_features = f
             rec = self.twin.record(f)

@@ -313,6 +313,36 @@ def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
     assert len(logged) == 1 and '[ERROR]' in logged[0] and monitor.joint in logged[0]
 
 
+def test_a_velocity_field_in_degrees_is_replaced_by_the_angles_rate_and_said(
+        ros, simulated, capfd):
+    # Read as it is, a velocity field in another form (zeros, deg/s, the motor's speed,
+    # the other sense) gave a confident wrong wear and remaining life, and OK.
+    _, rows = simulated
+    degrees = rows.copy()
+    degrees[:, 4] = np.degrees(degrees[:, 4])
+    monitor = Monitor(ros)
+    monitor.feed(degrees)
+    status = monitor.status(lambda s: 'velocity field' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    assert 'reads 57.' in status.message and 'degrees per second' in status.message
+    assert status.message.endswith('the rate of the link angle is used instead')
+    assert 57.0 < float(ros.key_values(status)['velocity_scale']) < 58.0
+    # Every sample's speed came from the link angle, those before the verdict too.
+    analyzer = monitor.node.twin.analyzer
+    assert analyzer.derived_velocity == analyzer.samples_seen == len(rows)
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'velocity field' in x]
+    assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
+def test_a_true_velocity_field_is_used_as_published(ros, simulated):
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    status = monitor.status(lambda s: s.level == DiagnosticStatus.OK)
+    assert 0.95 < float(ros.key_values(status)['velocity_scale']) < 1.05
+    assert monitor.node.twin.analyzer.derived_velocity == 0
+
+
 def test_a_stream_that_stops_turns_the_diagnostics_to_warn_never_ok(ros, simulated):
     # The controller stopped publishing the joint (or renamed it): the analysis stood where
     # it was and the diagnostics kept saying OK.

@@ -1,0 +1,111 @@
+"""A velocity field that is not the link angle's rate: found, said, and the rate used instead."""
+
+import math
+
+import numpy as np
+import pytest
+from reducer_twin.core.te_extraction import compute_te
+from reducer_twin.core.velocity_check import VELOCITY_CHECK_SAMPLES, VelocityCheck
+from reducer_twin.core.window_analysis import WindowAnalyzer
+from te_streams import PARAMS, RATIO, simulated
+
+RNG = np.random.default_rng(7)
+MOVE = np.sin(np.linspace(0.0, 20.0 * math.pi, 4000))      # a joint swinging, rad/s
+
+
+def _verdict(field, rate=MOVE, min_speed=0.01):
+    check = VelocityCheck(min_speed, RATIO)
+    return check, check.check(np.asarray(field, dtype=float), rate)
+
+
+@pytest.mark.parametrize('field, form', [
+    (np.zeros_like(MOVE), 'is zero where the link angle turns'),
+    (-MOVE, 'the other sense'),
+    (np.degrees(MOVE), 'degrees per second'),
+    (MOVE * 60.0 / (2.0 * math.pi), 'revolutions per minute'),
+    (MOVE * RATIO, "the motor's speed: the ratio is 81"),
+    (-MOVE * RATIO, "the motor's speed: the ratio is 81, the other sense"),
+    (MOVE / RATIO, 'the speed divided by the reduction ratio'),
+    (MOVE * 5.0, 'other units, or another quantity'),
+], ids=['zero-filled', 'negated', 'deg/s', 'rpm', "motor's speed", "motor's, reversed",
+        'divided by the ratio', 'five times'])
+def test_a_field_in_another_form_is_replaced_and_its_form_named(field, form):
+    check, replace = _verdict(field)
+    assert replace and check.replaced and check.decided
+    assert form in check.fault
+    assert check.fault.endswith('the rate of the link angle is used instead')
+    # Once replaced, it stays replaced: later chunks are not judged again.
+    assert check.check(MOVE, MOVE)
+
+
+@pytest.mark.parametrize('field', [
+    MOVE,
+    MOVE + RNG.normal(0.0, 0.05, MOVE.size),            # a noisy drive estimate
+    np.concatenate([[0.0] * 40, MOVE[:-40]]) * 0.9,    # lagging and filtered
+], ids=['the rate', 'noisy', 'lagging and filtered'])
+def test_the_link_angles_rate_in_any_honest_form_is_trusted(field):
+    check, replace = _verdict(field)
+    assert not replace and check.trusted and check.fault is None
+    assert 0.5 <= check.scale <= 2.0
+
+
+def test_nothing_is_decided_until_the_joint_has_turned_enough():
+    check = VelocityCheck(0.01, RATIO)
+    still = np.full(10_000, 0.001)      # below min_speed: standing
+    assert not check.check(np.zeros_like(still), still)
+    assert not check.decided and math.isnan(check.scale)
+    turning = np.ones(VELOCITY_CHECK_SAMPLES - 1)
+    assert not check.check(np.zeros_like(turning), turning)
+    assert not check.decided
+    assert check.check(np.zeros(1), np.ones(1))     # the sample that decides
+
+
+def test_samples_without_a_field_take_no_part():
+    field = np.where(np.arange(MOVE.size) % 2 == 0, np.nan, -MOVE)
+    check, replace = _verdict(field)
+    assert replace and check.turning < np.count_nonzero(np.abs(MOVE) >= 0.01)
+
+
+def _same(a, b):
+    """Equal bit for bit, NaN equal to NaN, through dicts and nested dataclasses."""
+    if hasattr(a, '__dataclass_fields__'):
+        return all(_same(getattr(a, k), getattr(b, k)) for k in a.__dataclass_fields__)
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, str):
+        return a == b
+    return bool(np.array_equal(a, b, equal_nan=True))
+
+
+def _analyzer(batch, velocity, pieces=400):
+    """Feed a simulated stream in pieces (as a node does), with this velocity field."""
+    stream = compute_te(batch.t, batch.motor_angle, batch.t, batch.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    windows = []
+    for sl in np.array_split(np.arange(batch.t.size), pieces):
+        part = slice(sl[0], sl[-1] + 1)
+        windows += analyzer.update(stream.part(part), batch.effort[part], velocity[part])
+    return analyzer, windows + analyzer.flush()
+
+
+@pytest.mark.parametrize('form', ['zeros', 'degrees', 'negated'])
+def test_the_window_analysis_of_a_replaced_field_is_that_of_a_stream_without_one(form):
+    _, b = simulated()
+    field = {'zeros': np.zeros_like(b.link_velocity),
+             'degrees': np.degrees(b.link_velocity),
+             'negated': -b.link_velocity}[form]
+    without, expected = _analyzer(b, np.full_like(b.link_velocity, np.nan))
+    analyzer, got = _analyzer(b, field)
+    assert analyzer.velocity_fault is not None
+    assert without.velocity_fault is None and math.isnan(without.velocity_scale)
+    assert len(got) == len(expected) > 5
+    for g, e in zip(got, expected):     # every feature, bit for bit: the first samples too
+        assert _same(g, e)
+    assert analyzer.derived_velocity == without.derived_velocity == analyzer.samples_seen
+
+
+def test_a_true_field_is_used_as_it_is():
+    _, b = simulated()
+    analyzer, _ = _analyzer(b, b.link_velocity)
+    assert analyzer.velocity_fault is None and analyzer.derived_velocity == 0
+    assert analyzer.velocity_scale == pytest.approx(1.0, abs=0.05)
