@@ -568,10 +568,10 @@ class WindowAnalyzer:
                     "lower bound, and the estimate would be the prior's alone): a unit built "
                     'tighter than nominal, read once its play has grown past that, or an '
                     'effort whose zero lies beyond the loads (an offset from the torque)')
-        rate = self.rate_hz
-        if math.isfinite(rate) and rate < LOW_RATE_HZ:
-            return (f'{rate:.0f} Hz: too few samples per torque reversal in '
-                    f'{self.windows_emitted} windows')
+        if self.largest_effort == 0.0:
+            return (f'the effort on {effort_source} is zero in every sample that carries '
+                    f'one ({seen - self.samples_without_effort}): a controller that fills '
+                    'zeros where it has no effort; the lost motion needs the torque')
         if self.largest_effort < self.edges[0]:
             # Nothing reaches the lowest torque bin: a joint that carries no load, or an
             # effort in other units (a motor torque taken for the output torque).
@@ -580,6 +580,10 @@ class WindowAnalyzer:
                     f'({100.0 * self.edges[0] / self.rated_torque:.0f} % of the rated torque) '
                     'from which the lost motion is read: a joint without load, or an effort '
                     'in other units (a motor torque: set motor_effort_units to motor)')
+        rate = self.rate_hz
+        if math.isfinite(rate) and rate < LOW_RATE_HZ:
+            return (f'{rate:.0f} Hz: too few samples per torque reversal in '
+                    f'{self.windows_emitted} windows')
         if self.largest_effort > EFFORT_PLAUSIBLE_RATED * self.rated_torque:
             return (f'the effort on {effort_source} reaches {self.largest_effort:.3g} N*m, '
                     f'{self.largest_effort / self.rated_torque:.3g} times the rated torque '

@@ -283,6 +283,24 @@ def test_a_joint_that_never_reverses_under_load_is_reported_as_such():
     assert 'no torque reversal' in analyzer.not_observed_reason()
 
 
+@pytest.mark.parametrize('rate_hz', [1000, 200])
+def test_an_effort_filled_with_zeros_is_named_as_such_at_any_rate(rate_hz):
+    # A controller without an effort interface that fills zeros: at 200 Hz the joint was
+    # "not observed: 200 Hz: too few samples per torque reversal", which sends the
+    # engineer to the recording's rate instead of the effort.
+    _, b = simulated(samples=8000)
+    keep = slice(None, None, 1000 // rate_hz)
+    stream = compute_te(b.t[keep], b.motor_angle[keep], b.t[keep], b.link_angle[keep], RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    analyzer.update(stream, np.zeros(stream.t.size), b.link_velocity[keep])
+    analyzer.flush()
+    assert analyzer.windows_emitted >= 1 and analyzer.windows_observed == 0
+    reason = analyzer.not_observed_reason('/arm/joint_states')
+    assert reason == (f'the effort on /arm/joint_states is zero in every sample that carries '
+                      f'one ({stream.t.size}): a controller that fills zeros where it has no '
+                      'effort; the lost motion needs the torque')
+
+
 def test_an_effort_too_small_to_read_is_named_as_such_not_as_a_joint_without_reversals():
     # A motor torque reported beside motor angles divided by the ratio is taken for the
     # output torque: the effort is 1/ratio of it and never reaches the lowest torque bin.
