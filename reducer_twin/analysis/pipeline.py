@@ -63,7 +63,8 @@ from reducer_twin.core.ingest import motor_effort_scale
 from reducer_twin.core.ingest import pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS
 from reducer_twin.core.ingest import stream_cleaners
-from reducer_twin.core.joint_twin import joint_topic, TOPIC_NAMESPACE
+from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
+from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
@@ -227,6 +228,7 @@ class _Output:
     def __init__(self, writer, joints, truth_topics, diagnostics=None):
         self.writer = writer
         self.channels = {}
+        check_topic_tokens(joints)
         for joint in joints:
             for suffix, qos in (('te', DEFAULT_QOS), ('te_features', DEFAULT_QOS),
                                 ('wear', LATEST_QOS), ('remaining_life', LATEST_QOS)):
@@ -270,6 +272,11 @@ class _Run:
                 truth[joint] = topic
         self.truth_topics = truth
         self.out = _Output(writer, plan.joints, truth, diagnostics)
+        for joint in plan.joints:
+            if topic_token(joint) != joint:
+                warn(bag, f'{joint}: its derived topics are {joint_topic(joint, "...")} (a '
+                     "ROS 2 topic name takes letters, digits and '_', and no part of it "
+                     'starts with a digit)')
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)

@@ -25,6 +25,7 @@ from typing import Mapping, Optional
 
 import numpy as np
 
+from .errors import InvalidParameter
 from .ingest import IngestConfig
 from .kinematics import total_ratio
 from .params import _Validated, spec
@@ -38,9 +39,68 @@ TOPIC_NAMESPACE = 'reducer_twin'
 """Namespace of every derived topic."""
 
 
+def topic_token(joint):
+    """
+    Return a joint's name as it stands in topic names: valid for ROS 2, one per name.
+
+    A ROS 2 topic name takes ASCII letters, digits, ``_`` and ``/``, and none of its
+    tokens starts with a digit; a joint's name takes anything (``joint-1``, ``Joint 2``,
+    ``3rd_axis``), and ``ros2 bag play`` of a derived bag, or a node's publisher, refused
+    such a topic. Every other character becomes ``_``, a token that starts with a digit
+    gets a ``_`` before it, and empty tokens (``//``, a leading ``/``) are dropped; a
+    valid name is returned unchanged (``robot_b/joint_1``).
+
+    Parameters
+    ----------
+    joint : str
+        The joint's name, as the JointState messages carry it.
+
+    Returns
+    -------
+    str
+
+    """
+    tokens = [''.join(c if c.isascii() and (c.isalnum() or c == '_') else '_' for c in t)
+              for t in str(joint).split('/') if t]
+    return '/'.join('_' + t if t[0].isdigit() else t for t in tokens) or '_'
+
+
+def node_token(joint):
+    """Return a joint's name as it stands in node names (:func:`topic_token`, ``/`` as ``_``)."""
+    return topic_token(joint).replace('/', '_')
+
+
 def joint_topic(joint, suffix, namespace=TOPIC_NAMESPACE):
-    """Return the topic of a derived value of one joint, ``/reducer_twin/<joint>/<suffix>``."""
-    return f'/{namespace}/{joint}/{suffix}'
+    """
+    Return the topic of a derived value of one joint, ``/reducer_twin/<joint>/<suffix>``.
+
+    The joint's name as :func:`topic_token` writes it.
+    """
+    return f'/{namespace}/{topic_token(joint)}/{suffix}'
+
+
+def check_topic_tokens(joints):
+    """
+    Refuse joints whose names would share their topics (``joint-1`` and ``joint_1``).
+
+    Parameters
+    ----------
+    joints : iterable of str
+
+    Raises
+    ------
+    InvalidParameter
+        Naming both joints and the topic token they share.
+
+    """
+    seen = {}
+    for joint in joints:
+        token = topic_token(joint)
+        if token in seen and seen[token] != joint:
+            raise InvalidParameter(f'joints {seen[token]!r} and {joint!r} would publish on the '
+                                   f'same topics (/{TOPIC_NAMESPACE}/{token}/...): a topic '
+                                   "name takes letters, digits and '_' only")
+        seen[token] = joint
 
 
 @dataclass(frozen=True)

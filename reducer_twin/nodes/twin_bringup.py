@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 # names stay importable from here.
 from reducer_twin.config import default_config, DEFAULTS, load_config  # noqa: F401
 from reducer_twin.config import joint_reducers, twin_config
+from reducer_twin.core.joint_twin import check_topic_tokens, node_token
 from reducer_twin.nodes.runtime import run_nodes
 
 
@@ -54,6 +55,7 @@ def build_nodes(config, sim_overrides=None):
     twin, life = config['twin'], config['life']
     params, own = joint_reducers(config)
     joints = list(twin['joints'])
+    check_topic_tokens(joints)
     nodes = {'simulator': None, 'te': {}, 'estimator': {}, 'life': {}}
     if twin['simulate']:
         sim = [Parameter('joints', value=joints),
@@ -81,9 +83,9 @@ def build_nodes(config, sim_overrides=None):
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
     spec = twin_config(config)
     for joint in joints:
-        reducer = own.get(joint, params)
+        reducer, name = own.get(joint, params), node_token(joint)
         nodes['te'][joint] = TEMonitor(
-            f'te_monitor_{joint}', params=reducer, subscribe=not local, parameter_overrides=[
+            f'te_monitor_{name}', params=reducer, subscribe=not local, parameter_overrides=[
                 Parameter('joint', value=joint),
                 *(Parameter(name, value=float(getattr(spec, name)))
                   for name in ('aging_factor', 'window_s', 'max_gap_s')),
@@ -95,10 +97,10 @@ def build_nodes(config, sim_overrides=None):
                  Parameter('store_period_s', value=float(twin['store_period_s'])),
                  *life_params] if twin['store'] else []
         nodes['estimator'][joint] = WearEstimatorNode(
-            f'wear_estimator_{joint}', params=reducer, parameter_overrides=[
+            f'wear_estimator_{name}', params=reducer, parameter_overrides=[
                 Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir']),
                 *store])
-        nodes['life'][joint] = LifePublisher(f'life_publisher_{joint}', params=reducer,
+        nodes['life'][joint] = LifePublisher(f'life_publisher_{name}', params=reducer,
                                              parameter_overrides=[Parameter('joint', value=joint),
                                                                   *life_params])
     return nodes

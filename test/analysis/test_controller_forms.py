@@ -262,6 +262,32 @@ def test_a_true_velocity_field_is_used_and_said_to_be(original):
         assert res.summary()['velocity'] == 'field'
 
 
+def test_joints_whose_names_are_no_topic_names_get_valid_derived_topics_and_it_is_said(
+        original, tmp_path, capsys):
+    # 'ros2 bag play' of the derived bag refused '/reducer_twin/joint-1/wear'.
+    from rclpy.validate_topic_name import validate_topic_name
+    js = original[0]
+    rename = {'joint_1': 'joint-1', 'joint_2': '2nd axis'}
+    names = [rename[n[:-6]] + '_motor' if n.endswith('_motor') else rename[n]
+             for n in js.names]
+    bag = write_bag_dir(tmp_path / 'named', {'/joint_states': JointStateBatch(
+        js.stamps_ns, names, js.position, js.velocity, js.effort)}, custom_data=CUSTOM)
+    code, got, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 0
+    for old, new in rename.items():     # the same joints, by their own names
+        assert got['joints'][new]['wear_um'] == pytest.approx(
+            original[1].joints[old].summary()['wear_um'], rel=1e-3)
+    for said in ('joint-1: its derived topics are /reducer_twin/joint_1/...',
+                 '2nd axis: its derived topics are /reducer_twin/_2nd_axis/...'):
+        (line,) = [x for x in err.splitlines() if said in x]
+        assert line.startswith('WARNING: '), line
+    with open_bag(tmp_path / 'd') as derived:
+        topics = sorted(derived.topics)
+    assert '/reducer_twin/joint_1/wear' in topics and '/reducer_twin/_2nd_axis/te' in topics
+    for topic in topics:
+        validate_topic_name(topic)      # raises on a name ROS 2 refuses
+
+
 def test_every_robot_of_a_recording_is_analysed_its_joints_named_by_namespace(
         original, tmp_path, capsys):
     # A second robot's /robot_b/joint_states was left out without a word.

@@ -9,12 +9,15 @@ joint's processing are one validated spec.
 """
 
 from dataclasses import FrozenInstanceError
+import re
 
+from hypothesis import given
+from hypothesis import strategies as st
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
-from reducer_twin.core.joint_twin import TwinBack
+from reducer_twin.core.joint_twin import check_topic_tokens, node_token, topic_token, TwinBack
 from reducer_twin.core.joint_twin import TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
@@ -143,3 +146,37 @@ def test_an_unobserved_reducer_has_no_number_in_the_summaries_and_an_observed_on
     assert seen['rul_p50_h'] == pytest.approx(u.summary.rul_p50_h, rel=1e-12)
     assert set(estimate_numbers(u.wear.record, u.life.record, observed=False).values()) == {None}
     assert set(estimate_numbers({}, {}, observed=True).values()) == {None}
+
+
+@pytest.mark.parametrize('joint, token', [
+    ('joint_1', 'joint_1'),
+    ('robot_b/joint_1', 'robot_b/joint_1'),
+    ('joint-1', 'joint_1'),
+    ('Joint 2', 'Joint_2'),
+    ('3rd_axis', '_3rd_axis'),
+    ('arm/6', 'arm/_6'),
+    ('/arm//a1', 'arm/a1'),
+    ('Gelenk_ä', 'Gelenk__'),
+], ids=['valid', 'namespaced', 'hyphen', 'space', 'leading digit', 'digit token',
+        'empty tokens', 'not ASCII'])
+def test_a_joints_topic_token_is_a_valid_ros_name_and_a_valid_name_stays(joint, token):
+    assert topic_token(joint) == token
+    assert joint_topic(joint, 'wear') == f'/reducer_twin/{token}/wear'
+    assert node_token(joint) == token.replace('/', '_')
+
+
+ROS_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
+
+
+@given(st.text(min_size=1, max_size=30))
+def test_any_joint_name_gives_a_topic_token_by_the_ros_2_rules(joint):
+    token = topic_token(joint)
+    assert ROS_NAME.fullmatch(token), token
+    if ROS_NAME.fullmatch(joint):
+        assert token == joint
+
+
+def test_joints_that_would_share_their_topics_are_refused():
+    check_topic_tokens(['joint_1', 'joint_2', 'robot_b/joint_1'])
+    with pytest.raises(InvalidParameter, match="'joint-1' and 'joint_1' would publish"):
+        check_topic_tokens(['joint-1', 'joint_2', 'joint_1'])

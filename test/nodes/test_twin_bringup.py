@@ -10,6 +10,7 @@ reach the TE monitors as parameters derived from the core's ``TwinConfig``.
 from pathlib import Path
 
 import pytest
+from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.nodes.twin_bringup import build_nodes, load_config
@@ -47,3 +48,30 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
         assert te.get_parameter('window_s').value == 3.0
         assert te.twin.analyzer.friction is False
         assert te.get_parameter('max_gap_s').value == TwinConfig().max_gap_s
+
+
+def test_joints_whose_names_are_no_topic_names_run_on_valid_topics(default_ros, tmp_path):
+    # A joint named 'joint-1' or '2nd axis' (a URDF takes any name) made the bringup fail
+    # on its first publisher: a ROS 2 topic or node name takes letters, digits and '_'.
+    config_file = tmp_path / 'twin.yaml'
+    config_file.write_text("twin:\n  joints: [joint-1, 2nd axis]\n  simulate: true\n"
+                           f'  state_dir: {tmp_path}\n')
+    nodes = build_nodes(load_config(config_file))
+    for node in [nodes['simulator'], nodes['ingest'], *nodes['te'].values(),
+                 *nodes['estimator'].values(), *nodes['life'].values()]:
+        default_ros.add(node)
+    for joint, token in (('joint-1', 'joint_1'), ('2nd axis', '_2nd_axis')):
+        te = nodes['te'][joint]
+        assert te.get_name() == f'te_monitor_{token}'
+        assert te.te_pub.topic_name == f'/reducer_twin/{token}/te'
+        assert nodes['estimator'][joint].pub.topic_name == f'/reducer_twin/{token}/wear'
+        # The simulator's JointState carries the names as they are; they reach the monitor.
+        default_ros.spin_until(lambda: te.samples > 0, what=f'samples of {joint}')
+
+
+def test_joints_that_would_share_their_topics_are_refused_naming_both(tmp_path):
+    config_file = tmp_path / 'twin.yaml'
+    config_file.write_text('twin:\n  joints: [joint-1, joint_1]\n  simulate: true\n')
+    with pytest.raises(InvalidParameter, match="'joint-1' and 'joint_1' would publish on the "
+                                               'same topics'):
+        build_nodes(load_config(config_file))
