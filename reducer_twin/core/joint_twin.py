@@ -86,6 +86,7 @@ def check_topic_tokens(joints):
     Parameters
     ----------
     joints : iterable of str
+        The joints' names.
 
     Raises
     ------

@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 from reducer_twin.core.errors import InvalidParameter
-from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
 from reducer_twin.core.joint_twin import check_topic_tokens, node_token, topic_token, TwinBack
+from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
 from reducer_twin.core.joint_twin import TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig

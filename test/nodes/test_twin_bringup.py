@@ -54,7 +54,7 @@ def test_joints_whose_names_are_no_topic_names_run_on_valid_topics(default_ros, 
     # A joint named 'joint-1' or '2nd axis' (a URDF takes any name) made the bringup fail
     # on its first publisher: a ROS 2 topic or node name takes letters, digits and '_'.
     config_file = tmp_path / 'twin.yaml'
-    config_file.write_text("twin:\n  joints: [joint-1, 2nd axis]\n  simulate: true\n"
+    config_file.write_text('twin:\n  joints: [joint-1, 2nd axis]\n  simulate: true\n'
                            f'  state_dir: {tmp_path}\n')
     nodes = build_nodes(load_config(config_file))
     for node in [nodes['simulator'], nodes['ingest'], *nodes['te'].values(),
