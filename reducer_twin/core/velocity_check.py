@@ -8,10 +8,17 @@ forms: zeros where the hardware has no velocity, degrees per second, the motor's
 speed, the opposite sense. Read as it is, such a field gives a confident wrong wear
 and remaining life (a negated field: a wrist's wear 68 % low, its P10-P90 spanning
 94-100 000 h) or no observation with a wrong reason (a zero-filled one: "too few
-samples per torque reversal"). :class:`VelocityCheck` regresses the field on the
+samples per torque reversal"). :class:`VelocityCheck` compares the field with the
 link angle's central differences where the joint moves and, once the evidence
 suffices, says in one line what the field is and has the link angle's rate used
 in its place.
+
+The comparison is the median of the ratio field / rate, not a regression: stamps that
+scatter about their period (a driver that stamps a message on arrival, 0.3 ms sd at
+1 kHz, before the stream is re-timed) make the central differences noisy, with steps
+of a few microseconds giving rates hundreds of times the speed. Regressed on such
+rates, a true field read 0.002 times the rate and was replaced; the median ratio is
+1 for any noise that leaves the rate's sign and median right.
 """
 
 import math
@@ -24,7 +31,7 @@ VELOCITY_CHECK_SAMPLES = 200
 
 VELOCITY_SCALE_RANGE = (0.5, 2.0)
 """
-Plausible slope of the velocity field on the link angle's rate (1 for the same quantity).
+Plausible ratio of the velocity field to the link angle's rate (1 for the same quantity).
 
 A velocity the drive filters lags the angle's rate (a first-order filter of time constant
 ``tau`` keeps ``1/sqrt(1 + (2·pi·f·tau)^2)`` of a move of frequency ``f``: 0.85 for 1 Hz
@@ -54,7 +61,7 @@ class VelocityCheck:
     Attributes
     ----------
     scale : float
-        Slope of the field on the angle's rate [-], NaN before any turning sample.
+        Median ratio of the field to the angle's rate [-], NaN before any turning sample.
     turning : int
         Turning samples pooled.
     replaced : bool
@@ -70,7 +77,8 @@ class VelocityCheck:
     def __init__(self, min_speed, ratio):
         self.min_speed = float(min_speed)
         self.ratio = float(ratio)
-        self._sums = np.zeros(2)     # sum(field * rate), sum(rate^2)
+        self._ratios = []           # field / rate of the turning samples, until decided
+        self._scale = None
         self.turning = 0
         self.replaced = False
         self.trusted = False
@@ -83,8 +91,11 @@ class VelocityCheck:
 
     @property
     def scale(self):
-        """Slope of the velocity field on the link angle's rate, NaN before turning samples."""
-        return float(self._sums[0] / self._sums[1]) if self._sums[1] > 0 else math.nan
+        """Median ratio of the velocity field to the link angle's rate, NaN before turning."""
+        if self._scale is None:
+            self._scale = float(np.median(np.concatenate(self._ratios))) if self.turning \
+                else math.nan
+        return self._scale
 
     def check(self, field, rate):
         """
@@ -110,16 +121,18 @@ class VelocityCheck:
         both = np.isfinite(field) & (np.abs(rate) >= self.min_speed)
         n = int(np.count_nonzero(both))
         if n:
-            f, r = field[both], rate[both]
-            self._sums += (float(np.dot(f, r)), float(np.dot(r, r)))
+            self._ratios.append(field[both] / rate[both])
             self.turning += n
+            self._scale = None
         if self.turning < VELOCITY_CHECK_SAMPLES:
             return False
         scale = self.scale
         lo, hi = VELOCITY_SCALE_RANGE
         if lo <= scale <= hi:
+            self._ratios = [np.array([scale])]
             self.trusted = True
             return False
+        self._ratios = [np.array([scale])]       # decided: the median is all that is kept
         self.replaced = True
         if scale == 0.0:
             seen = f'is zero where the link angle turns ({self.turning} samples)'
@@ -130,7 +143,7 @@ class VelocityCheck:
         return True
 
     def _form(self, scale):
-        """Name the form a velocity field of this slope most likely has."""
+        """Name the form a velocity field of this ratio most likely has."""
         forms = _KNOWN_FORMS + ((self.ratio, f"the motor's speed: the ratio is {self.ratio:.4g}"),
                                 (1.0 / self.ratio, 'the speed divided by the reduction ratio'))
         for value, name in forms:
