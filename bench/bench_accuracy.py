@@ -30,7 +30,9 @@ remaining life. Evaluations are the windows between 25 % and 75 % of life.
 Three fixed cases go with them: units 3 um looser and 2 um tighter than
 nominal (model generator; RUL P50 at 60 % of life) and a used unit (2-10 um of
 wear, aging factor 1) met by a twin without state (wear after 20 usable
-windows).
+windows). And per generator, twins met without state part-way through each
+observed life (25, 50, 75 %), judged after 10 % and 30 % more of it: the
+remaining life of a reducer installed on a robot that has run for years.
 
 Printed per case (issue floors in brackets): wear error (lost motion on the
 independent generator), NEES [0.5, 2], NIS, alpha-lambda (alpha 0.2) at lambda
@@ -654,6 +656,63 @@ def report_case(name, results, unit_name):
             'calibration': [float(h) for h in hist]}
 
 
+MID_LIFE_STARTS = (0.25, 0.5, 0.75)
+"""Shares of life at which a twin without state is started on a unit (mid-life case)."""
+
+MID_LIFE_SPANS = (0.1, 0.3)
+"""Shares of life it then watches before its remaining life is judged."""
+
+
+def mid_life_starts(runs, params, config=None):
+    """
+    Figures of twins started without state on units already part-way through life.
+
+    Most twins meet their reducer used: installed on a robot that has run for years, a
+    recording analysed without the state of earlier ones. Each run is met at
+    :data:`MID_LIFE_STARTS` of its life by an estimator with the default prior (new with
+    probability 0.9, else of unknown history) and judged after it has seen
+    :data:`MID_LIFE_SPANS` of the life (starts whose span would pass the end are left
+    out): where the true remaining life falls against P10, P50 and P90.
+
+    Returns
+    -------
+    dict
+        Per span: ``starts``, ``coverage``, ``below_p10``, ``above_p90``,
+        ``p50_ratio`` (median P50 / true), ``p50_within_30``.
+
+    """
+    out = {}
+    for span in MID_LIFE_SPANS:
+        rows = []
+        for run in runs:
+            frac = run.t_end / run.eol
+            for start in MID_LIFE_STARTS:
+                k0 = int(np.searchsorted(frac, start))
+                k1 = int(np.searchsorted(frac, start + span))
+                if k1 >= frac.size or k1 <= k0:
+                    continue
+                sl = slice(k0, k1 + 1)
+                part = Run(run.truth, run.records[sl], run.t_end[sl], run.eol, run.wear[sl],
+                           run.lost_motion[sl], run.wear_mid[sl])
+                est = estimate(part, params, config)
+                true_rul = run.eol - part.t_end[-1]
+                rows.append((true_rul < est['p10'][-1], true_rul > est['p90'][-1],
+                             est['p50'][-1] / true_rul))
+        if not rows:
+            continue
+        below, above, ratio = (np.array(x, dtype=float) for x in zip(*rows))
+        out[span] = {'starts': len(rows), 'coverage': float(1.0 - below.mean() - above.mean()),
+                     'below_p10': float(below.mean()), 'above_p90': float(above.mean()),
+                     'p50_ratio': float(np.median(ratio)),
+                     'p50_within_30': float(np.mean(np.abs(ratio - 1.0) <= 0.3))}
+        f = out[span]
+        print(f'  met without state at 25/50/75 % of life, judged after {_pct(span)} more: '
+              f'{f["starts"]} starts, P10-P90 coverage {_pct(f["coverage"])} (below P10 '
+              f'{_pct(f["below_p10"])}, above P90 {_pct(f["above_p90"])}), P50 / true '
+              f'median {f["p50_ratio"]:.2f}, within 30 % in {_pct(f["p50_within_30"])}')
+    return out
+
+
 def fixed_as_built(params, offset_m, seeds, windows, cache):
     """P50 errors at 60 % of life of units built ``offset_m`` looser than nominal."""
     errors = []
@@ -708,9 +767,10 @@ def main(argv=None):
                   if gen == 'model' else
                   draw_independent_truths(args.independent_truths, args.seed, args.windows,
                                           gen))
-        results, oracle = [], []
+        results, oracle, runs = [], [], []
         for truth in truths:
             run = generate(truth, params, args.cache)
+            runs.append(run)
             results.append(evaluate(run, estimate(run, params, config)))
             results[-1].update(bias=window_bias(run, params),
                                first=first_window_error(run, params),
@@ -734,6 +794,8 @@ def main(argv=None):
         oracle = [r for r, s in zip(oracle, seen) if s]
         truths = [t for t, s in zip(truths, seen) if s]
         figures[gen] = report_case(f'{gen} generator', results, unit)
+        figures[gen]['mid_life'] = {f'{span:g}': f for span, f in mid_life_starts(
+            [r for r, s in zip(runs, seen) if s], params, config).items()}
         if gen == 'third':
             for kind in third.KINDS:
                 pick = [r for r, t in zip(results, truths) if t.kind == kind]

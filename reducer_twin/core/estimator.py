@@ -128,8 +128,9 @@ predictive density under both models, as each predicted it
 1984, from the :data:`SCORE_AFTER`-th usable window on; lagged because the
 remaining life is an extrapolation); their difference gives the probability
 that the observed law, not the model's curve, holds (prior
-``trend_probability``; 0 for a reducer of unknown history, whose exposure
-since new is unknown). The remaining life is the
+``trend_probability``). For a reducer that may have been used before the twin
+started the law's exposure counts from the start, with two origins weighed by
+their evidence (new, or used: :data:`.growth.START_PRIOR`). The remaining life is the
 mixture of both predictions (:mod:`.life`), and so is the reported lost
 motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
@@ -758,7 +759,7 @@ class WearEstimator:
         self._wm, self._wc = merwe_weights(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         self._spread = math.sqrt(SIGMA_ALPHA ** 2 * (N_FILTER + SIGMA_KAPPA))
         self._lw, self._m, self._P = prior_components(self.config)
-        self._growth = GrowthTrend()
+        self._growth = GrowthTrend(self.config.new_unit_probability)
         self._archard = 0.0
         self._observed_at = None
         self._window_increment = 0.0
@@ -1297,7 +1298,7 @@ class WearEstimator:
         if not isinstance(reason, str) or not reason.strip():
             raise InvalidInput(f'reset reason must be a non-empty string, got {reason!r}')
         self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
-        self._growth = GrowthTrend()
+        self._growth = GrowthTrend(1.0)
         self._archard = 0.0
         self._score = 0.0
         self._scored = 0
@@ -1336,12 +1337,12 @@ class WearEstimator:
         Probability that the observed growth law, not the model's curve, holds.
 
         ``p0`` (``config.trend_probability``) moved by the prequential log-score
-        difference of the two models; 0 for a reducer of unknown history (the
-        exposure since new is unknown, so the law cannot be placed).
+        difference of the two models. For a reducer used before the twin started
+        the law counts its exposure from the start (:mod:`.growth`, two origins).
         """
         p0 = self.config.trend_probability
-        if self.config.new_unit_probability == 0.0 or p0 in (0.0, 1.0):
-            return 0.0 if self.config.new_unit_probability == 0.0 else p0
+        if p0 in (0.0, 1.0):
+            return p0
         logit = math.log(p0 / (1.0 - p0)) + self._score
         return 1.0 / (1.0 + math.exp(-logit)) if logit > -700.0 else 0.0
 

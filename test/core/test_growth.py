@@ -134,3 +134,63 @@ def test_without_windows_no_growth_is_assumed():
     # (a half-normal prior would put 2.4 arcmin of growth on a unit never seen).
     mean, _ = GrowthTrend().summary()
     assert mean[1] == 0.0
+
+
+def mid_life(new_probability, n=30, seed=1):
+    """Return a law fed with a unit met at 75 % of its life, ``z = 0.6 + 1.8·(A/A_end)^0.5``."""
+    rng = np.random.default_rng(seed)
+    before = 3e-7                                   # exposure before the twin started
+    exposure = 3e-9 * (np.arange(n) + 0.5)          # counted from the twin's start
+    end = before + 4 * 3e-9 * n                     # the limit's exposure
+    z = 0.6 * ARCMIN + 1.8 * ARCMIN * ((before + exposure) / end) ** 0.5 \
+        + rng.normal(0.0, NOISE, n)
+    trend = GrowthTrend(new_probability)
+    for a, zk in zip(exposure, z):
+        trend.add(a, zk, NOISE ** 2)
+    trend.advance(exposure[-1])
+    return trend, z
+
+
+def test_a_unit_used_before_the_twin_started_gets_a_law_from_its_lost_motion_then():
+    # Placed as from new (beta at 0.65 arcmin), a unit met at 2 arcmin was bent into a
+    # steep start that flattens: its remaining life came out long.
+    trend, z = mid_life(0.9)
+    lw, _, _, _ = trend._posterior()
+    start_weight = np.exp(lw[EXPONENTS.size:]).sum()
+    assert start_weight > 0.99
+    mean, cov = trend.summary()
+    assert mean[0] == pytest.approx(z[0], abs=0.05 * ARCMIN)     # the lost motion then
+    assert abs(mean[2] - 1.0) < 0.3     # seen from mid-life, the growth is near linear
+    # Out to the limit (4 times the exposure seen: 2.4 arcmin) the law follows the unit;
+    # placed as from new only, it is bent towards its prior exponent (0.7) and falls short.
+
+    def at_limit(m):
+        return m[0] + m[1] * 4.0 ** m[2]
+
+    assert at_limit(mean) == pytest.approx(2.4 * ARCMIN, abs=0.05 * ARCMIN)
+    bent, _ = mid_life(1.0)
+    assert at_limit(bent.summary()[0]) < 2.4 * ARCMIN - 0.1 * ARCMIN
+
+
+def test_a_new_unit_keeps_the_law_placed_from_new():
+    trend, _, _ = history(0.7)
+    weighed = GrowthTrend(0.9)
+    weighed.sxx, weighed.sxz, weighed.szz = trend.sxx, trend.sxz, trend.szz
+    weighed.advance(trend.exposure)
+    lw, _, _, _ = weighed._posterior()
+    assert np.exp(lw[EXPONENTS.size:]).sum() < 0.05
+    for a, b in zip(trend.summary(), weighed.summary()):
+        np.testing.assert_allclose(a, b, rtol=0.05, atol=0.02 * ARCMIN)
+
+
+def test_the_laws_origin_odds_survive_a_round_trip_and_old_states_are_from_new():
+    trend, _ = mid_life(0.9)
+    state = json.loads(json.dumps(trend.state()))
+    restored = GrowthTrend.from_state(state)
+    assert restored.new_probability == 0.9
+    for a, b in zip(trend.summary(), restored.summary()):
+        np.testing.assert_array_equal(a, b)
+    del state['new_probability']
+    assert GrowthTrend.from_state(state).new_probability == 1.0
+    with pytest.raises(ValueError, match='new_probability'):
+        GrowthTrend.from_state({**state, 'new_probability': 1.5})
