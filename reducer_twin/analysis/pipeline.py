@@ -66,6 +66,7 @@ from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.pipeline import rate_unresolved
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -656,6 +657,11 @@ class _Run:
             res.reason = self._not_observed(front, counts, sides)
             res.partial = self._partial(joint, front)
             res.velocity = self._velocity(joint, front)
+            if res.observed and len(res.wear) and not res.summary()['rate_resolved']:
+                unresolved = rate_unresolved(dict(zip(WEAR_ESTIMATE.fields, res.wear[-1])))
+                warn(self.bag, f"{joint}: its remaining life is the model's wear rate at this "
+                     f'duty: {unresolved}; watch it longer, or analyse its recordings in '
+                     'time order with --store')
             self._note_gaps(joint, front)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)

@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
+from reducer_twin.core.pipeline import rate_resolved
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -75,7 +76,8 @@ class JointResult:
             link and motor samples were paired, and why) and ``velocity`` (``'field'``:
             the velocity field, found to be the link angle's rate; ``'link_angle'``: the
             rate of the link angle, where the field is missing or is not that rate; None
-            without samples).
+            without samples) and ``rate_resolved`` (whether the remaining life rests on
+            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
@@ -92,6 +94,7 @@ class JointResult:
         out['partial'] = self.partial if observed else None
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
+        out['rate_resolved'] = rate_resolved(wear) if observed and wear else None
         return out
 
 
@@ -149,7 +152,8 @@ class BagResult:
         for name, reason in self.plan.not_analysed().items():
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
-                            'partial': None, 'pairing': None, 'velocity': None}
+                            'partial': None, 'pairing': None, 'velocity': None,
+                            'rate_resolved': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

@@ -12,6 +12,7 @@ and an offline analysis carry the same values.
 """
 
 from dataclasses import dataclass
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -565,7 +566,7 @@ class LifeStage:
         if pred.limit_reached:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
         else:
-            message += growth_note(wear_record)
+            message += growth_note(wear_record) + rate_note(wear_record)
         if level == 'OK' and int(wear_record.get('updates', 0)) == 0:
             # A prediction from the duty alone is no assessment: never 'OK' without evidence.
             level = 'STALE'
@@ -596,6 +597,58 @@ def trend_from_record(record):
         cov[i, j] = cov[j, i] = float(record[key])
     return GrowthTrendState(float(record['trend_probability']), mean, cov,
                             float(record['archard_exposure_m']))
+
+
+RATE_RESOLVED_SD = 0.5
+"""
+Sd of ``ln s`` up to which the unit's own wear rate counts as resolved by its windows.
+
+The prior's is 2 (the model's rate may be off by 7 times either way at 1 sd); at 0.5 the
+rate alone spans the remaining life's P10-P90 over a factor 3.6. A twin from new gets
+there within 10-25 % of a life (``bench_accuracy.py``); one started on a used unit with
+a short recording may not: its remaining life is then the model's rate at this duty.
+"""
+
+
+def rate_note(wear_record):
+    """
+    Say when the remaining life rests on the model's wear rate, not the unit's own.
+
+    Parameters
+    ----------
+    wear_record : mapping
+        A ``wear`` record.
+
+    Returns
+    -------
+    str
+        ``''`` once the prediction rests on the unit's own growth
+        (:func:`rate_resolved`), else a clause for the life message.
+
+    """
+    if rate_resolved(wear_record):
+        return ''
+    return f"; from the model's wear rate at this duty: {rate_unresolved(wear_record)}"
+
+
+def rate_unresolved(wear_record):
+    """Return how far the unit's own wear rate is from resolved, in words."""
+    sd = math.sqrt(max(float(wear_record['var_log_rate']), 0.0))
+    return (f"this unit's own is not yet resolved (ln-rate sd {sd:.2f}, resolved at "
+            f'{RATE_RESOLVED_SD:g})')
+
+
+def rate_resolved(wear_record):
+    """
+    Return whether a ``wear`` record's remaining life rests on the unit's own growth.
+
+    True once ``ln s`` has an sd of at most :data:`RATE_RESOLVED_SD` or the observed
+    growth law is the likelier (it is fitted to the unit's windows).
+    """
+    if float(wear_record.get('trend_probability', 0.0)) > 0.5:
+        return True
+    var = float(wear_record.get('var_log_rate', math.nan))
+    return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2
 
 
 def growth_note(wear_record):

@@ -42,7 +42,7 @@ SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0,
                       wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
 JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
              'lost_motion_arcmin', 'messages', 'rejected', 'observed', 'windows', 'reason',
-             'partial', 'pairing', 'velocity'}
+             'partial', 'pairing', 'velocity', 'rate_resolved'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
              'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',
@@ -636,3 +636,26 @@ def test_bad_inputs_print_one_error_line_without_a_traceback(sim, tmp_path, caps
     (line,) = _errors(err)
     assert fragment in line, line
     assert 'Traceback' not in err + out and out == ''
+
+
+def test_a_used_unit_seen_briefly_is_said_to_have_the_models_remaining_life(tmp_path, capsys):
+    # A twin without state on a unit 6000 h into its life, for 20 h: the wear is read, the
+    # unit's own rate cannot be, and the remaining life is the model's at this duty. It was
+    # given as the unit's, without a word.
+    spec = SimulationSpec(hours=20.0, aging_factor=1800.0, joints=1, rate_hz=250.0, seed=3,
+                          load_torque_nm=1.2 * 784.0, start_hours=6000.0)
+    simulate_bag(tmp_path / 'bag', spec)
+    code, out, err = _run(['analyze', tmp_path / 'bag', '--out', tmp_path / 'd', '--json'],
+                          capsys)
+    assert code == 0
+    joint = json.loads(out)['joints']['joint_1']
+    assert joint['observed'] and joint['rate_resolved'] is False
+    (line,) = [x for x in err.splitlines() if 'joint_1: its remaining life' in x]
+    assert line.startswith('WARNING: ')
+    assert "is the model's wear rate at this duty: this unit's own is not yet resolved" in line
+    assert line.endswith('analyse its recordings in time order with --store')
+
+
+def test_a_unit_followed_from_new_has_its_own_rate(analysed):
+    for res in analysed.joints.values():
+        assert res.summary()['rate_resolved'] is True

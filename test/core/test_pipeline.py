@@ -19,7 +19,7 @@ from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
-from reducer_twin.core.pipeline import state_from_record
+from reducer_twin.core.pipeline import rate_resolved, state_from_record
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -248,6 +248,22 @@ def test_the_life_message_says_when_the_prediction_follows_the_observed_trend(wo
                                  'trend_exponent': 1.02})
     assert 'grows unlike the wear model (as exposure^1.02, probability 0.95)' in noted
     assert 'the prediction follows the observed trend' in noted
+
+
+def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):
+    # A twin started on a used unit with a short recording: its rate is the prior's
+    # (ln s sd near 2) and its remaining life the model's at this duty (P10 24 000 h on a
+    # unit with 5 200 h left), which nothing said.
+    stage = LifeStage(PARAMS)
+    _, _, unresolved = stage.process({**worn_record, 'var_log_rate': 1.83 ** 2,
+                                      'trend_probability': 0.1})
+    assert unresolved.endswith("; from the model's wear rate at this duty: this unit's own is "
+                               'not yet resolved (ln-rate sd 1.83, resolved at 0.5)')
+    assert not rate_resolved({**worn_record, 'var_log_rate': 1.83 ** 2, 'trend_probability': 0.1})
+    for resolved in ({'var_log_rate': 0.49 ** 2}, {'var_log_rate': 4.0, 'trend_probability': 0.9}):
+        record = {**worn_record, 'trend_exponent': 1.0, **resolved}
+        assert rate_resolved(record)
+        assert 'wear rate at this duty' not in stage.process(record)[2]
 
 
 def test_the_duty_uncertainty_of_the_record_widens_the_interval(worn_record):
