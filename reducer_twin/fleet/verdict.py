@@ -108,9 +108,10 @@ def fleet_row(reducer, params):
     -------
     dict
         :data:`FIELDS` plus ``windows``, ``installed_at``, ``retired_at``,
-        ``lost_motion_limit_arcmin``, ``rul_censored``, ``rule``, ``live_segments`` and
+        ``lost_motion_limit_arcmin``, ``rul_censored``, ``rule``, ``live_segments``,
         ``hours_live`` (the part of ``hours_observed`` a live ``wear_estimator`` wrote;
-        ``bags`` counts recorded bags only).
+        ``bags`` counts recorded bags only) and ``rate_resolved`` (False while the
+        remaining life is the model's wear rate, not the unit's own; None unknown).
 
     """
     r = reducer
@@ -125,6 +126,7 @@ def fleet_row(reducer, params):
                hours_live=r.live_exposure_s / HOUR)
     state = (r.state or {}).get('estimator')
     summary = r.summary or {}
+    row['rate_resolved'] = summary.get('rate_resolved')
     if state is not None:
         row['wear_um'] = float(state['x'][0]) / UM
         row['wear_std_um'] = math.sqrt(max(float(state['P'][0][0]), 0.0)) / UM
@@ -184,6 +186,10 @@ def _judge(row, r, state, params):
     else:
         row['verdict'] = 'OK'
         row['reason'] = f'remaining life P10 {text} > {warn_h:,.0f} h (warning threshold)'
+    if row['rate_resolved'] is False:
+        # Never an OK that is the physics alone without saying so.
+        row['reason'] += ("; the remaining life is the model's wear rate at this duty, the "
+                          "unit's own not yet resolved (watch it longer)")
 
 
 def rank(rows):

@@ -79,3 +79,17 @@ def test_the_fleet_is_ranked_by_p10_with_unobserved_and_retired_last():
         _reducer(150.0, joint='c'), _reducer(900.0, joint='d'),
         _reducer(100.0, retired=5, joint='e'))]
     assert [r['joint'] for r in rank(rows)] == ['c', 'd', 'a', 'b', 'e']
+
+
+def test_an_ok_that_is_the_models_rate_says_so():
+    # A fleet met without history: every reducer OK on the physics' wear rate at its duty,
+    # its own not yet seen, and the view said nothing of it.
+    reducer = _reducer(24000.0)
+    reducer.summary['rate_resolved'] = False
+    row = fleet_row(reducer, PARAMS)
+    assert row['verdict'] == 'OK' and row['rate_resolved'] is False
+    assert row['reason'].endswith("the remaining life is the model's wear rate at this duty, "
+                                  "the unit's own not yet resolved (watch it longer)")
+    reducer.summary['rate_resolved'] = True
+    row = fleet_row(reducer, PARAMS)
+    assert row['rate_resolved'] is True and 'wear rate' not in row['reason']
