@@ -432,7 +432,8 @@ class WindowAnalyzer:
             # rate is held beside the buffered samples, to take the field's place in
             # them too if it is not.
             rate = self._link_rate(stream, use)
-            if self._velocity.check(velocity[use], rate) and self._held is not None:
+            if self._velocity.check(stream.t[use], stream.output_angle[use], velocity[use]) \
+                    and self._held is not None:
                 self._buf['speed'] = self._held[0].copy()
                 self.derived_velocity += int(np.count_nonzero(self._held[1]))
         if self._velocity.replaced:
