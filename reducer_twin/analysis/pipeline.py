@@ -546,10 +546,12 @@ class _Run:
              'high and its remaining life short by up to that share')
 
     def _velocity(self, joint, front):
-        """Say where a joint's speed came from; a velocity field that is not its rate is said."""
+        """Say where a joint's speed came from (a field not its rate: said); say a held effort."""
         a = front.analyzer
         if a.velocity_fault is not None:
             warn(self.bag, f'{joint}: {a.velocity_fault}')
+        if a.effort_held is not None:
+            warn(self.bag, f'{joint}: {a.effort_held}')
         if not a.samples_seen:
             return None
         return 'link_angle' if a.velocity_fault is not None or \

@@ -41,6 +41,7 @@ from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .flanks import FlankPool
 from .friction_fit import FrictionFit
+from .held_effort import HeldEffort
 from .kinematics import total_ratio
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice, TWO_PI
 from .transmission_error import model_tables
@@ -325,6 +326,7 @@ class WindowAnalyzer:
         self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
         self._effort = EffortCheck(self.tables, self.takeup_torque)
         self._velocity = VelocityCheck(self.min_speed, total_ratio(g))
+        self._held_effort = HeldEffort()
         # Until the velocity check decides: the link angle's rate of the buffered samples
         # (row 0) and whether they carry a field (row 1).
         self._held = None
@@ -420,6 +422,8 @@ class WindowAnalyzer:
             if steps.size:
                 self._period_s = float(np.median(steps))
         use = fresh & np.isfinite(effort)
+        if not self._held_effort.decided:
+            self._held_effort.observe(stream.t[use], effort[use])
         without = int(np.count_nonzero(fresh & ~use))
         self.samples_without_effort += without
         self._since['without_effort'] += without
@@ -499,6 +503,22 @@ class WindowAnalyzer:
     def velocity_fault(self):
         """Return why the velocity field is not the link angle's rate, once found, else None."""
         return self._velocity.fault
+
+    @property
+    def effort_held(self):
+        """
+        Say when the effort is held between updates slower than the stream, else None.
+
+        See :mod:`.held_effort`: its noise is then hidden from the window analysis.
+        """
+        hz = self._held_effort.update_hz
+        if hz is None:
+            return None
+        return (f'the effort repeats itself on successive samples: it changes at about '
+                f'{hz:.0f} Hz on a {self.rate_hz:.0f} Hz stream (held between slower updates, '
+                'or quantised more coarsely than it changes), so its noise cannot be told '
+                'from successive samples and the lost motion and wear may read wrong (a base '
+                "joint 32 % low); record the effort at the stream's rate")
 
     @property
     def velocity_scale(self):

@@ -135,7 +135,8 @@ def say_faults(logger, joint, analyzer, said):
     Log a joint's input faults on stderr, each kind once (``/diagnostics`` carry them on).
 
     An effort that is not the output torque is an error (the joint is not observed); a
-    velocity field that is not the link angle's rate a warning (its rate is used).
+    velocity field that is not the link angle's rate a warning (its rate is used), and
+    so is an effort held between slower updates.
 
     Parameters
     ----------
@@ -149,11 +150,13 @@ def say_faults(logger, joint, analyzer, said):
         Kinds already said; updated.
 
     """
-    for level, fault in (('error', analyzer.effort_fault and
-                          f'not observed: {analyzer.effort_fault}'),
-                         ('warning', analyzer.velocity_fault)):
-        if fault and level not in said:
-            said.add(level)
+    for kind, level, fault in (
+            ('effort', 'error', analyzer.effort_fault and
+             f'not observed: {analyzer.effort_fault}'),
+            ('velocity', 'warning', analyzer.velocity_fault),
+            ('held', 'warning', analyzer.effort_held)):
+        if fault and kind not in said:
+            said.add(kind)
             getattr(logger, level)(f'{joint}: {fault}')
 
 
@@ -205,9 +208,10 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
-    if analyzer.velocity_fault is not None and reason is None:
-        message = f'{message}; {analyzer.velocity_fault}'
-        level = 'WARN' if level == 'OK' else level
+    for said in (analyzer.velocity_fault, analyzer.effort_held):
+        if said is not None and reason is None:
+            message = f'{message}; {said}'
+            level = 'WARN' if level == 'OK' else level
     if quiet_s is not None:
         values['seconds_since_pairs'] = quiet_s
         if quiet_s >= silent_after_s and level in ('OK', 'WARN'):

@@ -334,6 +334,18 @@ def test_a_velocity_field_in_degrees_is_replaced_by_the_angles_rate_and_said(
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
 
 
+def test_an_effort_held_between_slower_updates_turns_the_diagnostics_to_warn(
+        ros, simulated):
+    _, rows = simulated
+    held = rows.copy()
+    held[:, 3] = rows[(np.arange(len(rows)) // 10) * 10, 3]
+    monitor = Monitor(ros)
+    monitor.feed(held)
+    status = monitor.status(lambda s: 'repeats itself' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    assert 'it changes at about 100 Hz on a 1000 Hz stream' in status.message
+
+
 def test_a_true_velocity_field_is_used_as_published(ros, simulated):
     _, rows = simulated
     monitor = Monitor(ros)
