@@ -4,13 +4,16 @@ Whether a joint's effort is held between updates slower than the stream.
 A drive that updates its current (or torque) estimate slower than the controller
 publishes repeats each value until the next: a 1 kHz stream with the effort of a 100 Hz
 loop repeats 9 samples in 10. The window analysis estimates the effort's noise from
-successive samples' second differences, which a held effort does not have, so it reads
-the effort as quiet: samples near zero torque, where the noise picks the flank, are kept,
-and the average that should quiet the noise is not lengthened. Measured on the
-independent generator (seed 4, 1 kHz, effort held at 100 Hz, 150 h at half of life): a
-base joint's wear read 32 % low and a shoulder's effort was refused as "about 4 times the
-torque"; interpolating the effort between its updates did not help (its noise is still
-hidden). :class:`HeldEffort` finds such an effort so that it is said.
+successive samples' second differences, which a held effort does not have: it read the
+effort as quiet, kept samples near zero torque, where the noise picks the flank, and did
+not lengthen the average that quiets the noise. Measured on the independent generator
+(seed 4, 1 kHz, effort held at 100 Hz, 150 h at half of life): a base joint's wear read
+32 % low (10.7 against 15.8 um on the fresh effort) and a shoulder's effort was refused as
+"about 4 times the torque"; interpolating the effort between its updates did not help (its
+noise stays hidden). :class:`HeldEffort` finds such an effort and how many samples each
+update holds (:attr:`HeldEffort.hold_samples`): the window analysis then takes the noise
+between updates and counts an average's independent samples as updates, and the base
+joint reads 16.2 um, the shoulder is read (7.9 against 8.1 um), and it is said.
 """
 
 import numpy as np
@@ -59,6 +62,13 @@ class HeldEffort:
             return None
         # Per sample period: n samples span n - 1 periods but hold for n.
         return self._changes / (self._span * (self._pairs + 1) / self._pairs)
+
+    @property
+    def hold_samples(self):
+        """Return the samples per update of a held effort (1 while it is not held)."""
+        if not self.held or self._changes == 0:
+            return 1
+        return max(1, int(round(self._pairs / self._changes)))
 
     def observe(self, t, effort):
         """

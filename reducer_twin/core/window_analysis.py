@@ -509,16 +509,16 @@ class WindowAnalyzer:
         """
         Say when the effort is held between updates slower than the stream, else None.
 
-        See :mod:`.held_effort`: its noise is then hidden from the window analysis.
+        See :mod:`.held_effort`: its noise is then taken between its updates.
         """
         hz = self._held_effort.update_hz
         if hz is None:
             return None
         return (f'the effort repeats itself on successive samples: it changes at about '
                 f'{hz:.0f} Hz on a {self.rate_hz:.0f} Hz stream (held between slower updates, '
-                'or quantised more coarsely than it changes), so its noise cannot be told '
-                'from successive samples and the lost motion and wear may read wrong (a base '
-                "joint 32 % low); record the effort at the stream's rate")
+                'or quantised more coarsely than it changes); its noise is taken between its '
+                'changes, and the lost motion rests on fewer independent samples than the '
+                "stream's rate suggests")
 
     @property
     def velocity_scale(self):
@@ -947,8 +947,10 @@ class WindowAnalyzer:
         The noise of the raw effort is estimated per window from second
         differences (robustly, by their median absolute value), so the
         smoothed torque's noise is ``sigma/sqrt(m)`` for an average of ``m``
-        samples. Samples whose smoothed torque is within ``sign_sigmas`` of
-        that noise from zero (or from the torque with the viscous friction
+        samples; of an effort held over ``h`` samples (:mod:`.held_effort`),
+        from second differences ``h`` samples apart, and ``sigma/sqrt(m/h)``.
+        Samples whose smoothed torque is within ``sign_sigmas`` of that noise
+        from zero (or from the torque with the viscous friction
         left in) are ambiguous: their flank is unknown. ``half`` is the
         average's half-width in samples (:meth:`_smoothing_half`), lengthened
         for a noisy effort by :meth:`_quiet_half`.
@@ -960,13 +962,17 @@ class WindowAnalyzer:
             both like ``torque``.
 
         """
-        sigma = 1.4826 * window_medians(np.abs(torque[1:-1] - 0.5 * (torque[:-2] + torque[2:])),
-                                        starts, ends - 2) / math.sqrt(1.5)
-        half = self._quiet_half(sigma, half, t, period, model)
+        # A held effort changes every h samples: its noise shows between its updates, and
+        # an average of m samples holds m/h of them (:mod:`.held_effort`).
+        h = self._held_effort.hold_samples
+        sigma = 1.4826 * window_medians(
+            np.abs(torque[h:-h] - 0.5 * (torque[:-2 * h] + torque[2 * h:])), starts,
+            ends - 2 * h) / math.sqrt(1.5)
+        half = self._quiet_half(sigma, half, t, period, model, h)
         smooth, count = window_mean(torque, half, win, starts, ends)
-        return smooth, self.sign_sigmas * sigma[win] / np.sqrt(count)
+        return smooth, self.sign_sigmas * sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
 
-    def _quiet_half(self, sigma, half, t, period, model):
+    def _quiet_half(self, sigma, half, t, period, model, hold=1):
         """
         Half-width of the torque average that quiets the effort's noise beside the test torque.
 
@@ -999,6 +1005,8 @@ class WindowAnalyzer:
             Their median step [s].
         model : ndarray or None
             The rigid-body load as :meth:`.friction_fit.FrictionFit.fit` explains the effort [N·m].
+        hold : int
+            Samples per update of a held effort (1: fresh on every sample).
 
         Returns
         -------
@@ -1009,7 +1017,7 @@ class WindowAnalyzer:
         noise = float(np.median(sigma)) if sigma.size else 0.0
         if half <= 0 or model is None or not noise > 0.0:
             return half
-        samples = (noise / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
+        samples = hold * (noise / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
         size = np.abs(model)
         near = np.flatnonzero((size > 0.5 * self.takeup_torque)
                               & (size < 1.5 * self.takeup_torque))

@@ -23,6 +23,7 @@ def test_an_effort_of_a_100_hz_loop_on_a_1_khz_stream_is_held_at_100_hz():
     noisy = TORQUE + RNG.normal(0.0, 10.0, T.size)
     held = _judged(noisy[(np.arange(T.size) // 10) * 10])
     assert held.held and held.update_hz == pytest.approx(100.0, rel=0.02)
+    assert held.hold_samples == 10
 
 
 @pytest.mark.parametrize('effort', [
@@ -33,6 +34,7 @@ def test_an_effort_of_a_100_hz_loop_on_a_1_khz_stream_is_held_at_100_hz():
 def test_an_effort_fresh_on_every_sample_is_not_held(effort):
     held = _judged(effort)
     assert held.decided and not held.held and held.update_hz is None
+    assert held.hold_samples == 1
 
 
 def test_nothing_is_judged_before_enough_pairs():
@@ -48,4 +50,5 @@ def test_the_window_analysis_says_a_held_effort_and_keeps_quiet_about_a_fresh_on
     said = analyzed(replace(b, effort=held)).effort_held
     assert said.startswith('the effort repeats itself on successive samples: it changes at '
                            'about 100 Hz on a 1000 Hz stream'), said
-    assert said.endswith("record the effort at the stream's rate")
+    assert said.endswith("the lost motion rests on fewer independent samples than the stream's "
+                         'rate suggests')
