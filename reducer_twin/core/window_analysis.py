@@ -329,7 +329,7 @@ class WindowAnalyzer:
         self._held_effort = HeldEffort()
         # Until the velocity check decides: the link angle's rate of the buffered samples
         # (row 0) and whether they carry a field (row 1).
-        self._held = None
+        self._rate_held = None
         self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
                                               self.compliance_prior, self.min_bins)
         self._buf = {name: np.empty(0) for name in _BUFFER}
@@ -437,9 +437,9 @@ class WindowAnalyzer:
             # them too if it is not.
             rate = self._link_rate(stream, use)
             if self._velocity.check(stream.t[use], stream.output_angle[use], velocity[use]) \
-                    and self._held is not None:
-                self._buf['speed'] = self._held[0].copy()
-                self.derived_velocity += int(np.count_nonzero(self._held[1]))
+                    and self._rate_held is not None:
+                self._buf['speed'] = self._rate_held[0].copy()
+                self.derived_velocity += int(np.count_nonzero(self._rate_held[1]))
         if self._velocity.replaced:
             unknown = use
         if unknown.any():
@@ -474,9 +474,10 @@ class WindowAnalyzer:
             if not self._velocity.decided:
                 held = np.vstack([new['speed'] if rate is None else rate,
                                   ~pick(unknown) if rate is not None else np.zeros(t.size)])
-                self._held = held if self._held is None else np.hstack([self._held, held])
+                self._rate_held = held if self._rate_held is None \
+                    else np.hstack([self._rate_held, held])
         if self._velocity.decided:
-            self._held = None
+            self._rate_held = None
         return self._emit(final=False)
 
     @property
@@ -522,7 +523,7 @@ class WindowAnalyzer:
 
     @property
     def velocity_scale(self):
-        """Return the velocity field's slope on the link angle's rate (NaN before motion)."""
+        """Return the velocity field's median ratio to the link angle's rate (NaN: no motion)."""
         return self._velocity.scale
 
     @property
@@ -714,8 +715,8 @@ class WindowAnalyzer:
             if self._aliased:
                 # The buffer must not alias arrays the caller may reuse.
                 self._buf = {k: v.copy() for k, v in self._buf.items()}
-                if self._held is not None:
-                    self._held = self._held.copy()
+                if self._rate_held is not None:
+                    self._rate_held = self._rate_held.copy()
                 self._aliased = False
             return []
         out, first = [], 0
@@ -747,8 +748,8 @@ class WindowAnalyzer:
             first = last
         end = cuts[-1][1]
         self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
-        if self._held is not None:
-            self._held = self._held[:, end:].copy()
+        if self._rate_held is not None:
+            self._rate_held = self._rate_held[:, end:].copy()
         self._aliased = False
         return out
 
