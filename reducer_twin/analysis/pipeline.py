@@ -66,7 +66,7 @@ from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
-from reducer_twin.core.pipeline import rate_unresolved
+from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -545,17 +545,21 @@ class _Run:
              'operation; if the robot ran meanwhile, its wear rate per operating hour reads '
              'high and its remaining life short by up to that share')
 
-    def _velocity(self, joint, front):
-        """Say where a joint's speed came from (a field not its rate: said); say a held effort."""
-        a = front.analyzer
-        if a.velocity_fault is not None:
-            warn(self.bag, f'{joint}: {a.velocity_fault}')
-        if a.effort_held is not None:
-            warn(self.bag, f'{joint}: {a.effort_held}')
-        if not a.samples_seen:
-            return None
-        return 'link_angle' if a.velocity_fault is not None or \
-            a.derived_velocity >= 0.5 * a.samples_seen else 'field'
+    def _inputs_said(self, joint, front):
+        """Say a velocity field that is not the link angle's rate, and a held effort."""
+        for said in (front.analyzer.velocity_fault, front.analyzer.effort_held):
+            if said is not None:
+                warn(self.bag, f'{joint}: {said}')
+
+    def _rate_said(self, joint, res):
+        """Say when an observed joint's remaining life is the model's wear rate, not its own."""
+        if not (res.observed and len(res.wear)):
+            return
+        last = dict(zip(WEAR_ESTIMATE.fields, res.wear[-1]))
+        if not rate_resolved(last):
+            warn(self.bag, f"{joint}: its remaining life is the model's wear rate at this duty: "
+                 f'{rate_unresolved(last)}; watch it longer, or analyse its recordings in '
+                 'time order with --store')
 
     def _partial(self, joint, front):
         """
@@ -658,12 +662,9 @@ class _Run:
             res.windows = int(front.analyzer.windows_observed)
             res.reason = self._not_observed(front, counts, sides)
             res.partial = self._partial(joint, front)
-            res.velocity = self._velocity(joint, front)
-            if res.observed and len(res.wear) and not res.summary()['rate_resolved']:
-                unresolved = rate_unresolved(dict(zip(WEAR_ESTIMATE.fields, res.wear[-1])))
-                warn(self.bag, f"{joint}: its remaining life is the model's wear rate at this "
-                     f'duty: {unresolved}; watch it longer, or analyse its recordings in '
-                     'time order with --store')
+            res.velocity = _velocity_source(front.analyzer)
+            self._inputs_said(joint, front)
+            self._rate_said(joint, res)
             self._note_gaps(joint, front)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)
@@ -675,6 +676,14 @@ class _Run:
         if statuses and last_ns:
             self.out.raw(self.out.diagnostics, [last_ns],
                          [encode_diagnostic_array(last_ns, statuses)])
+
+
+def _velocity_source(analyzer):
+    """Return where a joint's speed came from: 'field', 'link_angle', None without samples."""
+    if not analyzer.samples_seen:
+        return None
+    return 'link_angle' if analyzer.velocity_fault is not None or \
+        analyzer.derived_velocity >= 0.5 * analyzer.samples_seen else 'field'
 
 
 def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=False,
