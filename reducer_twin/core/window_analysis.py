@@ -807,7 +807,7 @@ class WindowAnalyzer:
         t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
         win = np.repeat(np.arange(n_win), ends - starts)
         drag = model = taken = unknown = None
-        period = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        period = nominal_step(t)
         half = self._smoothing_half(period)
         harmonics = self._flanks.harmonics(buf['theta'])
         if self.friction:
@@ -969,11 +969,11 @@ class WindowAnalyzer:
         sigma = 1.4826 * window_medians(
             np.abs(torque[h:-h] - 0.5 * (torque[:-2 * h] + torque[2 * h:])), starts,
             ends - 2 * h) / math.sqrt(1.5)
-        half = self._quiet_half(sigma, half, t, period, model, h)
+        half = self._quiet_half(sigma, half, t, period, model, win, starts, ends, h)
         smooth, count = window_mean(torque, half, win, starts, ends)
         return smooth, self.sign_sigmas * sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
 
-    def _quiet_half(self, sigma, half, t, period, model, hold=1):
+    def _quiet_half(self, sigma, half, t, period, model, win, starts, ends, hold=1):
         """
         Half-width of the torque average that quiets the effort's noise beside the test torque.
 
@@ -991,8 +991,12 @@ class WindowAnalyzer:
         over the passage mixes the two flanks: a 0.15 s average read an
         unloaded joint whose load passes it in 17 ms 12 % low) nor than
         :data:`_SMOOTHING_MAX_S`. The passage is timed on the rigid-body load
-        of :meth:`.friction_fit.FrictionFit.fit` (noise-free); without it the average keeps
-        ``half``.
+        of :meth:`.friction_fit.FrictionFit.fit` (noise-free); without it, or in a
+        window where the load does not pass the test torque, the average keeps
+        ``half``. Each window is judged on its own noise and passage: one
+        half-width for a batch of windows (their median noise and slope) made
+        the result depend on how the stream was cut into batches (a remaining
+        life moved 12 % between chunkings of one recording).
 
         Parameters
         ----------
@@ -1006,39 +1010,51 @@ class WindowAnalyzer:
             Their median step [s].
         model : ndarray or None
             The rigid-body load as :meth:`.friction_fit.FrictionFit.fit` explains the effort [N·m].
+        win, starts, ends : ndarray
+            Window of each sample; first and end sample of each window.
         hold : int
             Samples per update of a held effort (1: fresh on every sample).
 
         Returns
         -------
-        int
-            Half-width [samples], at least ``half``.
+        ndarray of int
+            Half-width of each window [samples], at least ``half``.
 
         """
-        noise = float(np.median(sigma)) if sigma.size else 0.0
-        if half <= 0 or model is None or not noise > 0.0:
-            return half
-        samples = hold * (noise / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
+        halves = np.full(sigma.size, half, dtype=np.int64)
+        if half <= 0 or model is None or not period > 0.0:
+            return halves
+        samples = hold * (sigma / (_SMOOTHING_NOISE * self.takeup_torque)) ** 2
         size = np.abs(model)
         near = np.flatnonzero((size > 0.5 * self.takeup_torque)
                               & (size < 1.5 * self.takeup_torque))
-        # The slope over the average's own span: the load model carries the noise of the
-        # speed (its acceleration and drag terms), which a slope between neighbours
-        # multiplies.
+        # The slope over the average's own span, within the sample's window: the load
+        # model carries the noise of the speed (its acceleration and drag terms), which a
+        # slope between neighbours multiplies.
         lag = 2 * half
-        near = near[(near >= lag) & (near < model.size - lag)]
-        if not period > 0.0 or near.size == 0:
-            return half
+        w = win[near]
+        near, w = (a[(near - lag >= starts[w]) & (near + lag < ends[w])] for a in (near, w))
         with np.errstate(invalid='ignore'):
             slope = (np.abs(model[near + lag] - model[near - lag])
                      / (t[near + lag] - t[near - lag]))
-        slope = slope[np.isfinite(slope)]
+        ok = np.isfinite(slope)
+        slope, w = slope[ok], w[ok]
         if slope.size == 0:
-            return half
-        passage = self.takeup_torque / max(float(np.median(slope)), 1e-12)
-        longest = min(0.5 * passage, _SMOOTHING_MAX_S)
-        return max(half, min(math.ceil(0.5 * (samples - 1.0)),
-                             int(0.5 * longest / period)))
+            return halves
+        # The median slope of each window that has one.
+        order = np.lexsort((slope, w))
+        slope, w = slope[order], w[order]
+        first = np.flatnonzero(np.r_[True, w[1:] != w[:-1]])
+        count = np.diff(np.r_[first, w.size])
+        middle = 0.5 * (slope[first + (count - 1) // 2] + slope[first + count // 2])
+        passage = self.takeup_torque / np.maximum(middle, 1e-12)
+        longest = np.minimum(0.5 * passage, _SMOOTHING_MAX_S)
+        with np.errstate(invalid='ignore'):
+            quiet = np.minimum(np.ceil(0.5 * (samples[w[first]] - 1.0)),
+                               np.floor(0.5 * longest / period))
+        quiet = np.where(np.isfinite(quiet), quiet, 0.0)
+        halves[w[first]] = np.maximum(half, quiet).astype(np.int64)
+        return halves
 
     def _smoothing_half(self, period):
         """Half-width in samples of the ``torque_smoothing_s`` average at a stamp step [s]."""
@@ -1157,6 +1173,21 @@ these; the shoulders' 1.7 % -> 1.0 %. With 6 the flanks of a few samples at full
 were noisier than the bins they added: over the bench's 72 truths (seeds 1000-1023,
 2000-2023, 3000-3023) 3 more recordings had a joint beyond 5 % than with 10.
 """
+
+
+def nominal_step(t):
+    """
+    Stamp step a stream's clock keeps [s]: the median step to three significant digits.
+
+    The averages' half-widths are whole numbers of steps and sit on whole numbers at
+    round rates (0.15 s at 200 Hz: 15 steps either way of a 5 ms step); a jittered
+    stream's median step over one batch of windows was 4.99988 ms, over another
+    5.00011 ms, and the half-width 15 or 14 samples with how the stream was cut.
+    """
+    if t.size < 2:
+        return 0.0
+    step = float(np.median(np.diff(t)))
+    return float(f'{step:.3g}') if step > 0.0 else step
 
 
 _BATCH_SAMPLES = 1 << 16

@@ -26,6 +26,9 @@ def window_mean(values, half, win, starts, ends):
     """
     Centred mean of ``values[i - half .. i + half]`` cut at the ends of each window.
 
+    ``half`` is one half-width [samples] for every window, or an array of one per
+    window; a window's means depend on its own samples and half-width only.
+
     Returns
     -------
     tuple of ndarray
@@ -33,6 +36,8 @@ def window_mean(values, half, win, starts, ends):
         window, fewer within ``half`` of its ends); ``values`` itself when ``half`` is 0.
 
     """
+    if np.ndim(half):
+        return _window_mean_each(values, np.asarray(half), win, starts, ends)
     n = values.size
     width = 2 * half + 1
     count = np.full(n, width, dtype=np.int64)
@@ -49,6 +54,20 @@ def window_mean(values, half, win, starts, ends):
     mean[edge] = (acc[hi] - acc[lo]) / (hi - lo)
     count[edge] = hi - lo
     return mean, count
+
+
+def _window_mean_each(values, halves, win, starts, ends):
+    """:func:`window_mean` with a half-width per window (the same sums, sample by sample)."""
+    if halves.size == 0 or np.all(halves == halves[0]):
+        return window_mean(values, int(halves[0]) if halves.size else 0, win, starts, ends)
+    h = halves[win]
+    index = np.arange(values.size)
+    lo = np.maximum(index - h, starts[win])
+    hi = np.minimum(index + h + 1, ends[win])
+    acc = np.concatenate([[0.0], np.cumsum(values)])
+    count = hi - lo
+    mean = np.where(h > 0, (acc[hi] - acc[lo]) / count, values)
+    return mean, np.where(h > 0, count, 2 * h + 1)
 
 
 def shifted(values, shift):

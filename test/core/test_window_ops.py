@@ -28,6 +28,21 @@ def test_the_centred_mean_is_cut_at_the_ends_of_each_window(lengths, half, seed)
         assert np.isclose(mean[i], values[lo:hi].mean() if half else values[i])
 
 
+@settings(max_examples=60)
+@given(shape=st.lists(st.tuples(st.integers(1, 30), st.integers(0, 5)), min_size=1,
+                      max_size=6), seed=st.integers(0, 100))
+def test_a_window_averaged_with_its_own_half_width_is_as_if_averaged_alone(shape, seed):
+    lengths, halves = zip(*shape)
+    values = np.random.default_rng(seed).normal(size=sum(lengths))
+    win, starts, ends = _windows(lengths)
+    mean, count = window_mean(values, np.array(halves), win, starts, ends)
+    for k, half in enumerate(halves):
+        one = slice(starts[k], ends[k])
+        alone = window_mean(values[one], half, *_windows([lengths[k]]))
+        np.testing.assert_array_equal(count[one], alone[1])
+        np.testing.assert_allclose(mean[one], alone[0], rtol=1e-12, atol=1e-12)
+
+
 def test_a_shifted_copy_repeats_the_end_samples():
     values = np.arange(5.0)
     np.testing.assert_array_equal(shifted(values, 2), [2, 3, 4, 4, 4])
