@@ -5,8 +5,9 @@ ROS-free: ``twin_bringup`` builds nodes from it, ``reducer-twin analyze --config
 the same file to find joints and topics, the aging factor, the window length, the
 life thresholds and the reducer parameters: ``reducer`` (overrides for every joint) and
 ``reducers`` (per joint, a reducer file or overrides: a robot's base and wrist carry
-different reducers). The defaults of a joint's processing come from
-:class:`~reducer_twin.core.joint_twin.TwinConfig`, not from here.
+different reducers), and ``service_time_s`` (per joint, the reducer's operating time
+before the twin first sees it: a robot's hour meter). The defaults of a joint's processing
+come from :class:`~reducer_twin.core.joint_twin.TwinConfig`, not from here.
 """
 
 import math
@@ -31,7 +32,7 @@ DEFAULTS = {
              'simulate': False, 'intra_process': True, 'robot': '', 'store': '',
              'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
-    'reducers': {},
+    'reducers': {}, 'service_time_s': {},
 }
 
 
@@ -97,10 +98,11 @@ def load_config_sources(path):
     if not joints or not named or len(set(joints)) != len(joints):
         raise InvalidParameter(f'{path}: twin.joints must be distinct names, got {joints!r}')
     _check_values(path, out)
-    unknown = sorted(set(out['reducers']) - set(joints)) if 'twin.joints' in given else []
-    if unknown:
-        raise InvalidParameter(f'{path}: reducers names joints that twin.joints does not have: '
-                               f'{unknown}; joints: {joints}')
+    for section in ('reducers', 'service_time_s'):
+        unknown = sorted(set(out[section]) - set(joints)) if 'twin.joints' in given else []
+        if unknown:
+            raise InvalidParameter(f'{path}: {section} names joints that twin.joints does not '
+                                   f'have: {unknown}; joints: {joints}')
     return out, given
 
 
@@ -238,6 +240,7 @@ def _check_values(path, config):
             as_number('simulator.wear_rate_scales[]', x) for x in scales]
         twin_config(config)
         joint_reducers(config, path)
+        config['service_time_s'] = service_times(config)
     except InvalidParameter as err:
         raise InvalidParameter(f'{path}: {err}') from None
     try:
@@ -330,6 +333,34 @@ def joint_reducers(config, path=None):
         except InvalidParameter as err:
             raise InvalidParameter(f'reducers.{joint}: {err}') from None
     return common, own
+
+
+def service_times(config):
+    """
+    Return each joint's reducer service time [s] (``service_time_s`` of the configuration).
+
+    The operating time of a joint's reducer before the twin first sees it (a robot's hour
+    meter since the reducer was fitted; :attr:`.core.estimator.EstimatorConfig.service_time_s`).
+    A joint left out: not known.
+
+    Raises
+    ------
+    InvalidParameter
+        On a value that is no number in [0, 1e10] s, naming the joint.
+
+    """
+    given = config.get('service_time_s') or {}
+    if not isinstance(given, dict):
+        raise InvalidParameter(f'service_time_s must map joint names to operating seconds, '
+                               f'got {given!r}')
+    out = {}
+    for joint, value in given.items():
+        seconds = as_number(f'service_time_s.{joint}', value)
+        if not 0.0 <= seconds <= 1e10:
+            raise InvalidParameter(f'service_time_s.{joint} must be in [0, 1e10] s (operating '
+                                   f'time before the twin starts), got {value!r}')
+        out[str(joint)] = seconds
+    return out
 
 
 def _beside(path, value):

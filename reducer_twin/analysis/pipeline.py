@@ -558,8 +558,9 @@ class _Run:
         last = dict(zip(WEAR_ESTIMATE.fields, res.wear[-1]))
         if not rate_resolved(last):
             warn(self.bag, f"{joint}: its remaining life is the model's wear rate at this duty: "
-                 f'{rate_unresolved(last)}; watch it longer, or analyse its recordings in '
-                 'time order with --store')
+                 f'{rate_unresolved(last)}; watch it longer, analyse its recordings in '
+                 'time order with --store, or give its operating time before the recording '
+                 '(service_time_s in --config: the hour meter)')
 
     def _partial(self, joint, front):
         """
@@ -743,7 +744,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
             else:  # forked only now: a bag that cannot be analysed costs no process
                 backs = WorkerBacks() if stage_worker else LocalBacks()
             backs.configure({j: settings.params_of(j) for j in every}, settings.life,
-                            initial_states)
+                            initial_states, {j: settings.estimator_of(j) for j in every})
             custom = {'reducer_twin.source': str(Path(path).resolve()),
                       AGING_KEY: repr(float(aging)),
                       'reducer_twin.joints': ','.join(every)}

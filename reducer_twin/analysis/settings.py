@@ -12,6 +12,7 @@ import math
 
 from reducer_twin.config import joint_reducers, load_config_sources, twin_config
 from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig
 from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS
 from reducer_twin.core.joint_twin import TwinConfig
@@ -70,6 +71,10 @@ class AnalysisSettings:
     joint_params : tuple of (str, ReducerParams)
         Reducer parameters of the joints that carry another reducer (an RV-160E at the
         base, an RV-40E at the wrist); see :meth:`params_of`.
+    service_times : tuple of (str, float)
+        Operating time [s] of a joint's reducer before the recording, where known
+        (``service_time_s`` of the configuration: a robot's hour meter); see
+        :meth:`estimator_of`.
     life : LifeConfig
         Limit and thresholds of the remaining-life stage.
     ingest : IngestConfig
@@ -99,6 +104,7 @@ class AnalysisSettings:
     friction_in_effort: int = TwinConfig().friction_in_effort
     params: ReducerParams = field(default_factory=ReducerParams)
     joint_params: tuple = ()
+    service_times: tuple = ()
     life: LifeConfig = field(default_factory=LifeConfig)
     ingest: IngestConfig = field(default_factory=IngestConfig)
     compression: str = 'none'
@@ -110,6 +116,17 @@ class AnalysisSettings:
             if name == joint:
                 return params
         return self.params
+
+    def estimator_of(self, joint):
+        """
+        Return the estimator tuning of ``joint``'s reducer met without state.
+
+        Its service time where :attr:`service_times` has one, else the defaults (None).
+        """
+        for name, seconds in self.service_times:
+            if name == joint:
+                return EstimatorConfig(service_time_s=seconds)
+        return None
 
     @classmethod
     def from_config(cls, path):
@@ -179,8 +196,8 @@ class AnalysisSettings:
                    effort_scale=check_effort_scale(twin['effort_scale'], f'{path}: twin.'),
                    interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
                    max_gap_s=spec.max_gap_s, friction_in_effort=spec.friction_in_effort,
-                   params=params,
-                   joint_params=tuple(joint_params.items()), life=life)
+                   params=params, joint_params=tuple(joint_params.items()),
+                   service_times=tuple(config['service_time_s'].items()), life=life)
 
 
 MOTOR_ANGLES = ('auto', 'raw', 'output')

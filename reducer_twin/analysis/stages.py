@@ -19,6 +19,7 @@ import numpy as np
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
+from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.wear import depth_per_mesh_pass
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
@@ -333,12 +334,15 @@ class JointBack:
     state : dict, optional
         Where an earlier analysis of the same reducer ended (:meth:`state`); default a
         new reducer.
+    estimator_config : EstimatorConfig, optional
+        Estimator tuning of a reducer met without state (its service time); default
+        the defaults.
 
     """
 
-    def __init__(self, joint, params, life_config, state=None):
+    def __init__(self, joint, params, life_config, state=None, estimator_config=None):
         self.joint = joint
-        self.twin = TwinBack(params, life_config)
+        self.twin = TwinBack(params, life_config, EstimatorStage(params, estimator_config))
         if state is not None:
             self.twin.restore(state)
 
@@ -412,11 +416,17 @@ class LocalBacks:
     def __init__(self, params=None, life_config=None):
         self.configure(params, life_config)
 
-    def configure(self, params, life_config, states=None):
-        """Start over for a new bag with these parameters (and reducers' earlier states)."""
+    def configure(self, params, life_config, states=None, estimators=None):
+        """
+        Start over for a new bag with these parameters (and reducers' earlier states).
+
+        ``estimators`` maps a joint to the estimator tuning of its reducer met without
+        state (:meth:`.settings.AnalysisSettings.estimator_of`).
+        """
         self.params = params
         self.life_config = life_config
         self.initial = dict(states or {})
+        self.estimators = dict(estimators or {})
         self.states = {}
         self.backs = {}
         self.fronts = {}
@@ -452,7 +462,8 @@ class LocalBacks:
         if back is None:
             params = self.params[joint] if isinstance(self.params, dict) else self.params
             back = self.backs[joint] = JointBack(joint, params, self.life_config,
-                                                 self.initial.get(joint))
+                                                 self.initial.get(joint),
+                                                 self.estimators.get(joint))
         if kind == 'start':
             self._done.append((joint, [back.initial(items)]))
         else:
@@ -498,7 +509,7 @@ def _back_worker(inbox, outbox):
             if item is None:
                 break
             if item[0] == _CONFIG:
-                local.configure(item[1], item[2], item[3])
+                local.configure(*item[1:])
                 _warm_up(item[1], item[2])
             elif item[0] == _ADD_FRONT:
                 local.add_front(item[1], JointFront(*item[1:]))
@@ -543,10 +554,10 @@ class WorkerBacks:
         """Whether the worker process runs."""
         return self._proc.is_alive()
 
-    def configure(self, params, life_config, states=None):
-        """Start over for a new bag with these parameters (and reducers' earlier states)."""
+    def configure(self, params, life_config, states=None, estimators=None):
+        """Start over for a new bag (see :meth:`LocalBacks.configure`)."""
         self.states = {}
-        self._inbox.put((_CONFIG, params, life_config, states))
+        self._inbox.put((_CONFIG, params, life_config, states, estimators))
 
     def add_front(self, joint, settings, aging_factor, motor_scale, keep_every):
         """

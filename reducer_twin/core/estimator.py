@@ -163,7 +163,7 @@ import math
 
 import numpy as np
 
-from .duty_rate import DutyRate
+from .duty_rate import DUTY_BATCH_WINDOWS, DutyRate
 from .errors import InvalidInput, StateFileError
 from .growth import GrowthTrend, window_terms
 from .noise_scale import NoiseScale
@@ -295,6 +295,11 @@ class EstimatorConfig(_Validated):
                                  'operating-time constant of the recent duty rate', lo_open=True)
     duty_min_windows: float = spec(50.0, '', 1.0, 1e9, 'fewest windows the recent duty rate '
                                    'averages over (time-compressed recordings)')
+    service_time_s: float = spec(0.0, 's', 0.0, 1e10, 'operating time of a reducer met without '
+                                 "state before the twin's first window (a robot's hour meter "
+                                 'since the reducer was fitted); 0: not known')
+    service_rate_log_std: float = spec(0.5, '', 0.0, 5.0, "sd of ln of the past duty's Archard "
+                                       'rate over the duty the twin sees', lo_open=True)
 
     @classmethod
     def unknown_history(cls, **changes):
@@ -758,8 +763,13 @@ class WearEstimator:
         # The scaled sigma points' weights (filterpy's MerweScaledSigmaPoints, same numbers).
         self._wm, self._wc = merwe_weights(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         self._spread = math.sqrt(SIGMA_ALPHA ** 2 * (N_FILTER + SIGMA_KAPPA))
-        self._lw, self._m, self._P = prior_components(self.config)
-        self._growth = GrowthTrend(self.config.new_unit_probability)
+        # A reducer with a known service time is used (however little): its wear is
+        # told by its service time and rate once the duty is known (:meth:`_serviced`).
+        serviced = self.config.service_time_s > 0.0
+        p_new = 0.0 if serviced else self.config.new_unit_probability
+        self._lw, self._m, self._P = prior_components(self.config, p_new)
+        self._growth = GrowthTrend(p_new)
+        self._service_pending = serviced
         self._archard = 0.0
         self._observed_at = None
         self._window_increment = 0.0
@@ -921,7 +931,58 @@ class WearEstimator:
             self._counters['censored'] += 1
             return UpdateResult('censored')
         sigma2 = max(std, self.config.min_lost_motion_std) ** 2
+        if self._service_pending and self._counters['predictions'] >= DUTY_BATCH_WINDOWS:
+            self._serviced()
         return self._update(z, sigma2)
+
+    def _serviced(self):
+        """
+        Take the service time as what it says of the unit's wear and rate, once.
+
+        A reducer that ran ``H = service_time_s`` before the twin's first window at
+        the duty the twin has since seen (rate ``r``: run-in-free Archard wear per
+        operating second at ``s = 1``, known from :data:`.duty_rate.DUTY_BATCH_WINDOWS`
+        windows on) has the run-in-free wear ``S(w) = e^θ·(r·H + a)``, ``a`` the
+        Archard exposure since; its past duty is not known beyond the ratio
+        ``e^ε``, ``ε ~ N(0, service_rate_log_std²)`` (with the recent rate's own
+        standard error). Each component is updated with the pseudo-observation
+        ``S(w) - e^θ·(r·H + a) = 0`` (noise ``e^θ·r·H`` times that sd at its
+        mean; unscented, as the windows), its weight by its likelihood. The lost
+        motion tells ``w``; with it the service time tells ``θ``, which a short
+        recording of a used unit cannot: without it that remaining life is the
+        model's rate at the duty, which may be many times off.
+        """
+        self._service_pending = False
+        rate = self._duty.rate
+        if not rate > 0.0:
+            return
+        c = self.config
+        past = rate * c.service_time_s
+        total = past + self._archard
+        sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
+        wp = self.params.wear
+        m0, P0 = self._m, self._P
+        X = self._sigma(m0, P0)
+        d = X - np.einsum('k,ckn->cn', self._wm, X)[:, None, :]
+        Z = run_in_free_wear(X[..., 0], wp) - np.exp(X[..., 1]) * total
+        zc, szz, cxz = self._observed(Z, d)
+        R = (sd * np.exp(m0[:, 1]) * past) ** 2
+        S = szz + R
+        gain = cxz / S[:, None]
+        self._m = m0 - gain * zc[:, None]
+        P = P0 - np.einsum('ci,cj->cij', gain, gain) * S[:, None, None]
+        self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self._lw = self._lw - 0.5 * (np.log(S) + zc ** 2 / S)
+        self._lw -= _logsumexp(self._lw)
+        self._project()
+        self._tidy()
+        # The growth law counts from new too (its exponent prior the physics', as for a
+        # unit the twin saw new), and both models are compared again from here on.
+        self._growth = GrowthTrend(1.0, origin=past)
+        self._growth.advance(self._archard)
+        self._lagged, self._recent, self._recent_terms = [], [], []
+        self._score, self._scored = 0.0, 0
+        self._settle = SCORE_AFTER + 1
 
     def _smear(self):
         """
@@ -1018,9 +1079,9 @@ class WearEstimator:
         if len(self._lagged) == SCORE_LAG and self._growth.windows >= SCORE_AFTER:
             self._score += self._lagged_score(self._lagged[0], z, R_score, rho)
             self._scored += 1
-        terms = window_terms(exposure, z, R / rho)
+        terms = self._growth.terms(exposure, z, R / rho)
         self._growth.add_terms(terms)
-        self._recent = (self._recent + [[exposure, z, R / rho]])[-SCORE_LAG:]
+        self._recent = (self._recent + [[exposure + self._growth.origin, z, R / rho]])[-SCORE_LAG:]
         self._recent_terms = (self._recent_terms + [terms])[-SCORE_LAG:]
 
     def _snapshot(self):
@@ -1299,6 +1360,7 @@ class WearEstimator:
             raise InvalidInput(f'reset reason must be a non-empty string, got {reason!r}')
         self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
         self._growth = GrowthTrend(1.0)
+        self._service_pending = False
         self._archard = 0.0
         self._score = 0.0
         self._scored = 0
@@ -1517,6 +1579,7 @@ class WearEstimator:
             'archard_exposure': float(self._archard),
             'trend_score': [float(self._score), int(self._scored)],
             'score_settle': int(self._settle),
+            'service_pending': bool(self._service_pending),
             'trend': [float(self._trend), int(self._trend_count)],
             'exposure_s': self._exposure_s,
             'exposure_since_reset_s': self._exposure_since_reset_s,
@@ -1627,6 +1690,8 @@ class WearEstimator:
         est._recent_terms = [window_terms(*row) for row in recent]
         est._score, est._scored = score
         est._settle = settle
+        # (not in earlier states: the service time, if any, was taken)
+        est._service_pending = bool(d.get('service_pending', False))
         est._noise = NoiseScale(noise)
         est._trend, est._trend_count = trend
         est._exposure_s = scalars['exposure_s']

@@ -111,14 +111,17 @@ class GrowthTrend:
     :meth:`state` / :meth:`from_state`.
     """
 
-    def __init__(self, new_probability=1.0):
+    def __init__(self, new_probability=1.0, origin=0.0):
         n = EXPONENTS.size
         self.new_probability = float(new_probability)   # prior odds of the law's origin
+        # Exposure of a unit's service before the twin started [m], where known (its
+        # service time at the duty seen since): the law then counts from new.
+        self.origin = float(origin)
         self.sxx = np.zeros((n, 3))   # Σw, Σw·a, Σw·a² with a = A^g
         self.sxz = np.zeros((n, 2))   # Σw·z, Σw·z·a
         self.szz = 0.0                # Σw·z²
         self.windows = 0
-        self.exposure = 0.0           # A_now [m]
+        self.exposure = 0.0           # A_now [m], from the origin
         self.noise_scale = 1.0        # ρ, applied to every window's R
         self._cached = None
 
@@ -138,7 +141,11 @@ class GrowthTrend:
             Its noise variance before the noise scale ``ρ`` [rad²] (> 0).
 
         """
-        self.add_terms(window_terms(exposure, z, R))
+        self.add_terms(self.terms(exposure, z, R))
+
+    def terms(self, exposure, z, R):
+        """Return a window's :func:`window_terms`, its exposure counted from the origin."""
+        return window_terms(exposure + self.origin, z, R)
 
     def add_terms(self, terms):
         """Take one window's terms (:func:`window_terms`) into the sums."""
@@ -178,7 +185,7 @@ class GrowthTrend:
 
     def copy(self):
         """Return an independent duplicate: the sums and the exposure now."""
-        out = GrowthTrend(self.new_probability)
+        out = GrowthTrend(self.new_probability, self.origin)
         out.sxx, out.sxz, out.szz = self.sxx.copy(), self.sxz.copy(), self.szz
         out.windows, out.exposure, out.noise_scale = self.windows, self.exposure, self.noise_scale
         out._cached = self._cached
@@ -192,8 +199,8 @@ class GrowthTrend:
             self._cached = None
 
     def advance(self, exposure):
-        """Set the exposure now, ``A_now`` [m] (the end of the latest window)."""
-        exposure = max(float(exposure), self.exposure)
+        """Set the exposure now [m] since the estimator started (the end of the latest window)."""
+        exposure = max(float(exposure) + self.origin, self.exposure)
         if exposure != self.exposure:
             self.exposure = exposure
             self._cached = None
@@ -278,7 +285,7 @@ class GrowthTrend:
         Parameters
         ----------
         exposure : float
-            Archard exposure of the window's middle [m].
+            Archard exposure of the window's middle since the estimator started [m].
         R : float
             Noise variance of the window, ``ρ`` included [rad²].
 
@@ -290,7 +297,7 @@ class GrowthTrend:
         """
         lw, mean, cov, a_ref = self._posterior()
         g = self._exponents(lw.size)
-        a = (max(exposure, 0.0) / EXPOSURE_UNIT) ** g
+        a = (max(exposure + self.origin, 0.0) / EXPOSURE_UNIT) ** g
         if a_ref > 0.0:
             a = a * a_ref ** -g
         x = np.stack([np.ones_like(a), a], axis=1)
@@ -325,7 +332,7 @@ class GrowthTrend:
                 'sxz': [[float(v) for v in row] for row in self.sxz],
                 'szz': float(self.szz), 'windows': int(self.windows),
                 'exposure': float(self.exposure), 'noise_scale': float(self.noise_scale),
-                'new_probability': self.new_probability}
+                'new_probability': self.new_probability, 'origin': self.origin}
 
     @classmethod
     def from_state(cls, d, legacy_scale=1.0):
@@ -349,10 +356,12 @@ class GrowthTrend:
 
         """
         # A state from before the law had two origins: it was placed as from new.
-        out = cls(float(d.get('new_probability', 1.0)))
-        if not 0.0 <= out.new_probability <= 1.0:
-            raise ValueError(f'growth new_probability must lie in [0, 1], got '
-                             f'{out.new_probability!r}')
+        out = cls(float(d.get('new_probability', 1.0)), float(d.get('origin', 0.0)))
+        if not (0.0 <= out.new_probability <= 1.0 and math.isfinite(out.origin)
+                and out.origin >= 0.0):
+            raise ValueError(f'growth new_probability must lie in [0, 1] and origin be a '
+                             f'finite number >= 0 m, got {out.new_probability!r} and '
+                             f'{out.origin!r}')
         sxx = np.array(d['sxx'], dtype=float)
         sxz = np.array(d['sxz'], dtype=float)
         if sxx.shape != out.sxx.shape or sxz.shape != out.sxz.shape:

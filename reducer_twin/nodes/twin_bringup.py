@@ -15,7 +15,9 @@ exports only on ``/dynamic_joint_states`` are fed through a second
 With ``twin.store`` (and ``twin.robot``) the estimators write the live history into
 that fleet store and continue from it (see ``wear_estimator``). Each joint's nodes
 take that joint's reducer (``reducers.<joint>`` in the YAML: a reducer file or
-overrides of ``reducer``; an RV-160E at the base, an RV-40E at the wrist).
+overrides of ``reducer``; an RV-160E at the base, an RV-40E at the wrist), and
+its reducer's service time where ``service_time_s.<joint>`` gives it (parameter
+``estimator.service_time_s`` of its ``wear_estimator``).
 """
 
 from rclpy.node import Node
@@ -96,10 +98,13 @@ def build_nodes(config, sim_overrides=None):
                  Parameter('robot', value=str(twin['robot'] or '')),
                  Parameter('store_period_s', value=float(twin['store_period_s'])),
                  *life_params] if twin['store'] else []
+        service = config.get('service_time_s') or {}
+        service = [Parameter('estimator.service_time_s', value=float(service[joint]))] \
+            if joint in service else []
         nodes['estimator'][joint] = WearEstimatorNode(
             f'wear_estimator_{name}', params=reducer, parameter_overrides=[
                 Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir']),
-                *store])
+                *store, *service])
         nodes['life'][joint] = LifePublisher(f'life_publisher_{name}', params=reducer,
                                              parameter_overrides=[Parameter('joint', value=joint),
                                                                   *life_params])

@@ -653,7 +653,9 @@ def test_a_used_unit_seen_briefly_is_said_to_have_the_models_remaining_life(tmp_
     (line,) = [x for x in err.splitlines() if 'joint_1: its remaining life' in x]
     assert line.startswith('WARNING: ')
     assert "is the model's wear rate at this duty: this unit's own is not yet resolved" in line
-    assert line.endswith('analyse its recordings in time order with --store')
+    assert line.endswith('analyse its recordings in time order with --store, or give its '
+                         'operating time before the recording (service_time_s in --config: the '
+                         'hour meter)')
 
 
 def test_a_unit_followed_from_new_has_its_own_rate(analysed):

@@ -430,6 +430,45 @@ def test_a_used_reducer_of_unknown_history_is_found_within_15_percent_after_20_w
         assert mean[0] == pytest.approx(tables.lost_motion(w0), abs=3.0 * NOISE)
 
 
+@pytest.mark.parametrize('scale', [0.25, 1.0, 4.0])
+def test_a_used_reducers_service_time_tells_its_rate_where_a_short_stretch_cannot(params, scale):
+    # Met at half its life and seen for 20 windows (4 % of the life at 4x the model's rate,
+    # under 1 % at 0.25): the lost motion grows too little to tell the rate.
+    features, true_w, eol = synthetic_run(params, scale, seed=5, n=20000)
+    start = eol // 2
+    seen = features[start:start + 20]
+    served = WearEstimator(params, EstimatorConfig(service_time_s=start * WINDOW))
+    unknown = WearEstimator(params)
+    for f in seen:
+        served.step(f)
+        unknown.step(f)
+    sd = math.sqrt(served.P[1, 1])
+    assert sd < 0.6
+    assert abs(math.log(served.rate_scale / scale)) < 3.0 * sd
+    assert served.wear == pytest.approx(true_w[start + 19], rel=0.05)
+    # The growth law counts from new: its exposure then is the service's.
+    assert served.growth_trend()[3] > served.archard_exposure
+    if scale < 4.0:     # at 4x the stretch itself shows the rate
+        assert math.sqrt(unknown.P[1, 1]) > 1.0
+
+
+def test_the_service_time_is_taken_once_and_a_restored_state_keeps_it_taken(params):
+    features, _, eol = synthetic_run(params, 1.0, seed=5, n=20000)
+    start = eol // 2
+    est = WearEstimator(params, EstimatorConfig(service_time_s=start * WINDOW))
+    for f in features[start:start + 5]:
+        est.step(f)
+    pending = WearEstimator.from_state(params, json.loads(json.dumps(est.state_dict())))
+    for f in features[start + 5:start + 30]:
+        est.step(f)
+        pending.step(f)
+    assert pending.state_dict() == est.state_dict()
+    again = WearEstimator.from_state(params, json.loads(json.dumps(est.state_dict())))
+    again.step(features[start + 30])
+    est.step(features[start + 30])
+    assert again.wear == est.wear and again.rate_scale == est.rate_scale
+
+
 def replay_recorded(params, name):
     """Step a new estimator through the te_features records of ``test/core/data/<name>``."""
     doc = json.loads((DATA / name).read_text())

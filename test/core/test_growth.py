@@ -194,3 +194,30 @@ def test_the_laws_origin_odds_survive_a_round_trip_and_old_states_are_from_new()
     assert GrowthTrend.from_state(state).new_probability == 1.0
     with pytest.raises(ValueError, match='new_probability'):
         GrowthTrend.from_state({**state, 'new_probability': 1.5})
+
+
+def test_a_law_with_an_origin_is_the_law_of_the_exposure_counted_from_new():
+    # A unit whose service before the twin is known: its windows' exposure counts from
+    # new, so the law is that of the same windows fed with the service's exposure added.
+    origin = 2e-7
+    served, counted = GrowthTrend(origin=origin), GrowthTrend()
+    rng = np.random.default_rng(3)
+    for a in 3e-9 * (np.arange(40) + 0.5):
+        z = 0.6 * ARCMIN + 1.8 * ARCMIN * ((origin + a) / 3.2e-7) + rng.normal(0.0, NOISE)
+        served.add(a, z, NOISE ** 2)
+        counted.add(origin + a, z, NOISE ** 2)
+    served.advance(1.2e-7)
+    counted.advance(origin + 1.2e-7)
+    assert served.exposure == counted.exposure
+    for a, b in zip(served.summary(), counted.summary()):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
+    later = served.predictive(1.3e-7, NOISE ** 2)
+    for a, b in zip(later, counted.predictive(origin + 1.3e-7, NOISE ** 2)):
+        np.testing.assert_allclose(a, b, rtol=1e-12)
+    restored = GrowthTrend.from_state(json.loads(json.dumps(served.state())))
+    assert restored.origin == origin
+    state = served.state()
+    del state['origin']
+    assert GrowthTrend.from_state(state).origin == 0.0
+    with pytest.raises(ValueError, match='origin'):
+        GrowthTrend.from_state({**state, 'origin': -1.0})

@@ -4,7 +4,8 @@ The bringup builds every joint's nodes from ``config/twin.yaml`` (``nodes.twin_b
 A robot's axes carry different reducers: each joint's simulator, TE monitor, wear
 estimator and life publisher take that joint's reducer from ``reducers.<joint>`` (a file
 or overrides), the other joints the common ``reducer``; the joint processing's settings
-reach the TE monitors as parameters derived from the core's ``TwinConfig``.
+reach the TE monitors as parameters derived from the core's ``TwinConfig``, and a
+joint's reducer's service time (``service_time_s.<joint>``) its wear estimator.
 """
 
 from pathlib import Path
@@ -29,7 +30,8 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
         f'  state_dir: {tmp_path}\n'
         'reducer: {rating: {rated_life: 3.6e7}}\n'
         f'reducers:\n  base: {{file: {RV80E}, rating: {{rated_torque: 1568.0}}}}\n'
-        '  wrist: {rating: {rated_torque: 392.0}}\n')
+        '  wrist: {rating: {rated_torque: 392.0}}\n'
+        'service_time_s: {elbow: 4.32e7}\n')
     nodes = build_nodes(load_config(config_file))
     for node in [nodes['simulator'], nodes['ingest'], *nodes['te'].values(),
                  *nodes['estimator'].values(), *nodes['life'].values()]:
@@ -48,6 +50,11 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
         assert te.get_parameter('window_s').value == 3.0
         assert te.twin.analyzer.friction is False
         assert te.get_parameter('max_gap_s').value == TwinConfig().max_gap_s
+    # The elbow's reducer ran 12 000 h before the twin started; the others' time is unknown.
+    service = {joint: node.stage.estimator.config.service_time_s
+               for joint, node in nodes['estimator'].items()}
+    assert service == {'base': 0.0, 'elbow': 4.32e7, 'wrist': 0.0}
+    assert nodes['estimator']['elbow'].get_parameter('estimator.service_time_s').value == 4.32e7
 
 
 def test_joints_whose_names_are_no_topic_names_run_on_valid_topics(default_ros, tmp_path):
