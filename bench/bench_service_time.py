@@ -11,7 +11,9 @@ do not follow the model (``bench/independent_generator.py``: lives drawn
 exposure and growth law) contradicts by many times. The robot's hour meter
 says how long the reducer has run (``service_time_s`` in the configuration).
 The model's own simulator (``reducer-twin simulate``, two joints, each with a
-hidden rate scale drawn log-uniform in 0.3-3) is run the same way: it wears
+hidden rate scale drawn log-uniform in 1-8, so that its lives span about
+3 400-27 000 h as the other generators' do, within the remaining life's
+100 000-h horizon) is run the same way: it wears
 as the twin's model does, so there the twin's figures say how wide its
 intervals are where the model holds.
 
@@ -106,12 +108,12 @@ def run_one(tmp, source, seed, fraction, hours, aging_factor):
 
 def run_model(tmp, seed, fraction, hours, aging_factor):
     """
-    :func:`run_one` on the model's simulator: two joints, rate scales drawn in 0.3-3.
+    :func:`run_one` on the model's simulator: two joints, rate scales drawn in 1-8.
 
     The life at each scale is read from a first, one-hour recording (its remaining life
     plus the hour); the recording then starts at ``fraction`` of the shorter life.
     """
-    scales = np.exp(np.random.default_rng([seed, 11]).uniform(math.log(0.3), math.log(3.0), 2))
+    scales = np.exp(np.random.default_rng([seed, 11]).uniform(0.0, math.log(8.0), 2))
     common = ['--joints', '2', '--seed', str(seed), '--aging-factor', repr(aging_factor),
               '--wear-rate-scale', ','.join(f'{k:.4f}' for k in scales), '--json']
 
