@@ -67,6 +67,7 @@ from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
+from reducer_twin.core.units import HOUR
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -562,6 +563,16 @@ class _Run:
                  'time order with --store, or give its operating time before the recording '
                  '(service_time_s in --config: the hour meter)')
 
+    def _service_said(self, joint, res, outputs):
+        """Give how a joint's service time was taken; say one that was not, and why."""
+        for out in outputs:
+            if 'service' in out:
+                taken, scale, line = out['service']
+                res.service = {'hours': self.settings.estimator_of(joint).service_time_s / HOUR,
+                               'taken': bool(taken), 'rate_scale': float(scale)}
+                if not taken:
+                    warn(self.bag, f'{joint}: {line}')
+
     def _partial(self, joint, front):
         """
         Say when an observed joint's lost motion stopped well before its stream did.
@@ -666,6 +677,7 @@ class _Run:
             res.velocity = _velocity_source(front.analyzer)
             self._inputs_said(joint, front)
             self._rate_said(joint, res)
+            self._service_said(joint, res, outputs)
             self._note_gaps(joint, front)
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)

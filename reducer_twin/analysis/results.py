@@ -55,6 +55,7 @@ class JointResult:
     reason: str = None
     partial: str = None
     velocity: str = None
+    service: dict = None
 
     @property
     def observed(self):
@@ -77,7 +78,9 @@ class JointResult:
             the velocity field, found to be the link angle's rate; ``'link_angle'``: the
             rate of the link angle, where the field is missing or is not that rate; None
             without samples) and ``rate_resolved`` (whether the remaining life rests on
-            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed).
+            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed)
+            and ``service`` (how its service time was taken: ``hours``, ``taken``,
+            ``rate_scale``; None without one, or before it was judged).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \
@@ -95,6 +98,7 @@ class JointResult:
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
         out['rate_resolved'] = rate_resolved(wear) if observed and wear else None
+        out['service'] = self.service
         return out
 
 
@@ -153,7 +157,7 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            'rate_resolved': None}
+                            'rate_resolved': None, 'service': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

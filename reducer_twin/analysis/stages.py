@@ -381,11 +381,19 @@ class JointBack:
         Returns
         -------
         list of dict
-            :meth:`process` of each record, in order.
+            :meth:`process` of each record, in order; the output of the batch in which
+            the reducer's service time was judged also has ``service``: ``(taken,
+            rate_scale, line)`` (:func:`.core.pipeline.service_note`).
 
         """
-        return [self._outputs(wear, life, summary)
-                for wear, life, summary in self.twin.step_many(records)]
+        said = self.twin.estimator.service_said
+        out = [self._outputs(wear, life, summary)
+               for wear, life, summary in self.twin.step_many(records)]
+        verdict = self.twin.estimator.estimator.service_verdict
+        if out and said is None and self.twin.estimator.service_said is not None:
+            # How the service time was taken, once, with the window that took it.
+            out[-1]['service'] = (*verdict, self.twin.estimator.service_said)
+        return out
 
     def _outputs(self, wear, life, summary=None):
         summary = summary or self.twin.summary(wear, life)

@@ -221,6 +221,17 @@ way, every ten windows (a unit built 2 µm tight, whose rate the prior puts
 1.5x too low: P50 35-44 % short at 60 % of life; with the release: 0-5 %).
 """
 
+SERVICE_RATE_LIMIT = 1000.0
+"""
+Rate scale beyond which a service time is not taken (:meth:`WearEstimator._serviced`).
+
+A service time that makes a unit's wear over it more than this many times the model's
+rate at its duty is far likelier a time in hours read as seconds (3 600 times) than a
+reducer that wore so fast all its life: the independent generator's units, whose lives
+ignore the model, wear up to about 80 times its rate. Such a unit's own windows show
+its rate soon anyway.
+"""
+
 SCORE_AFTER = 8
 """Usable windows both models have seen before their predictions are scored."""
 
@@ -770,6 +781,7 @@ class WearEstimator:
         self._lw, self._m, self._P = prior_components(self.config, p_new)
         self._growth = GrowthTrend(p_new)
         self._service_pending = serviced
+        self._service_verdict = None
         self._archard = 0.0
         self._observed_at = None
         self._window_increment = 0.0
@@ -891,6 +903,17 @@ class WearEstimator:
         return float(value)
 
     @property
+    def service_verdict(self):
+        """
+        Return how the service time was taken: None before (or without one), else a tuple.
+
+        ``(taken, rate_scale)``: whether it was taken and the rate scale it implies (the
+        unit's mean run-in-free rate over its service relative to the model's at the duty
+        seen); not taken beyond :data:`SERVICE_RATE_LIMIT`.
+        """
+        return self._service_verdict
+
+    @property
     def noise_scale(self):
         """Return the learnt ratio ``ρ`` of the observed to the reported lost-motion variance."""
         return self._noise.value
@@ -950,7 +973,9 @@ class WearEstimator:
         mean; unscented, as the windows), its weight by its likelihood. The lost
         motion tells ``w``; with it the service time tells ``θ``, which a short
         recording of a used unit cannot: without it that remaining life is the
-        model's rate at the duty, which may be many times off.
+        model's rate at the duty, which may be many times off. A service time that
+        implies a rate beyond :data:`SERVICE_RATE_LIMIT` times the model's is not taken
+        (:attr:`service_verdict` says which).
         """
         self._service_pending = False
         rate = self._duty.rate
@@ -961,6 +986,12 @@ class WearEstimator:
         total = past + self._archard
         sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
         wp = self.params.wear
+        # The rate the service time implies, from the wear the windows read so far.
+        implied = float(run_in_free_wear(max(self._x[0], 0.0), wp)) / total
+        taken = implied <= SERVICE_RATE_LIMIT * c.initial_rate_scale
+        self._service_verdict = (taken, implied)
+        if not taken:
+            return
         m0, P0 = self._m, self._P
         X = self._sigma(m0, P0)
         d = X - np.einsum('k,ckn->cn', self._wm, X)[:, None, :]
@@ -1361,6 +1392,7 @@ class WearEstimator:
         self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
         self._growth = GrowthTrend(1.0)
         self._service_pending = False
+        self._service_verdict = None
         self._archard = 0.0
         self._score = 0.0
         self._scored = 0
@@ -1580,6 +1612,8 @@ class WearEstimator:
             'trend_score': [float(self._score), int(self._scored)],
             'score_settle': int(self._settle),
             'service_pending': bool(self._service_pending),
+            'service_verdict': None if self._service_verdict is None else [
+                bool(self._service_verdict[0]), float(self._service_verdict[1])],
             'trend': [float(self._trend), int(self._trend_count)],
             'exposure_s': self._exposure_s,
             'exposure_since_reset_s': self._exposure_since_reset_s,
@@ -1663,6 +1697,9 @@ class WearEstimator:
                 archard = float(d['archard_exposure'])
                 score = (float(d['trend_score'][0]), int(d['trend_score'][1]))
             settle = int(d.get('score_settle', 0))     # (not in earlier states: 0)
+            verdict = d.get('service_verdict')         # (nor this: None)
+            if verdict is not None:
+                verdict = (bool(verdict[0]), float(verdict[1]))
             if not 0 <= settle <= SCORE_AFTER + 1:
                 raise ValueError(f'score_settle must be 0 .. {SCORE_AFTER + 1}, got {settle}')
             lw, m, P = _checked_components(lw, m, P)
@@ -1692,6 +1729,7 @@ class WearEstimator:
         est._settle = settle
         # (not in earlier states: the service time, if any, was taken)
         est._service_pending = bool(d.get('service_pending', False))
+        est._service_verdict = verdict
         est._noise = NoiseScale(noise)
         est._trend, est._trend_count = trend
         est._exposure_s = scalars['exposure_s']

@@ -203,6 +203,7 @@ class EstimatorStage:
         self.last_observation = float('nan')
         self.skipped_replays = 0
         self.restored_from = None
+        self.service_said = None
         loaded = store.restore(params, config) if store is not None else None
         if loaded is not None:
             self.estimator = loaded.estimator
@@ -245,8 +246,13 @@ class EstimatorStage:
         if last is not None and last - CLOCK_RESET_S < features.t_end <= last:
             self.skipped_replays += 1
             return 'replay'
+        said = self.estimator.service_verdict
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
+        if said is None and self.estimator.service_verdict is not None:
+            self.service_said = service_note(self.estimator.service_verdict,
+                                             self.estimator.config.service_time_s)
+            self.log(self.service_said)
         self.save()
         return result.status
 
@@ -597,6 +603,35 @@ def trend_from_record(record):
         cov[i, j] = cov[j, i] = float(record[key])
     return GrowthTrendState(float(record['trend_probability']), mean, cov,
                             float(record['archard_exposure_m']))
+
+
+def service_note(verdict, service_time_s):
+    """
+    Say how a reducer's service time was taken (:attr:`.estimator.WearEstimator.service_verdict`).
+
+    Parameters
+    ----------
+    verdict : tuple
+        ``(taken, rate_scale)``.
+    service_time_s : float
+        The service time [s].
+
+    Returns
+    -------
+    str
+        One line; one that is not taken names the likely mistake (hours given as seconds).
+
+    """
+    from .estimator import SERVICE_RATE_LIMIT
+    taken, scale = verdict
+    hours = service_time_s / HOUR
+    if taken:
+        return (f'service time {hours:,.0f} h taken: its wear over it is {scale:.3g} times the '
+                "model's rate at this duty")
+    return (f'service time {service_time_s:g} s ({hours:,.1f} h) not taken: it would make the '
+            f"unit's wear {scale:,.0f} times the model's rate at this duty (more than "
+            f'{SERVICE_RATE_LIMIT:,.0f}); service_time_s is in seconds ({service_time_s:g} h '
+            f'would be {service_time_s * HOUR:.4g} s)')
 
 
 RATE_RESOLVED_SD = 0.5

@@ -37,6 +37,19 @@ def test_the_service_time_resolves_a_used_units_rate_and_brings_its_life_to_the_
     assert not all(j['rate_resolved'] for j in runs['plain'][0].values())
     assert "this unit's own is not yet resolved" in runs['plain'][1]
     assert 'not yet resolved' not in runs['served'][1]
+    # What was taken is in --json; a time in hours written as seconds is refused, and said.
+    for joint, t in truth['joints'].items():
+        service = runs['served'][0][joint]['service']
+        assert service['taken'] and abs(service['hours'] - t['start_hours']) < 1e-6
+    assert all(j['service'] is None for j in runs['plain'][0].values())
+    hours = tmp_path / 'hours.yaml'
+    hours.write_text('twin:\n  aging_factor: 3600.0\nservice_time_s:\n'
+                     f'  joint_1: {truth["joints"]["joint_1"]["start_hours"]!r}\n')
+    done = analyze_process(tmp_path / 'bag', tmp_path / 'hours', '--config', hours)
+    assert done.returncode == 0, done.stderr[-500:]
+    assert not json.loads(done.stdout)['joints']['joint_1']['service']['taken']
+    assert [line for line in done.stderr.splitlines() if 'joint_1: service time' in line
+            and 'not taken' in line and 'service_time_s is in seconds' in line]
     for joint, t in truth['joints'].items():
         true_life = t['remaining_life_end_h']
         off = {name: abs(math.log(joints[joint]['rul_p50_h'] / true_life))

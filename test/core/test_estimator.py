@@ -24,6 +24,7 @@ from reducer_twin.core.estimator import (
     wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
+from reducer_twin.core.pipeline import service_note
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 
@@ -452,6 +453,31 @@ def test_a_used_reducers_service_time_tells_its_rate_where_a_short_stretch_canno
         assert math.sqrt(unknown.P[1, 1]) > 1.0
 
 
+def test_a_service_time_in_hours_given_as_seconds_is_not_taken_and_says_why(params, tables):
+    # A robot's recording in real time: 2-s windows of a unit that ran 6 000 h at the
+    # model's rate; its hour meter's 6 000 given as seconds would make it 3 600 times faster.
+    rng = np.random.default_rng(4)
+    rate = float(wear.wear_rate(0.8 * params.rating.rated_torque,
+                                wear.reference_speed(params), 0.0, params))
+    worn = wear_from_run_in_free(rate * 6000.0 * HOUR, params.wear)
+    windows = [features_at(float(tables.lost_motion(worn) + rng.normal(0.0, NOISE)),
+                           increment=2.0 * rate, exposure=2.0, t_end=2.0 * k)
+               for k in range(1, 31)]
+    verdicts = {}
+    for service in (6000.0, 6000.0 * HOUR):
+        est = WearEstimator(params, EstimatorConfig(service_time_s=service))
+        for f in windows:
+            est.step(f)
+        verdicts[service] = est.service_verdict
+    taken, scale = verdicts[6000.0]
+    assert not taken and 2000.0 < scale < 6000.0
+    note = service_note(verdicts[6000.0], 6000.0)
+    assert 'service time 6000 s (1.7 h) not taken' in note
+    assert 'service_time_s is in seconds (6000 h would be 2.16e+07 s)' in note
+    taken, scale = verdicts[6000.0 * HOUR]
+    assert taken and 0.5 < scale < 2.0
+
+
 def test_the_service_time_is_taken_once_and_a_restored_state_keeps_it_taken(params):
     features, _, eol = synthetic_run(params, 1.0, seed=5, n=20000)
     start = eol // 2
@@ -464,6 +490,7 @@ def test_the_service_time_is_taken_once_and_a_restored_state_keeps_it_taken(para
         pending.step(f)
     assert pending.state_dict() == est.state_dict()
     again = WearEstimator.from_state(params, json.loads(json.dumps(est.state_dict())))
+    assert again.service_verdict == est.service_verdict and est.service_verdict[0]
     again.step(features[start + 30])
     est.step(features[start + 30])
     assert again.wear == est.wear and again.rate_scale == est.rate_scale

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
+from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
@@ -125,6 +126,19 @@ def test_a_stage_without_state_file_steps_the_filter_and_records_the_wear_layout
     assert rec['updates'] == statuses.count('accepted')
     assert rec['lost_motion_obs_rad'] == windows[9].lost_motion
     assert stage.restored_from is None
+
+
+def test_a_stage_says_once_how_the_service_time_was_taken(windows):
+    # A unit the twin meets after 10 000 h: the wear estimator's log says it once, when
+    # the duty is known (10 windows) and the service time has been judged.
+    lines = []
+    stage = EstimatorStage(PARAMS, EstimatorConfig(service_time_s=10000.0 * HOUR),
+                           log=lines.append)
+    run(stage, windows[:15])
+    said = [line for line in lines if line.startswith('service time')]
+    assert said == [stage.service_said]
+    assert said[0].startswith('service time 10,000 h taken: its wear over it is ')
+    assert said[0].endswith(" times the model's rate at this duty")
 
 
 def test_the_estimate_follows_the_synthetic_truth(windows):
