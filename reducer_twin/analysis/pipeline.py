@@ -564,13 +564,18 @@ class _Run:
                  '(service_time_s in --config: the hour meter)')
 
     def _service_said(self, joint, res, outputs):
-        """Give how a joint's service time was taken; say one that was not, and why."""
+        """
+        Give how a joint's service time was taken; say one that was not, and why.
+
+        ``taken`` None: the reducer met without state has a service time the windows have
+        not judged yet (fewer than the duty needs); it is judged in a later bag of its
+        history (``--store``).
+        """
         for out in outputs:
             if 'service' in out:
-                taken, scale, line = out['service']
-                res.service = {'hours': self.settings.estimator_of(joint).service_time_s / HOUR,
-                               'taken': bool(taken), 'rate_scale': float(scale)}
-                if not taken:
+                taken, scale, line, hours = out['service']
+                res.service = {'hours': hours, 'taken': taken, 'rate_scale': scale}
+                if taken is False:
                     warn(self.bag, f'{joint}: {line}')
 
     def _partial(self, joint, front):

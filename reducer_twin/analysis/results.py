@@ -79,8 +79,9 @@ class JointResult:
             rate of the link angle, where the field is missing or is not that rate; None
             without samples) and ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed)
-            and ``service`` (how its service time was taken: ``hours``, ``taken``,
-            ``rate_scale``; None without one, or before it was judged).
+            and ``service`` (how the service time of a reducer met without state was
+            taken: ``hours``, ``taken``, ``rate_scale``; ``taken`` None while too few
+            windows have judged it; None without one).
 
         """
         wear = dict(zip(WEAR_ESTIMATE.fields, self.wear[-1])) if self.wear is not None and \

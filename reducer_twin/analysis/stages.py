@@ -19,7 +19,9 @@ import numpy as np
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
+from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.pipeline import EstimatorStage
+from reducer_twin.core.units import HOUR
 from reducer_twin.core.wear import depth_per_mesh_pass
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_FEATURES
@@ -319,6 +321,10 @@ def te_values(block):
     return values
 
 
+NEW_REDUCER = {'new_reducer': True}
+"""The initial state of a reducer the fleet store knows was fitted new (a replacement)."""
+
+
 class JointBack:
     """
     The ``wear_estimator`` and ``life_publisher`` part of one joint (a :class:`TwinBack`).
@@ -332,8 +338,9 @@ class JointBack:
     life_config : LifeConfig
         Limit and thresholds.
     state : dict, optional
-        Where an earlier analysis of the same reducer ended (:meth:`state`); default a
-        new reducer.
+        Where an earlier analysis of the same reducer ended (:meth:`state`), or
+        :data:`NEW_REDUCER` (a reducer fitted by a recorded replacement); default a
+        reducer met without state.
     estimator_config : EstimatorConfig, optional
         Estimator tuning of a reducer met without state (its service time); default
         the defaults.
@@ -342,6 +349,10 @@ class JointBack:
 
     def __init__(self, joint, params, life_config, state=None, estimator_config=None):
         self.joint = joint
+        if state == NEW_REDUCER:
+            # Fitted by a recorded replacement: new, whatever the configuration says of
+            # the unit the twin first met (its service time).
+            estimator_config, state = EstimatorConfig(new_unit_probability=1.0), None
         self.twin = TwinBack(params, life_config, EstimatorStage(params, estimator_config))
         if state is not None:
             self.twin.restore(state)
@@ -351,9 +362,18 @@ class JointBack:
         return self.twin.state()
 
     def initial(self, stamp_s):
-        """Return the outputs the nodes publish when they start (no window yet)."""
+        """
+        Return the outputs the nodes publish when they start (no window yet).
+
+        With ``service``, ``(None, None, None, hours)``, while a service time waits to be
+        judged (:meth:`process_many`).
+        """
         wear, life = self.twin.start(stamp_s)
-        return self._outputs(wear, life)
+        out = self._outputs(wear, life)
+        estimator = self.twin.estimator.estimator
+        if estimator.service_pending:
+            out['service'] = (None, None, None, estimator.config.service_time_s / HOUR)
+        return out
 
     def process(self, record):
         """
@@ -383,7 +403,7 @@ class JointBack:
         list of dict
             :meth:`process` of each record, in order; the output of the batch in which
             the reducer's service time was judged also has ``service``: ``(taken,
-            rate_scale, line)`` (:func:`.core.pipeline.service_note`).
+            rate_scale, line, hours)`` (:func:`.core.pipeline.service_note`).
 
         """
         said = self.twin.estimator.service_said
@@ -392,7 +412,8 @@ class JointBack:
         verdict = self.twin.estimator.estimator.service_verdict
         if out and said is None and self.twin.estimator.service_said is not None:
             # How the service time was taken, once, with the window that took it.
-            out[-1]['service'] = (*verdict, self.twin.estimator.service_said)
+            out[-1]['service'] = (*verdict, self.twin.estimator.service_said,
+                                  self.twin.estimator.estimator.config.service_time_s / HOUR)
         return out
 
     def _outputs(self, wear, life, summary=None):

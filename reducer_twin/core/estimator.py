@@ -903,6 +903,11 @@ class WearEstimator:
         return float(value)
 
     @property
+    def service_pending(self):
+        """Return whether a service time waits for the duty's rate to be taken."""
+        return self._service_pending
+
+    @property
     def service_verdict(self):
         """
         Return how the service time was taken: None before (or without one), else a tuple.

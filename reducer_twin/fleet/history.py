@@ -27,6 +27,7 @@ import socket
 import sys
 import tempfile
 
+from reducer_twin.analysis.stages import NEW_REDUCER
 from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreError
 
@@ -230,7 +231,8 @@ def plan_chains(store, infos, settings, rebuild=False, scratch=None):
         have = {j: (set() if r.row_id in forget else _fingerprints(store, r.row_id))
                 for j, r in reducers.items()}
         revision = {j: r.revision + (1 if r.row_id in forget else 0) for j, r in reducers.items()}
-        start[robot] = {j: r.state for j, r in reducers.items() if r.row_id not in forget}
+        start[robot] = {j: _start_state(r) for j, r in reducers.items()
+                        if r.row_id not in forget}
         seen, items = set(), []
         for info in bags:
             if info.fingerprint in seen:
@@ -251,6 +253,13 @@ def plan_chains(store, infos, settings, rebuild=False, scratch=None):
         if items:
             chains[robot] = items
     return chains, outcomes, start
+
+
+def _start_state(reducer):
+    """Where a stored reducer's analysis starts: its state; new if fitted by a replacement."""
+    if reducer.state is None and reducer.installed_ns is not None:
+        return NEW_REDUCER
+    return reducer.state
 
 
 def _decide(robot, info, reducers, last, have, revision):

@@ -22,7 +22,7 @@ Windows wait in memory up to :data:`MAX_PENDING_WINDOWS`; beyond that the oldest
 dropped from the store (counted; their operating time still counts).
 """
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import datetime
 import os
 from pathlib import Path
@@ -585,7 +585,7 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
 
     """
     from reducer_twin.core.errors import StateFileError
-    from reducer_twin.core.estimator import WearEstimator
+    from reducer_twin.core.estimator import EstimatorConfig, WearEstimator
     log = log or (lambda text: None)
     check_robot(robot)
     file_t_end = stage.estimator.t_end if stage.restored_from else None
@@ -604,7 +604,10 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
         stage.last_observation = float('nan') if obs is None else float(obs)
         stage.restored_from = f'fleet store {store} ({robot}/{joint})'
     elif start.new_reducer:
-        stage.estimator = WearEstimator(params, estimator_config)
+        # Fitted new: not the unit the configuration's service time was of.
+        stage.estimator = WearEstimator(params, replace(
+            estimator_config or EstimatorConfig(), new_unit_probability=1.0,
+            service_time_s=0.0))
         stage.restored_from = None
     log(start.note)
     if start.state is not None or start.new_reducer:

@@ -131,6 +131,27 @@ def test_after_a_replacement_later_bags_continue_the_new_reducer(bags, tmp_path,
     assert rows['joint_1', True]['retired_at'] == rows['joint_1', False]['installed_at']
 
 
+def test_a_reducer_fitted_by_a_replacement_is_new_whatever_the_service_time_said(
+        bags, tmp_path, capsys):
+    # The configuration's service time is of the units the twin first met (the robot's
+    # hour meter at 2000 h); the reducer fitted later is new.
+    store, config = tmp_path / 'f.db', tmp_path / 'twin.yaml'
+    config.write_text('service_time_s: {joint_1: 7200000.0, joint_2: 7200000.0}\n')
+    code, out, err = _analyze([bags['s2']], store, tmp_path / 'a', capsys, '--config', config)
+    assert code == 0, err
+    first = json.loads(out)['joints']
+    # A short bag: judged once the duty is known, in this bag or the next of the history.
+    assert all(first[j]['service']['hours'] == 2000.0 for j in ('joint_1', 'joint_2')), first
+    assert _run(['replace', '--store', store, '--robot', 'r1', '--joint', 'joint_1'],
+                capsys)[0] == 0
+    code, out, err = _analyze([bags['s3']], store, tmp_path / 'b', capsys, '--config', config)
+    assert code == 0, err
+    later = json.loads(out)['joints']
+    assert later['joint_1']['service'] is None
+    assert (later['joint_2']['service'] or {}).get('taken') is not False
+    assert 'service time' not in err
+
+
 def _cli(args, **kwargs):
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.Popen([sys.executable, '-m', 'reducer_twin.cli', *map(str, args)],
