@@ -17,9 +17,9 @@ from typing import NamedTuple
 
 import numpy as np
 from reducer_twin.core.errors import ReducerTwinError
+from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
-from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.units import HOUR
 from reducer_twin.core.wear import depth_per_mesh_pass
