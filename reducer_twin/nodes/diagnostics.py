@@ -4,7 +4,8 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
-from reducer_twin.core.units import m_to_um
+from reducer_twin.core.pipeline import service_note
+from reducer_twin.core.units import HOUR, m_to_um
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import diagnostics_qos
@@ -87,6 +88,18 @@ def estimator_status(stage, rejected, live=None):
         level = 'ERROR'
         values['state_write_error'] = str(error)
     message = f'wear {values["wear_um"]:.2f} +/- {values["wear_std_um"]:.2f} um'
+    if est.config.service_time_s > 0.0:
+        # The service time the node was given, and what became of it.
+        verdict = est.service_verdict
+        values['service_time_h'] = est.config.service_time_s / HOUR
+        values['service_time'] = ('waiting for the duty' if est.service_pending else
+                                  'not judged' if verdict is None else
+                                  'taken' if verdict[0] else 'not taken')
+        if verdict is not None:
+            values['service_rate_scale'] = verdict[1]
+        if verdict is not None and not verdict[0]:
+            level = 'WARN' if level == 'OK' else level
+            message += '; ' + service_note(verdict, est.config.service_time_s)
     if error is not None:
         message = f'{error}; {message}'
     if live is not None:

@@ -68,8 +68,9 @@ def offline(records):
 class Estimator:
     """A WearEstimatorNode on a state directory, and a probe that feeds and hears it."""
 
-    def __init__(self, ros, state_dir, joint=None):
+    def __init__(self, ros, state_dir, joint=None, extra=()):
         self.ros = ros
+        self.extra = list(extra)
         self.joint = joint or f'hip{next(_ids)}'
         self.state = state_dir / f'{self.joint}.json'
         self.node = self.start()
@@ -86,7 +87,8 @@ class Estimator:
             f'wear_estimator_{self.joint}', params=PARAMS, context=self.ros.context,
             parameter_overrides=[Parameter('joint', value=self.joint),
                                  Parameter('state_dir', value=str(self.state.parent)),
-                                 Parameter('diagnostics_period_s', value=0.1)])
+                                 Parameter('diagnostics_period_s', value=0.1),
+                                 *self.extra])
         return self.ros.add(node)
 
     def restart(self):
@@ -212,6 +214,22 @@ def test_the_diagnostics_say_how_the_windows_scatter_against_their_reported_sd(
     assert learnt != 1.0, 'twelve windows teach the noise scale something'
     status = est.status(lambda s: ros.key_values(s)['updates'] == '12')
     assert float(ros.key_values(status)['window_noise_scale']) == pytest.approx(learnt, rel=1e-4)
+
+
+def test_the_diagnostics_say_the_service_time_and_what_became_of_it(ros, tmp_path, records):
+    est = Estimator(ros, tmp_path, extra=[Parameter('estimator.service_time_s',
+                                                    value=2000.0 * HOUR)])
+    est.send(records[:5])
+    status = est.status(lambda s: ros.key_values(s)['updates'] == '5')
+    values = ros.key_values(status)
+    assert values['service_time'] == 'waiting for the duty'
+    assert float(values['service_time_h']) == 2000.0
+    est.send(records[5:15])
+    status = est.status(lambda s: ros.key_values(s)['updates'] == '15')
+    values = ros.key_values(status)
+    verdict = est.node.stage.estimator.service_verdict
+    assert values['service_time'] == 'taken' and verdict[0]
+    assert float(values['service_rate_scale']) == pytest.approx(verdict[1], rel=1e-4)
 
 
 def test_a_corrupt_state_file_falls_back_to_the_backup_copy(ros, tmp_path, records):
