@@ -65,7 +65,7 @@ Usage: ``python bench/bench_accuracy.py [--truths 24] [--independent-truths 32]
 """
 
 import argparse
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 import hashlib
 import json
 import math
@@ -663,7 +663,7 @@ MID_LIFE_SPANS = (0.1, 0.3)
 """Shares of life it then watches before its remaining life is judged."""
 
 
-def mid_life_starts(runs, params, config=None):
+def mid_life_starts(runs, params, config=None, service=False):
     """
     Figures of twins started without state on units already part-way through life.
 
@@ -672,7 +672,9 @@ def mid_life_starts(runs, params, config=None):
     :data:`MID_LIFE_STARTS` of its life by an estimator with the default prior (new with
     probability 0.9, else of unknown history) and judged after it has seen
     :data:`MID_LIFE_SPANS` of the life (starts whose span would pass the end are left
-    out): where the true remaining life falls against P10, P50 and P90.
+    out): where the true remaining life falls against P10, P50 and P90. With ``service``
+    the estimator is told the unit's operating time before the start (its service time,
+    ``EstimatorConfig.service_time_s``), as a robot's hour meter would.
 
     Returns
     -------
@@ -694,7 +696,11 @@ def mid_life_starts(runs, params, config=None):
                 sl = slice(k0, k1 + 1)
                 part = Run(run.truth, run.records[sl], run.t_end[sl], run.eol, run.wear[sl],
                            run.lost_motion[sl], run.wear_mid[sl])
-                est = estimate(part, params, config)
+                told = config
+                if service and k0 > 0:
+                    told = replace(config or EstimatorConfig(),
+                                   service_time_s=float(run.t_end[k0 - 1]))
+                est = estimate(part, params, told)
                 true_rul = run.eol - part.t_end[-1]
                 rows.append((true_rul < est['p10'][-1], true_rul > est['p90'][-1],
                              est['p50'][-1] / true_rul))
@@ -706,7 +712,8 @@ def mid_life_starts(runs, params, config=None):
                      'p50_ratio': float(np.median(ratio)),
                      'p50_within_30': float(np.mean(np.abs(ratio - 1.0) <= 0.3))}
         f = out[span]
-        print(f'  met without state at 25/50/75 % of life, judged after {_pct(span)} more: '
+        told = ', told its service time' if service else ''
+        print(f'  met without state at 25/50/75 % of life{told}, judged after {_pct(span)} more: '
               f'{f["starts"]} starts, P10-P90 coverage {_pct(f["coverage"])} (below P10 '
               f'{_pct(f["below_p10"])}, above P90 {_pct(f["above_p90"])}), P50 / true '
               f'median {f["p50_ratio"]:.2f}, within 30 % in {_pct(f["p50_within_30"])}')
@@ -794,8 +801,11 @@ def main(argv=None):
         oracle = [r for r, s in zip(oracle, seen) if s]
         truths = [t for t, s in zip(truths, seen) if s]
         figures[gen] = report_case(f'{gen} generator', results, unit)
+        watched = [r for r, s in zip(runs, seen) if s]
         figures[gen]['mid_life'] = {f'{span:g}': f for span, f in mid_life_starts(
-            [r for r, s in zip(runs, seen) if s], params, config).items()}
+            watched, params, config).items()}
+        figures[gen]['mid_life_service'] = {f'{span:g}': f for span, f in mid_life_starts(
+            watched, params, config, service=True).items()}
         if gen == 'third':
             for kind in third.KINDS:
                 pick = [r for r, t in zip(results, truths) if t.kind == kind]
