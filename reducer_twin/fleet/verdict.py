@@ -110,8 +110,10 @@ def fleet_row(reducer, params):
         :data:`FIELDS` plus ``windows``, ``installed_at``, ``retired_at``,
         ``lost_motion_limit_arcmin``, ``rul_censored``, ``rule``, ``live_segments``,
         ``hours_live`` (the part of ``hours_observed`` a live ``wear_estimator`` wrote;
-        ``bags`` counts recorded bags only) and ``rate_resolved`` (False while the
-        remaining life is the model's wear rate, not the unit's own; None unknown).
+        ``bags`` counts recorded bags only), ``rate_resolved`` (False while the
+        remaining life is the model's wear rate, not the unit's own; None unknown) and
+        ``service_hours`` (the operating time it had before the twin first saw it, where
+        the configuration gave one and it was taken; else None).
 
     """
     r = reducer
@@ -127,6 +129,9 @@ def fleet_row(reducer, params):
     state = (r.state or {}).get('estimator')
     summary = r.summary or {}
     row['rate_resolved'] = summary.get('rate_resolved')
+    verdict = (state or {}).get('service_verdict')
+    row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
+        if verdict is not None and verdict[0] else None
     if state is not None:
         row['wear_um'] = float(state['x'][0]) / UM
         row['wear_std_um'] = math.sqrt(max(float(state['P'][0][0]), 0.0)) / UM

@@ -81,6 +81,17 @@ def test_the_fleet_is_ranked_by_p10_with_unobserved_and_retired_last():
     assert [r['joint'] for r in rank(rows)] == ['c', 'd', 'a', 'b', 'e']
 
 
+def test_the_row_gives_the_service_time_a_reducer_was_taken_with():
+    reducer = _reducer(24000.0)
+    assert fleet_row(reducer, PARAMS)['service_hours'] is None
+    state = reducer.state['estimator']
+    state['config']['service_time_s'] = 12000.0 * HOUR
+    state['service_verdict'] = [True, 3.2]
+    assert fleet_row(reducer, PARAMS)['service_hours'] == 12000.0
+    state['service_verdict'] = [False, 3600.0]     # not taken: the row does not claim it
+    assert fleet_row(reducer, PARAMS)['service_hours'] is None
+
+
 def test_an_ok_that_is_the_models_rate_says_so():
     # A fleet met without history: every reducer OK on the physics' wear rate at its duty,
     # its own not yet seen, and the view said nothing of it.
