@@ -988,7 +988,8 @@ class WearEstimator:
             return
         c = self.config
         past = rate * c.service_time_s
-        total = past + self._archard
+        # The state is at the window's middle (the exposure there, when stepping one).
+        total = past + (self._archard if self._observed_at is None else self._observed_at)
         sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
         wp = self.params.wear
         # The rate the service time implies, from the wear the windows read so far.
