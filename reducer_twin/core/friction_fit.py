@@ -109,7 +109,7 @@ class FrictionFit:
         effort cannot tell the two apart, so the caller treats a sample whose
         torque changes sign with ``Fv·omega`` put back as ambiguous. The
         acceleration is taken over ``half`` samples either side (at least 1;
-        :meth:`.window_analysis.WindowAnalyzer._smoothing_half`).
+        :meth:`.torque_smoothing.TorqueSmoothing.half_width`).
 
         Returns
         -------
