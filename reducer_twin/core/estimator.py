@@ -155,7 +155,7 @@ and without the rate's drift (``log_rate_scale_noise_density = 0``; that
 simulator's rate is constant): coverage 87-89 %.
 """
 
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from functools import lru_cache
 import hashlib
 import json
@@ -164,8 +164,8 @@ import math
 import numpy as np
 
 from .duty_rate import DUTY_BATCH_WINDOWS, DutyRate
-from .errors import InvalidInput, StateFileError
-from .growth import GrowthTrend, window_terms
+from .errors import InvalidInput
+from .growth import GrowthTrend
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
 from .sigma_points import merwe_weights
@@ -718,40 +718,6 @@ def mixture_moments(log_weights, means, covs):
 
 
 # --------------------------------------------------------------------------- filter
-
-
-def _components_state(lw, m, P):
-    return [[float(a), [float(v) for v in b], [float(v) for v in c.ravel()]]
-            for a, b, c in zip(lw, m, P)]
-
-
-def _components_from_state(rows):
-    lw = np.array([c[0] for c in rows], dtype=float)
-    m = np.array([c[1] for c in rows], dtype=float)
-    P = np.array([c[2] for c in rows], dtype=float).reshape(-1, N_FILTER, N_FILTER)
-    return _checked_components(lw, m, P)
-
-
-def _checked_components(lw, m, P):
-    if lw.ndim != 1 or lw.size == 0 or m.shape != (lw.size, N_FILTER):
-        raise ValueError(f'components must be [log weight, {N_FILTER} means, '
-                         f'{N_FILTER}x{N_FILTER} covariance], got {m.shape}')
-    if not (np.all(np.isfinite(lw)) and np.all(np.isfinite(m)) and np.all(np.isfinite(P))):
-        raise ValueError('component weights, means and covariances must be finite')
-    return lw, m, P
-
-
-def _snapshot_state(snap):
-    return {'archard': float(snap['archard']), 'exposure_s': float(snap['exposure_s']),
-            'components': _components_state(snap['lw'], snap['m'], snap['P']),
-            'windows': int(snap['windows']), 'growth_exposure': float(snap['growth_exposure'])}
-
-
-def _snapshot_from_state(d):
-    lw, m, P = _components_from_state(d['components'])
-    return {'archard': float(d['archard']), 'exposure_s': float(d['exposure_s']),
-            'lw': lw, 'm': m, 'P': P, 'windows': int(d['windows']),
-            'growth_exposure': float(d['growth_exposure'])}
 
 
 class WearEstimator:
@@ -1592,170 +1558,19 @@ class WearEstimator:
         """
         Return everything needed to continue exactly, as plain JSON-able data.
 
-        Returns
-        -------
-        dict
-            ``kind``, ``version``, ``params_sha256``, ``config``, ``x`` and
-            ``P`` (the mixture's moments, for people and tools),
-            ``components`` (``[log weight, mean, covariance]`` each),
-            ``noise`` (recent innovations ``[y, V, σ²]``), ``trend``, exposures, duty sums,
-            ``t_end``, ``counters``, ``events``.
-
+        See :func:`.estimator_state.estimator_state`.
         """
-        return {
-            'kind': STATE_KIND,
-            'version': STATE_VERSION,
-            'params_sha256': params_fingerprint(self.params),
-            'config': asdict(self.config),
-            'x': [float(v) for v in self.x],
-            'P': [[float(v) for v in row] for row in self.P],
-            'components': _components_state(self._lw, self._m, self._P),
-            'noise': self._noise.state(),
-            'growth': self._growth.state(),
-            'lagged': [_snapshot_state(snap) for snap in self._lagged],
-            'recent': [[float(v) for v in row] for row in self._recent],
-            'archard_exposure': float(self._archard),
-            'trend_score': [float(self._score), int(self._scored)],
-            'score_settle': int(self._settle),
-            'service_pending': bool(self._service_pending),
-            'service_verdict': None if self._service_verdict is None else [
-                bool(self._service_verdict[0]), float(self._service_verdict[1])],
-            'trend': [float(self._trend), int(self._trend_count)],
-            'exposure_s': self._exposure_s,
-            'exposure_since_reset_s': self._exposure_since_reset_s,
-            **self._duty.state(),
-            't_end': self._t_end,
-            'counters': dict(self._counters),
-            'events': [dict(e) for e in self._events],
-        }
+        from .estimator_state import estimator_state
+        return estimator_state(self)
 
     @classmethod
     def from_state(cls, params, d, config=None):
         """
         Restore an estimator exactly from :meth:`state_dict` output.
 
-        A version-1 state (``[w, ln s]``, one filter) is converted: its wear,
-        rate and their covariance carry over, the as-built offset and the
-        fit's bias start from their priors, the growth law from no history.
-
-        Parameters
-        ----------
-        params : ReducerParams
-            Parameters of the reducer; must be those the state was made with.
-        d : mapping
-            A state dict.
-        config : EstimatorConfig, optional
-            Tuning; by default the one stored in the state.
-
-        Returns
-        -------
-        WearEstimator
-            The restored estimator.
-
-        Raises
-        ------
-        StateFileError
-            If the state is of another kind or version, belongs to other
-            reducer parameters or is malformed.
-
+        See :func:`.estimator_state.restore_estimator` (it raises
+        :class:`~.errors.StateFileError` for a state of another kind, version or
+        reducer, or a malformed one).
         """
-        if not isinstance(d, dict) or d.get('kind') != STATE_KIND:
-            kind = d.get('kind') if isinstance(d, dict) else type(d).__name__
-            raise StateFileError(f'state kind must be {STATE_KIND!r}, got {kind!r}')
-        version = d.get('version')
-        if version not in (1, STATE_VERSION):
-            raise StateFileError(
-                f'state version must be 1 or {STATE_VERSION}, got {version!r}')
-        expected = params_fingerprint(params)
-        if d.get('params_sha256') != expected:
-            raise StateFileError(
-                'state belongs to other reducer parameters: params_sha256 must be '
-                f'{expected}, got {d.get("params_sha256")!r}')
-        try:
-            if config is None:
-                names = {f.name for f in fields(EstimatorConfig)}
-                stored = {k: v for k, v in d['config'].items() if k in names}
-                if version == 1:
-                    stored = {k: v for k, v in stored.items() if k not in (
-                        'initial_wear_std', 'initial_log_rate_scale_std', 'min_lost_motion_std',
-                        'max_consecutive_rejections')}
-                config = EstimatorConfig(**stored)
-            est = cls(params, config)
-            if version == 1:
-                lw, m, P, noise, trend = cls._from_version_1(d, config)
-                growth, archard, score, lagged, recent = GrowthTrend(), 0.0, (0.0, 0), [], []
-            else:
-                lw, m, P = _components_from_state(d['components'])
-                noise = [[float(v) for v in row] for row in d['noise']]
-                if any(len(row) != 3 for row in noise):
-                    raise ValueError('noise rows must hold 3 values')
-                trend = (float(d['trend'][0]), int(d['trend'][1]))
-                est._noise = NoiseScale(noise)
-                growth = GrowthTrend.from_state(d['growth'], legacy_scale=est.noise_scale)
-                lagged = [_snapshot_from_state(snap) for snap in d.get('lagged', [])]
-                recent = [[float(v) for v in row] for row in d.get('recent', [])]
-                if len(lagged) > SCORE_LAG or len(recent) > SCORE_LAG or any(
-                        len(row) != 3 for row in recent):
-                    raise ValueError(f'lagged and recent must hold at most {SCORE_LAG} '
-                                     'snapshots and windows [A, z, R]')
-                if lagged and growth.windows - lagged[0]['windows'] > len(recent):
-                    raise ValueError('recent must hold the windows since the oldest snapshot')
-                archard = float(d['archard_exposure'])
-                score = (float(d['trend_score'][0]), int(d['trend_score'][1]))
-            settle = int(d.get('score_settle', 0))     # (not in earlier states: 0)
-            verdict = d.get('service_verdict')         # (nor this: None)
-            if verdict is not None:
-                verdict = (bool(verdict[0]), float(verdict[1]))
-            if not 0 <= settle <= SCORE_AFTER + 1:
-                raise ValueError(f'score_settle must be 0 .. {SCORE_AFTER + 1}, got {settle}')
-            lw, m, P = _checked_components(lw, m, P)
-            added = ('censored',) if version == 1 else ()
-            counters = {k: int(d['counters'][k]) if k not in added else 0
-                        for k in est._counters}
-            events = [{'exposure_s': float(e['exposure_s']), 'reason': str(e['reason'])}
-                      for e in d['events']]
-            names = ('exposure_s', 'exposure_since_reset_s', 'duty_increment', 'duty_exposure')
-            scalars = {k: float(d[k]) for k in names}
-            if version == 1:
-                batch, sums = [0.0, 0.0, 0], [0.0, 0.0, 0.0, 0.0]
-            else:
-                batch = [float(d['duty_batch'][0]), float(d['duty_batch'][1]),
-                         int(d['duty_batch'][2])]
-                sums = [float(v) for v in d['duty_batch_sums']]
-                if len(sums) != 4:
-                    raise ValueError('duty_batch_sums must hold 4 values')
-            t_end = None if d['t_end'] is None else float(d['t_end'])
-        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
-            raise StateFileError(f'state is malformed: {type(err).__name__}: {err}') from err
-        est._lw, est._m, est._P = lw, m, P
-        est._growth, est._archard = growth, archard
-        est._lagged, est._recent = lagged, recent
-        est._recent_terms = [window_terms(*row) for row in recent]
-        est._score, est._scored = score
-        est._settle = settle
-        # (not in earlier states: the service time, if any, was taken)
-        est._service_pending = bool(d.get('service_pending', False))
-        est._service_verdict = verdict
-        est._noise = NoiseScale(noise)
-        est._trend, est._trend_count = trend
-        est._exposure_s = scalars['exposure_s']
-        est._exposure_since_reset_s = scalars['exposure_since_reset_s']
-        est._duty.restore(scalars['duty_increment'], scalars['duty_exposure'], batch, sums)
-        est._t_end = t_end
-        est._counters = counters
-        est._events = events
-        est._refresh()
-        return est
-
-    @staticmethod
-    def _from_version_1(d, config):
-        x = np.array(d['x'], dtype=float)
-        P = np.array(d['P'], dtype=float)
-        if x.shape != (2,) or P.shape != (2, 2):
-            raise ValueError(f'x must have shape (2,) and P (2, 2), got {x.shape}, {P.shape}')
-        m = np.array([[x[0], x[1], 0.0, 0.0]])
-        cov = np.zeros((1, N_FILTER, N_FILTER))
-        cov[0, :2, :2] = P
-        cov[0, 2, 2] = config.as_built_std ** 2
-        cov[0, 3, 3] = config.fit_bias_std ** 2
-        return np.zeros(1), m, cov, [], (0.0, 0)
+        from .estimator_state import restore_estimator
+        return restore_estimator(params, d, config)

@@ -8,7 +8,7 @@ plus white noise of 0.05 arcmin, reported as such.
 """
 
 import copy
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import json
 import math
 from pathlib import Path
@@ -18,48 +18,21 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 from reducer_twin.core import wear
-from reducer_twin.core.errors import InvalidInput, InvalidParameter, StateFileError
+from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import (
-    EstimatorConfig, lost_motion_curve, params_fingerprint, run_in_free_wear, SCORE_LAG,
+    EstimatorConfig, lost_motion_curve, run_in_free_wear, SCORE_LAG,
     wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
 from reducer_twin.core.pipeline import service_note
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
+from wear_windows import DutySummary, features_at, NOISE, synthetic_run, WINDOW
+from wear_windows import WindowFeatures
 
 DATA = Path(__file__).resolve().parent / 'data'
-NOISE = 0.05 * ARCMIN
-WINDOW = 10.0 * HOUR
 NEW = EstimatorConfig(new_unit_probability=1.0)
 """A reducer known to be new (no used hypothesis in the prior)."""
-
-
-@dataclass(frozen=True)
-class DutySummary:
-    """Duty of one window, as the TE extraction delivers it (SI units)."""
-
-    duration_s: float
-    exposure_s: float
-    archard_increment: float
-    mean_abs_torque: float = 0.0
-    mean_abs_speed: float = 0.0
-    cubic_mean_torque: float = 0.0
-    mean_speed: float = 0.0
-    max_abs_torque: float = 0.0
-
-
-@dataclass(frozen=True)
-class WindowFeatures:
-    """Features of one window of encoder data (SI units)."""
-
-    t_end: float
-    lost_motion: float
-    lost_motion_std: float
-    duty: DutySummary
-    wear_fit: float = math.nan
-    wear_fit_std: float = math.nan
-    loaded_mean_te: float = math.nan
 
 
 @pytest.fixture(scope='module')
@@ -70,48 +43,6 @@ def params():
 @pytest.fixture(scope='module')
 def tables(params):
     return model_tables(params)
-
-
-def synthetic_run(params, scale, seed, n=3000, window=WINDOW, as_built=0.0, wear0=0.0, bias=0.0):
-    """
-    Return windows of a reducer wearing with a hidden rate ``scale``.
-
-    Torque is uniform in 60-120 % of rated per window at the paper's speed;
-    the lost motion is the model's at ``w + as_built`` observed at the
-    window's middle, plus ``bias``; where ``w + as_built`` is below the
-    table (a tight unit), the fit sits on the table's lower bound as the
-    window analysis reports it (``wear_fit = 0``). The run stops at the 3
-    arcmin limit.
-
-    Returns
-    -------
-    tuple
-        ``(features, true_wear [m] at each window's end, eol_index)``.
-
-    """
-    rng = np.random.default_rng(seed)
-    tables = model_tables(params)
-    exposure = np.full(n, window)
-    torque = params.rating.rated_torque * rng.uniform(0.6, 1.2, n)
-    speed = np.full(n, wear.reference_speed(params))
-    increment = wear.wear_rate(torque, speed, 0.0, params) * exposure
-    half = np.repeat(0.5 * exposure, 2)
-    true_half = wear.integrate_wear(half, np.repeat(torque, 2), np.repeat(speed, 2), params,
-                                    wear0=wear0, rate_scale=scale)
-    true_w, mid_w = true_half[1::2], true_half[0::2]
-    z = tables.lost_motion(mid_w + as_built) + bias + rng.normal(0.0, NOISE, n)
-    fit = np.where(mid_w + as_built > 0.0, mid_w + as_built, 0.0)
-    eol = int(np.argmax(tables.lost_motion(true_w + as_built) >= 3.0 * ARCMIN))
-    features = [WindowFeatures(t_end=(k + 1) * 10.0, lost_motion=float(z[k]),
-                               lost_motion_std=NOISE, wear_fit=float(fit[k]),
-                               duty=DutySummary(10.0, float(exposure[k]), float(increment[k])))
-                for k in range(eol + 1)]
-    return features, true_w[:eol + 1], eol
-
-
-def features_at(lost_motion, increment=1e-8, exposure=WINDOW, std=NOISE, t_end=0.0):
-    return WindowFeatures(t_end=t_end, lost_motion=lost_motion, lost_motion_std=std,
-                          duty=DutySummary(10.0, exposure, increment), wear_fit=1e-6)
 
 
 # --------------------------------------------------------------------------- convergence
@@ -667,21 +598,6 @@ def stepped_estimator(params, n=60, seed=2):
     return est, features
 
 
-def test_a_state_dict_survives_a_json_round_trip_bit_for_bit(params):
-    est, features = stepped_estimator(params)
-    est.update(replace(features[60], lost_motion=features[60].lost_motion + 2.0 * ARCMIN))
-    est.reset('drill: state round trip')
-    for f in features[60:70]:
-        est.step(f)
-    restored = WearEstimator.from_state(params, json.loads(json.dumps(est.state_dict())))
-    assert restored.state_dict() == est.state_dict()
-    for f in features[70:90]:
-        est.step(f)
-        restored.step(f)
-        assert np.array_equal(restored.x, est.x) and np.array_equal(restored.P, est.P)
-        assert restored.trend_probability == est.trend_probability
-
-
 # --------------------------------------------------------------------------- reset
 
 
@@ -740,13 +656,6 @@ def test_predicted_wear_never_decreases_without_observations(params, increments)
         est.predict(DutySummary(1.0, WINDOW, a))
         assert est.wear >= previous - 1e-18
         previous = est.wear
-
-
-def test_a_state_dict_of_other_parameters_is_refused(params):
-    assert params_fingerprint(params) == params_fingerprint(ReducerParams())
-    with pytest.raises(StateFileError, match='other reducer parameters'):
-        WearEstimator.from_state(params.with_overrides({'rating.rated_torque': 800.0}),
-                                 WearEstimator(params).state_dict())
 
 
 def test_estimates_after_sixty_windows_are_micrometres_with_sub_micrometre_sd(params):
