@@ -544,123 +544,19 @@ class WindowAnalyzer:
         return self._friction_fit.efficiency
 
     def not_observed_reason(self, effort_source='the joint states'):
-        """
-        Say why no window has given a lost motion the wear is read from, or None once one has.
+        """Say why no window has given a lost motion; None once one has (:mod:`.observability`)."""
+        from .observability import not_observed_reason
+        return not_observed_reason(self, effort_source)
 
-        An effort found not to be the output torque (:attr:`effort_fault`) is said
-        even after windows gave lost motions: they were read with that effort. Encoders
-        that do not measure the same motion are said first (they distort the check).
-
-        Parameters
-        ----------
-        effort_source : str
-            Where the effort was expected (a topic name), for the message.
-
-        Returns
-        -------
-        str or None
-            One line a maintenance engineer can act on.
-
-        """
-        fault = self.effort_fault
-        if fault is None and self.windows_read:
-            return None
-        if fault is not None and not self.windows_implausible:
-            return fault
-        seen = self.samples_seen
-        if seen == 0:
-            return 'no encoder samples with a transmission error (no motor/link pairs)'
-        if self.samples_without_effort >= 0.99 * seen:
-            return (f'no effort on {effort_source} ({self.samples_without_effort} of {seen} '
-                    'samples): the lost motion needs the torque')
-        if self.windows_emitted == 0:
-            return f'no complete analysis window yet ({seen} samples)'
-        if self.windows_implausible:
-            return (f'the motor and link encoders do not measure the same motion: the '
-                    f'transmission error spans up to {math.degrees(self.largest_te_span):.3g} '
-                    f'deg in {self.windows_implausible} of {self.windows_emitted} windows '
-                    f"(a reducer's moves by arcminutes; at most "
-                    f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
-                    f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
-                    'frozen encoder, a motor encoder that counts against the link, or a '
-                    'wrong reduction ratio or motor_angles')
-        if fault is not None:
-            return fault
-        if self.windows_observed:       # every one censored
-            return (f'none of its {self.windows_observed} windows with a lost motion read a '
-                    "play beyond a new nominal unit's (their wear fits lie on the table's "
-                    "lower bound, and the estimate would be the prior's alone): a unit built "
-                    'tighter than nominal, read once its play has grown past that, or an '
-                    'effort whose zero lies beyond the loads (an offset from the torque)')
-        if self.largest_effort == 0.0:
-            return (f'the effort on {effort_source} is zero in every sample that carries '
-                    f'one ({seen - self.samples_without_effort}): a controller that fills '
-                    'zeros where it has no effort; the lost motion needs the torque')
-        if self.largest_effort < self.edges[0]:
-            # Nothing reaches the lowest torque bin: a joint that carries no load, or an
-            # effort in other units (a motor torque taken for the output torque).
-            return (f'the effort on {effort_source} stays within +-{self.largest_effort:.3g} '
-                    f'N*m in {self.windows_emitted} windows, below the {self.edges[0]:.3g} N*m '
-                    f'({100.0 * self.edges[0] / self.rated_torque:.0f} % of the rated torque) '
-                    'from which the lost motion is read: a joint without load, or an effort '
-                    'in other units (a motor torque: set motor_effort_units to motor)')
-        rate = self.rate_hz
-        if math.isfinite(rate) and rate < LOW_RATE_HZ:
-            return (f'{rate:.0f} Hz: too few samples per torque reversal in '
-                    f'{self.windows_emitted} windows')
-        if self.largest_effort > EFFORT_PLAUSIBLE_RATED * self.rated_torque:
-            return (f'the effort on {effort_source} reaches {self.largest_effort:.3g} N*m, '
-                    f'{self.largest_effort / self.rated_torque:.3g} times the rated torque '
-                    f'(a reducer takes at most about {EFFORT_PLAUSIBLE_RATED:g} times, '
-                    'momentarily): not the output torque in N*m (a torque in joint units '
-                    'on the motor entry, taken for a motor torque and multiplied by the '
-                    'ratio: motor_effort_units joint; or other units: effort_scale, '
-                    'twin.effort_scale in --config)')
-        if self.windows_friction_unknown:
-            return (f'the friction in the effort could not yet be told from the load: '
-                    f'{self.windows_friction_unknown} of {self.windows_emitted} windows had '
-                    'torque reversals, but the joint has not yet moved both ways in a fifth '
-                    'of the samples each, and a motor friction in the effort would pick the '
-                    'flank (an effort measured by a torque sensor at the output carries no '
-                    'friction: set twin.friction_in_effort to 0)')
-        return (f'no torque reversal at equal |T| above the effort noise in '
-                f'{self.windows_emitted} windows (the joint did not reverse under load)')
+    @property
+    def since_lost_motion(self):
+        """Return the counts since the last lost motion (:data:`_SINCE`: samples, windows)."""
+        return dict(self._since)
 
     def stale_reason(self, after_s, effort_source='the joint states'):
-        """
-        Say why an observed reducer's lost motion stopped, once ``after_s`` of stream passed.
-
-        Parameters
-        ----------
-        after_s : float
-            Stream time [s] after the last window with a lost motion from which it counts.
-        effort_source : str
-            Where the effort was expected (a topic name), for the message.
-
-        Returns
-        -------
-        tuple of (float, str, bool) or None
-            Stream seconds since the last lost motion, the cause (one line), and whether
-            the stream is faulty (effort missing, encoders that do not measure the same
-            motion) rather than only without a torque reversal; None while the lost
-            motion is current or was never read (:meth:`not_observed_reason` says why).
-
-        """
-        if self.last_observed_t is None or self.latest_t is None:
-            return None
-        gap = self.latest_t - self.last_observed_t
-        if gap < after_s:
-            return None
-        since = self._since
-        if since['without_effort'] >= 0.1 * max(since['seen'], 1):
-            return gap, (f'no effort on {effort_source} in {since["without_effort"]} of '
-                         f'{since["seen"]} samples since (their operating time is not '
-                         'counted)'), True
-        if since['implausible']:
-            return gap, (f'in {since["implausible"]} of {since["windows"]} windows since, the '
-                         f'transmission error spans up to '
-                         f'{math.degrees(self.largest_te_span):.3g} deg (a frozen encoder?)'), True
-        return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False
+        """Say why an observed reducer's lost motion stopped (:mod:`.observability`)."""
+        from .observability import stale_reason
+        return stale_reason(self, after_s, effort_source)
 
     def _link_rate(self, stream, use):
         """

@@ -1,0 +1,141 @@
+"""
+Why a joint's window analysis gives no lost motion, or stopped giving one: one line each.
+
+Never silent: a joint the twin cannot observe is said to be so with the reason a
+maintenance engineer can act on (no effort, an effort in other units, encoders that do
+not measure the same motion, too low a rate, no torque reversal...), everywhere the
+answer appears (``analyze --json`` and its warnings, the nodes' ``/diagnostics``).
+These read a :class:`.window_analysis.WindowAnalyzer`'s counts; its
+``not_observed_reason`` and ``stale_reason`` are these.
+"""
+
+import math
+
+from .effort_check import PLAUSIBLE_LOST_MOTION_RAD
+from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ, PLAUSIBLE_TE_SPAN_RAD
+
+
+def not_observed_reason(analyzer, effort_source='the joint states'):
+    """
+    Say why no window has given a lost motion the wear is read from, or None once one has.
+
+    An effort found not to be the output torque (the analyzer's ``effort_fault``) is
+    said even after windows gave lost motions: they were read with that effort. Encoders
+    that do not measure the same motion are said first (they distort the check).
+
+    Parameters
+    ----------
+    analyzer : WindowAnalyzer
+        The joint's window analysis.
+    effort_source : str
+        Where the effort was expected (a topic name), for the message.
+
+    Returns
+    -------
+    str or None
+        One line a maintenance engineer can act on.
+
+    """
+    fault = analyzer.effort_fault
+    if fault is None and analyzer.windows_read:
+        return None
+    if fault is not None and not analyzer.windows_implausible:
+        return fault
+    seen = analyzer.samples_seen
+    if seen == 0:
+        return 'no encoder samples with a transmission error (no motor/link pairs)'
+    if analyzer.samples_without_effort >= 0.99 * seen:
+        return (f'no effort on {effort_source} ({analyzer.samples_without_effort} of {seen} '
+                'samples): the lost motion needs the torque')
+    if analyzer.windows_emitted == 0:
+        return f'no complete analysis window yet ({seen} samples)'
+    if analyzer.windows_implausible:
+        return (f'the motor and link encoders do not measure the same motion: the '
+                f'transmission error spans up to {math.degrees(analyzer.largest_te_span):.3g} '
+                f'deg in {analyzer.windows_implausible} of {analyzer.windows_emitted} windows '
+                f"(a reducer's moves by arcminutes; at most "
+                f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
+                f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
+                'frozen encoder, a motor encoder that counts against the link, or a '
+                'wrong reduction ratio or motor_angles')
+    if fault is not None:
+        return fault
+    if analyzer.windows_observed:       # every one censored
+        return (f'none of its {analyzer.windows_observed} windows with a lost motion read a '
+                "play beyond a new nominal unit's (their wear fits lie on the table's "
+                "lower bound, and the estimate would be the prior's alone): a unit built "
+                'tighter than nominal, read once its play has grown past that, or an '
+                'effort whose zero lies beyond the loads (an offset from the torque)')
+    if analyzer.largest_effort == 0.0:
+        return (f'the effort on {effort_source} is zero in every sample that carries '
+                f'one ({seen - analyzer.samples_without_effort}): a controller that fills '
+                'zeros where it has no effort; the lost motion needs the torque')
+    if analyzer.largest_effort < analyzer.edges[0]:
+        # Nothing reaches the lowest torque bin: a joint that carries no load, or an
+        # effort in other units (a motor torque taken for the output torque).
+        return (f'the effort on {effort_source} stays within +-{analyzer.largest_effort:.3g} '
+                f'N*m in {analyzer.windows_emitted} windows, below the '
+                f'{analyzer.edges[0]:.3g} N*m '
+                f'({100.0 * analyzer.edges[0] / analyzer.rated_torque:.0f} % of the rated torque) '
+                'from which the lost motion is read: a joint without load, or an effort '
+                'in other units (a motor torque: set motor_effort_units to motor)')
+    rate = analyzer.rate_hz
+    if math.isfinite(rate) and rate < LOW_RATE_HZ:
+        return (f'{rate:.0f} Hz: too few samples per torque reversal in '
+                f'{analyzer.windows_emitted} windows')
+    if analyzer.largest_effort > EFFORT_PLAUSIBLE_RATED * analyzer.rated_torque:
+        return (f'the effort on {effort_source} reaches {analyzer.largest_effort:.3g} N*m, '
+                f'{analyzer.largest_effort / analyzer.rated_torque:.3g} times the rated torque '
+                f'(a reducer takes at most about {EFFORT_PLAUSIBLE_RATED:g} times, '
+                'momentarily): not the output torque in N*m (a torque in joint units '
+                'on the motor entry, taken for a motor torque and multiplied by the '
+                'ratio: motor_effort_units joint; or other units: effort_scale, '
+                'twin.effort_scale in --config)')
+    if analyzer.windows_friction_unknown:
+        return (f'the friction in the effort could not yet be told from the load: '
+                f'{analyzer.windows_friction_unknown} of {analyzer.windows_emitted} windows had '
+                'torque reversals, but the joint has not yet moved both ways in a fifth '
+                'of the samples each, and a motor friction in the effort would pick the '
+                'flank (an effort measured by a torque sensor at the output carries no '
+                'friction: set twin.friction_in_effort to 0)')
+    return (f'no torque reversal at equal |T| above the effort noise in '
+            f'{analyzer.windows_emitted} windows (the joint did not reverse under load)')
+
+
+def stale_reason(analyzer, after_s, effort_source='the joint states'):
+    """
+    Say why an observed reducer's lost motion stopped, once ``after_s`` of stream passed.
+
+    Parameters
+    ----------
+    analyzer : WindowAnalyzer
+        The joint's window analysis.
+    after_s : float
+        Stream time [s] after the last window with a lost motion from which it counts.
+    effort_source : str
+        Where the effort was expected (a topic name), for the message.
+
+    Returns
+    -------
+    tuple of (float, str, bool) or None
+        Stream seconds since the last lost motion, the cause (one line), and whether
+        the stream is faulty (effort missing, encoders that do not measure the same
+        motion) rather than only without a torque reversal; None while the lost
+        motion is current or was never read (:func:`not_observed_reason` says why).
+
+    """
+    if analyzer.last_observed_t is None or analyzer.latest_t is None:
+        return None
+    gap = analyzer.latest_t - analyzer.last_observed_t
+    if gap < after_s:
+        return None
+    since = analyzer.since_lost_motion
+    if since['without_effort'] >= 0.1 * max(since['seen'], 1):
+        return gap, (f'no effort on {effort_source} in {since["without_effort"]} of '
+                     f'{since["seen"]} samples since (their operating time is not '
+                     'counted)'), True
+    if since['implausible']:
+        return gap, (f'in {since["implausible"]} of {since["windows"]} windows since, the '
+                     f'transmission error spans up to '
+                     f'{math.degrees(analyzer.largest_te_span):.3g} deg (a frozen encoder?)'), True
+    return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False
