@@ -108,7 +108,7 @@ freedom as the innovations ``ρ`` is learnt from (the prior's
 :data:`.noise_scale.NOISE_PRIOR_WINDOWS` included), the prediction's share by
 Satterthwaite's rule (:func:`_normal_score`), so a unit's first windows, whose
 scatter ``ρ`` does not know yet, are not taken for a jump. Predictions made
-while a respread settles (:data:`SCORE_AFTER` usable windows) are not scored.
+while a respread settles (:data:`.trend_score.SCORE_AFTER` usable windows) are not scored.
 
 Prior of a reducer met without state: with probability
 ``new_unit_probability`` it is new (``w ~ N(initial_wear,
@@ -124,8 +124,8 @@ Growth law. Beside the wear model, :class:`.growth.GrowthTrend` learns the
 lost motion's growth against the Archard exposure from the windows
 themselves (a power law with the physics as its prior). Each window's
 predictive density under both models, as each predicted it
-:data:`SCORE_LAG` windows before, is scored (prequential log score, Dawid
-1984, from the :data:`SCORE_AFTER`-th usable window on; lagged because the
+:data:`.trend_score.SCORE_LAG` windows before, is scored (prequential log score, Dawid
+1984, from the :data:`.trend_score.SCORE_AFTER`-th usable window on; lagged because the
 remaining life is an extrapolation); their difference gives the probability
 that the observed law, not the model's curve, holds (prior
 ``trend_probability``). For a reducer that may have been used before the twin
@@ -165,11 +165,11 @@ import numpy as np
 
 from .duty_rate import DUTY_BATCH_WINDOWS, DutyRate
 from .errors import InvalidInput
-from .growth import GrowthTrend
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
 from .sigma_points import merwe_weights
 from .transmission_error import model_tables
+from .trend_score import TrendScore
 from .units import ARCMIN, HOUR, UM
 from .wear import _run_in_map, run_in_factor
 
@@ -231,25 +231,6 @@ reducer that wore so fast all its life: the independent generator's units, whose
 ignore the model, wear up to about 80 times its rate. Such a unit's own windows show
 its rate soon anyway.
 """
-
-SCORE_AFTER = 8
-"""Usable windows both models have seen before their predictions are scored."""
-
-SCORE_LAG = 8
-"""
-Windows between a model's prediction and the window it is scored on.
-
-The remaining life is an extrapolation, so the two models are weighed by how well each
-extrapolates: each usable window is scored against the prediction both made
-``SCORE_LAG`` windows earlier, not the one-step prediction. The wear model follows a
-lost motion that grows unlike its curve by moving its rate every window, which its
-one-step predictions hide; eight windows ahead they show it. Measured on the independent
-generator (bench_accuracy, 120 windows a life; lags of 4, 8 and 16 windows gave the same
-figures within a unit): seed 1 RUL P50 within 30 % at 60 % of life 88 -> 92 %,
-alpha-lambda 84/84 -> 88/88 %; seed 2 alpha-lambda 83/90 -> 86/90 %; the model generator
-unchanged.
-"""
-
 
 INTERP_SEARCH_BELOW = 1000
 """
@@ -745,18 +726,12 @@ class WearEstimator:
         serviced = self.config.service_time_s > 0.0
         p_new = 0.0 if serviced else self.config.new_unit_probability
         self._lw, self._m, self._P = prior_components(self.config, p_new)
-        self._growth = GrowthTrend(p_new)
+        self._scoring = TrendScore(p_new)
         self._service_pending = serviced
         self._service_verdict = None
         self._archard = 0.0
         self._observed_at = None
         self._window_increment = 0.0
-        self._score = 0.0
-        self._scored = 0
-        self._lagged = []
-        self._settle = 0
-        self._recent = []
-        self._recent_terms = []
         self._observed_exposure = None
         self._noise = NoiseScale()
         self._trend = 0.0
@@ -846,7 +821,7 @@ class WearEstimator:
         self._exposure_s += exposure
         self._exposure_since_reset_s += exposure
         self._archard += increment
-        self._growth.advance(self._archard)
+        self._scoring.law.advance(self._archard)
         self._duty.add(exposure, increment)
 
     def _predict(self, exposure, increment):
@@ -981,11 +956,9 @@ class WearEstimator:
         self._tidy()
         # The growth law counts from new too (its exponent prior the physics', as for a
         # unit the twin saw new), and both models are compared again from here on.
-        self._growth = GrowthTrend(1.0, origin=past)
-        self._growth.advance(self._archard)
-        self._lagged, self._recent, self._recent_terms = [], [], []
-        self._score, self._scored = 0.0, 0
-        self._settle = SCORE_AFTER + 1
+        self._scoring = TrendScore(1.0, origin=past)
+        self._scoring.law.advance(self._archard)
+        self._scoring.restart()
 
     def _smear(self):
         """
@@ -1071,21 +1044,14 @@ class WearEstimator:
         """
         Score both models' predictions of ``z``, then add it to the growth trend.
 
-        The predictions are those made :data:`SCORE_LAG` windows before, with the
+        The predictions are those made :data:`.trend_score.SCORE_LAG` windows before, with the
         window's noise ``R_score`` (the noise scale's and the growth within the window
         included, no Student-t weight: the same for both models). ``R`` is the noise
         the growth law takes the window with (``rho`` and the Student-t weight in it);
         the law keeps ``R/rho`` and applies the latest ``rho`` to all its windows.
         """
         exposure = self._archard if self._observed_at is None else self._observed_at
-        self._growth.set_noise_scale(rho)
-        if len(self._lagged) == SCORE_LAG and self._growth.windows >= SCORE_AFTER:
-            self._score += self._lagged_score(self._lagged[0], z, R_score, rho)
-            self._scored += 1
-        terms = self._growth.terms(exposure, z, R / rho)
-        self._growth.add_terms(terms)
-        self._recent = (self._recent + [[exposure + self._growth.origin, z, R / rho]])[-SCORE_LAG:]
-        self._recent_terms = (self._recent_terms + [terms])[-SCORE_LAG:]
+        self._scoring.add(exposure, z, R_score, R, rho, self._model_logpdf)
 
     def _snapshot(self):
         """
@@ -1093,21 +1059,18 @@ class WearEstimator:
 
         The wear model now, moment-matched (the mixture has collapsed to a few close
         components by the time windows are scored; one Gaussian keeps the state
-        small), and where the growth law is (its windows and exposure; its sums then
-        are today's less the windows added since, kept in ``_recent``).
+        small); :meth:`.trend_score.TrendScore.after_window` adds where the growth law is.
         """
         x, P = self._estimate()
         return {'archard': self._archard, 'exposure_s': self._exposure_s,
-                'lw': np.zeros(1), 'm': x[None, :].copy(), 'P': P[None, :, :].copy(),
-                'windows': self._growth.windows, 'growth_exposure': self._growth.exposure}
+                'lw': np.zeros(1), 'm': x[None, :].copy(), 'P': P[None, :, :].copy()}
 
-    def _lagged_score(self, snap, z, R, rho):
+    def _model_logpdf(self, snap, z, R):
         """
-        Log predictive density of ``z`` under the growth law less that under the wear model.
+        Log predictive density of ``z`` under the wear model, from ``snap`` (:meth:`_snapshot`).
 
-        Both predict from ``snap`` (:meth:`_snapshot`) to the window's middle: the wear
-        model's components through the Archard increment and the operation since, with
-        their process noise; the growth law at the window's exposure.
+        Its components are predicted to the window's middle through the Archard
+        increment and the operation since, with their process noise.
         """
         c = self.config
         at = self._archard if self._observed_at is None else self._observed_at
@@ -1120,14 +1083,8 @@ class WearEstimator:
         P = 0.5 * (P + np.swapaxes(P, 1, 2))
         zc, szz = self._observed(self._hx(self._sigma(m, P)))
         v = szz + R
-        log_model = _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
-                               - 0.5 * (z - zc) ** 2 / v)
-        since = self._growth.windows - snap['windows']
-        growth = self._growth.rolled_back(self._recent_terms[len(self._recent_terms) - since:],
-                                          snap['growth_exposure'])
-        lw, mean, var = growth.predictive(at, R)
-        log_trend = _logsumexp(lw - 0.5 * np.log(var) - 0.5 * (z - mean) ** 2 / var)
-        return log_trend - log_model
+        return _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
+                          - 0.5 * (z - zc) ** 2 / v)
 
     def _posterior(self, m0, P0, z, R, zc, szz, cxz, consider):
         """
@@ -1185,13 +1142,12 @@ class WearEstimator:
 
         The predictions made before (:meth:`_snapshot`) were of another reducer (a
         jump, a rate many times the model's): both models are scored again only on
-        predictions made :data:`SCORE_AFTER` usable windows from here on.
+        predictions made :data:`.trend_score.SCORE_AFTER` usable windows from here on.
         """
-        self._lagged = []
         # Nor are those it makes while the data choose the rate again (their wear was
         # 12-31 um on a unit at 0.5 after a respread on two noisy windows: the growth law
         # won the score by 13 nats on them, and the remaining life came out 40 % short).
-        self._settle = SCORE_AFTER + 1     # this window counts down the first
+        self._scoring.restart()
         m, P = mixture_moments(self._lw, self._m, self._P)
         lo, hi, step, sd = RATE_GRID
         theta0 = math.log(self.config.initial_rate_scale)
@@ -1333,10 +1289,8 @@ class WearEstimator:
                 self._window_increment = 0.0
             self._predict(0.5 * exposure, 0.5 * increment)
         self._count_duty(exposure, increment)
-        if self._settle and _finite(getattr(features, 'lost_motion', math.nan)):
-            self._settle -= 1
-        if not self._settle:
-            self._lagged = (self._lagged + [self._snapshot()])[-SCORE_LAG:]
+        self._scoring.after_window(_finite(getattr(features, 'lost_motion', math.nan)),
+                                   self._snapshot)
         t_end = getattr(features, 't_end', None)
         if _finite(t_end):
             self._t_end = float(t_end)
@@ -1362,16 +1316,10 @@ class WearEstimator:
         if not isinstance(reason, str) or not reason.strip():
             raise InvalidInput(f'reset reason must be a non-empty string, got {reason!r}')
         self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
-        self._growth = GrowthTrend(1.0)
+        self._scoring = TrendScore(1.0)
         self._service_pending = False
         self._service_verdict = None
         self._archard = 0.0
-        self._score = 0.0
-        self._scored = 0
-        self._lagged = []
-        self._settle = 0
-        self._recent = []
-        self._recent_terms = []
         self._noise = NoiseScale()
         self._trend = 0.0
         self._trend_count = 0
@@ -1406,11 +1354,7 @@ class WearEstimator:
         difference of the two models. For a reducer used before the twin started
         the law counts its exposure from the start (:mod:`.growth`, two origins).
         """
-        p0 = self.config.trend_probability
-        if p0 in (0.0, 1.0):
-            return p0
-        logit = math.log(p0 / (1.0 - p0)) + self._score
-        return 1.0 / (1.0 + math.exp(-logit)) if logit > -700.0 else 0.0
+        return self._scoring.probability(self.config.trend_probability)
 
     def growth_trend(self):
         """
@@ -1432,9 +1376,9 @@ class WearEstimator:
             ``LM = β + k·(A/A_now)^g`` and its covariance, and ``A_now`` [m].
 
         """
-        mean, cov = self._growth.summary()
+        mean, cov = self._scoring.law.summary()
         cov[0, 0] += self.config.fit_bias_std ** 2
-        return self.trend_probability, mean, cov, self._growth.exposure
+        return self.trend_probability, mean, cov, self._scoring.law.exposure
 
     @property
     def components(self):

@@ -15,10 +15,11 @@ import numpy as np
 
 from .errors import StateFileError
 from .estimator import (
-    EstimatorConfig, N_FILTER, params_fingerprint, SCORE_AFTER, SCORE_LAG, STATE_KIND,
+    EstimatorConfig, N_FILTER, params_fingerprint, STATE_KIND,
     STATE_VERSION, WearEstimator)
 from .growth import GrowthTrend, window_terms
 from .noise_scale import NoiseScale
+from .trend_score import SCORE_AFTER, SCORE_LAG
 
 
 def _components_state(lw, m, P):
@@ -78,12 +79,12 @@ def estimator_state(est):
         'P': [[float(v) for v in row] for row in est.P],
         'components': _components_state(est._lw, est._m, est._P),
         'noise': est._noise.state(),
-        'growth': est._growth.state(),
-        'lagged': [_snapshot_state(snap) for snap in est._lagged],
-        'recent': [[float(v) for v in row] for row in est._recent],
+        'growth': est._scoring.law.state(),
+        'lagged': [_snapshot_state(snap) for snap in est._scoring.lagged],
+        'recent': [[float(v) for v in row] for row in est._scoring.recent],
         'archard_exposure': float(est._archard),
-        'trend_score': [float(est._score), int(est._scored)],
-        'score_settle': int(est._settle),
+        'trend_score': [float(est._scoring.score), int(est._scoring.scored)],
+        'score_settle': int(est._scoring.settle),
         'service_pending': bool(est._service_pending),
         'service_verdict': None if est._service_verdict is None else [
             bool(est._service_verdict[0]), float(est._service_verdict[1])],
@@ -195,11 +196,12 @@ def restore_estimator(params, d, config=None):
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
         raise StateFileError(f'state is malformed: {type(err).__name__}: {err}') from err
     est._lw, est._m, est._P = lw, m, P
-    est._growth, est._archard = growth, archard
-    est._lagged, est._recent = lagged, recent
-    est._recent_terms = [window_terms(*row) for row in recent]
-    est._score, est._scored = score
-    est._settle = settle
+    scoring = est._scoring
+    scoring.law, est._archard = growth, archard
+    scoring.lagged, scoring.recent = lagged, recent
+    scoring.recent_terms = [window_terms(*row) for row in recent]
+    scoring.score, scoring.scored = score
+    scoring.settle = settle
     # (not in earlier states: the service time, if any, was taken)
     est._service_pending = bool(d.get('service_pending', False))
     est._service_verdict = verdict

@@ -20,12 +20,13 @@ import pytest
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import (
-    EstimatorConfig, lost_motion_curve, run_in_free_wear, SCORE_LAG,
+    EstimatorConfig, lost_motion_curve, run_in_free_wear,
     wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
 from reducer_twin.core.pipeline import service_note
 from reducer_twin.core.transmission_error import model_tables
+from reducer_twin.core.trend_score import SCORE_LAG
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from wear_windows import DutySummary, features_at, NOISE, synthetic_run, WINDOW
 from wear_windows import WindowFeatures
@@ -210,7 +211,8 @@ def test_the_growth_law_counts_the_growth_within_a_window_as_noise_as_the_wear_m
     est = WearEstimator(params, NEW)
     for f in features[:4]:
         est.step(f)
-    weight = est._growth.sxx[0, 0] / est._growth.noise_scale   # sum of 1/R over the windows
+    law = est._scoring.law
+    weight = law.sxx[0, 0] / law.noise_scale   # sum of 1/R over the windows
     assert weight < 0.25 * 4 / NOISE ** 2
 
 
@@ -569,14 +571,14 @@ def test_the_two_models_are_scored_on_what_they_predicted_score_lag_windows_befo
     w /= w.sum()
     v = szz + R
     model = math.log(w @ (np.exp(-0.5 * (last.lost_motion - zc) ** 2 / v) / np.sqrt(v)))
-    then._growth.set_noise_scale(est.noise_scale)   # the latest noise scale, as always
-    lw, m, vg = then._growth.predictive(then.archard_exposure, R)
+    then._scoring.law.set_noise_scale(est.noise_scale)   # the latest noise scale, as always
+    lw, m, vg = then._scoring.law.predictive(then.archard_exposure, R)
     law = math.log(np.exp(lw) @ (np.exp(-0.5 * (last.lost_motion - m) ** 2 / vg) / np.sqrt(vg)))
-    before = est._score
+    before = est._scoring.score
     est.step(last)
     # The window's own growth adds a little to R in the estimator (a 1e-4 share here), and
     # the carried prediction is one unscented step instead of eight.
-    assert est._score - before == pytest.approx(law - model, abs=0.02)
+    assert est._scoring.score - before == pytest.approx(law - model, abs=0.02)
 
 
 def test_lost_motion_that_follows_the_model_keeps_the_model(params):
