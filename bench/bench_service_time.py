@@ -88,20 +88,26 @@ def run_one(tmp, source, seed, fraction, hours, aging_factor):
     bag = tmp / f'bag-{seed}-{fraction}'
     truth = source.generate_bag(spec, bag)
     service = {j: t['start_hours'] * HOUR for j, t in truth['joints'].items()}
-    out = []
     reports = {}
     for case, given in (('without', None), ('with', service)):
         config = tmp / f'{case}.yaml'
         write_config(config, aging_factor, given)
         reports[case], _ = analyze(bag, tmp / f'out-{case}', config)
-    for joint, t in truth['joints'].items():
-        row = {'kind': t['kind'], 'truth': t['remaining_life_end_h']}
+    truths = {j: (t['kind'], t['remaining_life_end_h']) for j, t in truth['joints'].items()}
+    return _rows(truths, reports, [bag, *(tmp / f'out-{case}' for case in reports)])
+
+
+def _rows(truths, reports, scratch):
+    """Return a row per joint (kind, true life, each case's reported life); remove scratch."""
+    out = []
+    for joint, (kind, life) in truths.items():
+        row = {'kind': kind, 'truth': life}
         for case, joints in reports.items():
             r = joints.get(joint, {})
             row[case] = {k: r.get(f'rul_{k}_h', math.nan) for k in ('p10', 'p50', 'p90')}
             row[case]['resolved'] = bool(r.get('rate_resolved'))
         out.append(row)
-    for path in [bag, *(tmp / f'out-{case}' for case in reports)]:
+    for path in scratch:
         subprocess.run(['rm', '-rf', str(path)], check=False)
     return out
 
@@ -129,22 +135,13 @@ def run_model(tmp, seed, fraction, hours, aging_factor):
     start = fraction * min(1.0 + j['true_rul_h'] for j in probe.values())
     bag = tmp / f'model-{seed}-{fraction}'
     truth = simulate(bag, hours, start)
-    out = []
     reports = {}
     for case, given in (('without', None), ('with', {j: start * HOUR for j in truth})):
         config = tmp / f'{case}.yaml'
         write_config(config, aging_factor, given)
         reports[case], _ = analyze(bag, tmp / f'out-{case}', config)
-    for joint, t in truth.items():
-        row = {'kind': 'model', 'truth': t['true_rul_h']}
-        for case, joints in reports.items():
-            r = joints.get(joint, {})
-            row[case] = {k: r.get(f'rul_{k}_h', math.nan) for k in ('p10', 'p50', 'p90')}
-            row[case]['resolved'] = bool(r.get('rate_resolved'))
-        out.append(row)
-    for path in [bag, *(tmp / f'out-{case}' for case in reports)]:
-        subprocess.run(['rm', '-rf', str(path)], check=False)
-    return out
+    truths = {j: ('model', t['true_rul_h']) for j, t in truth.items()}
+    return _rows(truths, reports, [bag, *(tmp / f'out-{case}' for case in reports)])
 
 
 def summarise(name, rows):

@@ -179,9 +179,25 @@ BAD_REDUCERS = [
 ]
 
 
-@pytest.mark.parametrize('text, message', [row[1:] for row in BAD_REDUCERS],
-                         ids=[row[0] for row in BAD_REDUCERS])
-def test_a_bad_joint_reducer_is_refused_naming_the_joint(tmp_path, text, message):
+BAD_SERVICE = [
+    ('a joint the robot does not have', 'twin:\n  joints: [joint_1]\n'
+     'service_time_s:\n  joint_9: 3600.0\n',
+     "service_time_s names joints that twin.joints does not have: ['joint_9']"),
+    ('negative', 'service_time_s:\n  joint_1: -3600.0\n',
+     'service_time_s.joint_1 must be in [0, 1e10] s (operating time before the twin starts), '
+     'got -3600.0'),
+    ('not a number', 'service_time_s:\n  joint_1: 12000h\n',
+     "service_time_s.joint_1 must be a finite number, got '12000h'"),
+    ('not a mapping', 'service_time_s: [3600.0]\n', "section 'service_time_s' must be a "
+     'mapping'),
+]
+
+
+@pytest.mark.parametrize('text, message', [row[1:] for row in BAD_REDUCERS + BAD_SERVICE],
+                         ids=[row[0] for row in BAD_REDUCERS]
+                         + [f'service time {row[0]}' for row in BAD_SERVICE])
+def test_a_bad_joint_reducer_or_service_time_is_refused_naming_the_joint(tmp_path, text,
+                                                                         message):
     path = _file(tmp_path, text)
     with pytest.raises(InvalidParameter) as err:
         load_config(path)
@@ -198,29 +214,6 @@ def test_a_joints_service_time_reaches_its_estimator_and_the_others_stay_unknown
     settings = AnalysisSettings.from_config(path)
     assert settings.estimator_of('joint_1').service_time_s == 4.32e7
     assert settings.estimator_of('joint_2') is None
-
-
-BAD_SERVICE = [
-    ('a joint the robot does not have', 'twin:\n  joints: [joint_1]\n'
-     'service_time_s:\n  joint_9: 3600.0\n',
-     "service_time_s names joints that twin.joints does not have: ['joint_9']"),
-    ('negative', 'service_time_s:\n  joint_1: -3600.0\n',
-     'service_time_s.joint_1 must be in [0, 1e10] s (operating time before the twin starts), '
-     'got -3600.0'),
-    ('not a number', 'service_time_s:\n  joint_1: 12000h\n',
-     "service_time_s.joint_1 must be a finite number, got '12000h'"),
-    ('not a mapping', 'service_time_s: [3600.0]\n', "section 'service_time_s' must be a "
-     'mapping'),
-]
-
-
-@pytest.mark.parametrize('text, message', [row[1:] for row in BAD_SERVICE],
-                         ids=[row[0] for row in BAD_SERVICE])
-def test_a_bad_service_time_is_refused_naming_the_joint(tmp_path, text, message):
-    path = _file(tmp_path, text)
-    with pytest.raises(InvalidParameter) as err:
-        load_config(path)
-    assert str(err.value).startswith(str(path)) and message in str(err.value), err.value
 
 
 def test_friction_in_effort_is_0_or_1_and_reaches_the_window_analysis(tmp_path):

@@ -1,6 +1,5 @@
 """Tests of the remaining-life predictor, the catalogue life and the prognostic metrics."""
 
-from dataclasses import dataclass
 import math
 
 from hypothesis import given, settings
@@ -19,32 +18,7 @@ from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accurac
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
-
-WINDOW = 10.0 * HOUR
-
-
-@dataclass(frozen=True)
-class DutySummary:
-    """Duty of one window, as the TE extraction delivers it (SI units)."""
-
-    duration_s: float
-    exposure_s: float
-    archard_increment: float
-    mean_abs_torque: float
-    mean_abs_speed: float
-    cubic_mean_torque: float
-    mean_speed: float
-    max_abs_torque: float
-
-
-@dataclass(frozen=True)
-class WindowFeatures:
-    """Features of one window of encoder data (SI units)."""
-
-    t_end: float
-    lost_motion: float
-    lost_motion_std: float
-    duty: DutySummary
+from wear_windows import DutySummary, WINDOW, WindowFeatures
 
 
 @pytest.fixture(scope='module')
