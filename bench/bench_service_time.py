@@ -104,7 +104,9 @@ def _rows(truths, reports, scratch):
         row = {'kind': kind, 'truth': life}
         for case, joints in reports.items():
             r = joints.get(joint, {})
-            row[case] = {k: r.get(f'rul_{k}_h', math.nan) for k in ('p10', 'p50', 'p90')}
+            # A joint not observed has no remaining life (None in --json).
+            row[case] = {k: math.nan if r.get(f'rul_{k}_h') is None else r[f'rul_{k}_h']
+                         for k in ('p10', 'p50', 'p90')}
             row[case]['resolved'] = bool(r.get('rate_resolved'))
         out.append(row)
     for path in scratch:
@@ -156,7 +158,8 @@ def summarise(name, rows):
         p10, p50, p90 = (np.array([r[case][k] for r in seen]) for k in ('p10', 'p50', 'p90'))
         below, above = np.mean(truth < p10), np.mean(truth > p90)
         ratio = p50 / truth
-        print(f'  {case:7s} service time: {len(seen)} joints; P10-P90 coverage '
+        print(f'  {case:7s} service time: {len(seen)} joints ({len(rows) - len(seen)} not '
+              f'observed, left out); P10-P90 coverage '
               f'{100 * (1 - below - above):3.0f} % (below P10 {100 * below:.0f} %, above P90 '
               f'{100 * above:.0f} %) [80 +- 5; 10 +- 5 each]; P50 / true median '
               f'{np.median(ratio):.2f} (10-90 %: {np.percentile(ratio, 10):.2f}-'
