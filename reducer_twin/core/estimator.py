@@ -120,6 +120,13 @@ configuration says its history is unknown
 (:meth:`EstimatorConfig.unknown_history`). ``w >= 0`` is enforced by
 projecting each component's mean (Simon & Chia 2002).
 
+Service time. A reducer met used whose operating time ``H`` before the twin's
+first window is known (``service_time_s``: a robot's hour meter) starts from
+the used hypothesis, and once the duty's rate ``r`` is known the estimator takes
+``S(w) = e^θ·(r·H + a)`` as one pseudo-observation (:meth:`WearEstimator._serviced`):
+the lost motion tells ``w``, so the hour meter tells ``θ``, which a short
+recording cannot (measured: ``bench/bench_service_time.py``, README Figures).
+
 Growth law. Beside the wear model, :class:`.growth.GrowthTrend` learns the
 lost motion's growth against the Archard exposure from the windows
 themselves (a power law with the physics as its prior). Each window's
