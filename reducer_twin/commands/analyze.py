@@ -65,7 +65,8 @@ def add_parser(sub):
     p.add_argument('--config', metavar='YAML', default=None,
                    help='bringup configuration (config/twin.yaml): joints, topics, motor '
                         'suffix, motor angles, DynamicJointState interfaces, aging factor, '
-                        'window, life thresholds, reducer')
+                        "window, life thresholds, reducer per joint, each reducer's "
+                        'service time before the bag (service_time_s: the hour meter)')
     p.add_argument('--json', action='store_true', help='print the results as one JSON object')
     p.add_argument('--jobs', type=int, default=1,
                    help=f'bags analysed in parallel processes, 1 .. {MAX_JOBS} (default 1)')
