@@ -38,6 +38,7 @@ import argparse
 import json
 import math
 from pathlib import Path
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -110,7 +111,7 @@ def _rows(truths, reports, scratch):
             row[case]['resolved'] = bool(r.get('rate_resolved'))
         out.append(row)
     for path in scratch:
-        subprocess.run(['rm', '-rf', str(path)], check=False)
+        shutil.rmtree(path, ignore_errors=True)
     return out
 
 
@@ -133,7 +134,7 @@ def run_model(tmp, seed, fraction, hours, aging_factor):
         return json.loads(proc.stdout)['joints']
 
     probe = simulate(tmp / 'life', 1.0, 0.0)
-    subprocess.run(['rm', '-rf', str(tmp / 'life')], check=False)
+    shutil.rmtree(tmp / 'life', ignore_errors=True)
     start = fraction * min(1.0 + j['true_rul_h'] for j in probe.values())
     bag = tmp / f'model-{seed}-{fraction}'
     truth = simulate(bag, hours, start)

@@ -918,22 +918,22 @@ class WearEstimator:
         A reducer that ran ``H = service_time_s`` before the twin's first window at
         the duty the twin has since seen (rate ``r``: run-in-free Archard wear per
         operating second at ``s = 1``, known from :data:`.duty_rate.DUTY_BATCH_WINDOWS`
-        windows on) has the run-in-free wear ``S(w) = e^θ·(r·H + a)``, ``a`` the
-        Archard exposure since; its past duty is not known beyond the ratio
-        ``e^ε``, ``ε ~ N(0, service_rate_log_std²)`` (with the recent rate's own
-        standard error). Each component is updated with the pseudo-observation
-        ``S(w) - e^θ·(r·H + a) = 0`` (noise ``e^θ·r·H`` times that sd at its
-        mean; unscented, as the windows), its weight by its likelihood. The lost
-        motion tells ``w``; with it the service time tells ``θ``, which a short
-        recording of a used unit cannot: without it that remaining life is the
-        model's rate at the duty, which may be many times off. A service time that
-        implies a rate beyond :data:`SERVICE_RATE_LIMIT` times the model's is not taken
-        (:attr:`service_verdict` says which).
+        windows on, once above zero) has the run-in-free wear
+        ``S(w) = e^θ·(r·H + a)``, ``a`` the Archard exposure since; its past duty
+        is not known beyond the ratio ``e^ε``, ``ε ~ N(0, service_rate_log_std²)``
+        (with the recent rate's own standard error). Each component is updated with
+        the pseudo-observation ``S(w) - e^θ·(r·H + a) = 0`` (noise ``e^θ·r·H``
+        times that sd at its mean; unscented, as the windows), its weight by its
+        likelihood. The lost motion tells ``w``; with it the service time tells
+        ``θ``, which a short recording of a used unit cannot: without it that
+        remaining life is the model's rate at the duty, which may be many times off.
+        A service time that implies a rate beyond :data:`SERVICE_RATE_LIMIT` times
+        the model's is not taken (:attr:`service_verdict` says which).
         """
-        self._service_pending = False
         rate = self._duty.rate
         if not rate > 0.0:
-            return
+            return          # no Archard exposure yet (a joint at rest): wait for it
+        self._service_pending = False
         c = self.config
         past = rate * c.service_time_s
         # The state is at the window's middle (the exposure there, when stepping one).

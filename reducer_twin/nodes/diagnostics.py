@@ -92,8 +92,7 @@ def estimator_status(stage, rejected, live=None):
         # The service time the node was given, and what became of it.
         verdict = est.service_verdict
         values['service_time_h'] = est.config.service_time_s / HOUR
-        values['service_time'] = ('waiting for the duty' if est.service_pending else
-                                  'not judged' if verdict is None else
+        values['service_time'] = ('waiting for the duty' if verdict is None else
                                   'taken' if verdict[0] else 'not taken')
         if verdict is not None:
             values['service_rate_scale'] = verdict[1]

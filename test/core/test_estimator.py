@@ -411,6 +411,22 @@ def test_a_service_time_in_hours_given_as_seconds_is_not_taken_and_says_why(para
     assert taken and 0.5 < scale < 2.0
 
 
+def test_a_service_time_waits_for_the_joint_to_move_before_it_is_judged(params, tables):
+    # Twelve windows of a joint at rest (no Archard exposure), then moving: the service
+    # time is judged once the duty has a rate, not dropped for the rest windows.
+    rate = float(wear.wear_rate(0.8 * params.rating.rated_torque,
+                                wear.reference_speed(params), 0.0, params))
+    worn = wear_from_run_in_free(rate * 6000.0 * HOUR, params.wear)
+    z = float(tables.lost_motion(worn))
+    est = WearEstimator(params, EstimatorConfig(service_time_s=6000.0 * HOUR))
+    for k in range(12):
+        est.step(features_at(z, increment=0.0, exposure=2.0, t_end=2.0 * k))
+    assert est.service_pending and est.service_verdict is None
+    for k in range(12, 14):
+        est.step(features_at(z, increment=2.0 * rate, exposure=2.0, t_end=2.0 * k))
+    assert not est.service_pending and est.service_verdict[0]
+
+
 def test_the_service_time_is_taken_once_and_a_restored_state_keeps_it_taken(params):
     features, _, eol = synthetic_run(params, 1.0, seed=5, n=20000)
     start = eol // 2
