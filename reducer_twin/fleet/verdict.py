@@ -193,8 +193,12 @@ def _judge(row, r, state, params):
         row['reason'] = f'remaining life P10 {text} > {warn_h:,.0f} h (warning threshold)'
     if row['rate_resolved'] is False:
         # Never an OK that is the physics alone without saying so.
+        # A unit the twin has known since new only needs watching longer; one met used
+        # without its service time may also be told it (the robot's hour meter).
+        remedy = 'watch it longer' if r.installed_ns is not None or row['service_hours'] \
+            else 'watch it longer, or give its service time: service_time_s, the hour meter'
         row['reason'] += ("; the remaining life is the model's wear rate at this duty, the "
-                          "unit's own not yet resolved (watch it longer)")
+                          f"unit's own not yet resolved ({remedy})")
 
 
 def rank(rows):

@@ -1,5 +1,6 @@
 """Verdicts: what to do with each reducer, by rules stated with the numbers that applied."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -100,7 +101,16 @@ def test_an_ok_that_is_the_models_rate_says_so():
     row = fleet_row(reducer, PARAMS)
     assert row['verdict'] == 'OK' and row['rate_resolved'] is False
     assert row['reason'].endswith("the remaining life is the model's wear rate at this duty, "
-                                  "the unit's own not yet resolved (watch it longer)")
+                                  "the unit's own not yet resolved (watch it longer, or give "
+                                  "its service time: service_time_s, the hour meter)")
     reducer.summary['rate_resolved'] = True
     row = fleet_row(reducer, PARAMS)
     assert row['rate_resolved'] is True and 'wear rate' not in row['reason']
+
+
+def test_a_unit_known_since_new_is_only_told_to_be_watched_longer():
+    # Fitted by a recorded replacement: its service time is known (none), so the hour
+    # meter is no remedy.
+    reducer = dataclasses.replace(_reducer(24000.0), installed_ns=10 ** 18)
+    reducer.summary['rate_resolved'] = False
+    assert fleet_row(reducer, PARAMS)['reason'].endswith('not yet resolved (watch it longer)')
