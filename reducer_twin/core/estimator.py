@@ -85,7 +85,8 @@ weights of :func:`~.sigma_points.merwe_weights`, filterpy's numbers) whose weigh
 predictive likelihood. Components whose weight falls below ``exp(-23)`` of
 the best are dropped and components whose means come within a third of a
 standard deviation are merged (moment matching), so a few filters run once
-the rate is known.
+the rate is known. The numerics of the sum (points, moments, the update,
+pruning and merging) are :mod:`.gaussian_sum`'s.
 The estimate is the moment-matched mixture.
 
 A wide prior (a reducer of unknown history) makes the first update strongly
@@ -172,9 +173,10 @@ import numpy as np
 
 from .duty_rate import DUTY_BATCH_WINDOWS, DutyRate
 from .errors import InvalidInput
+from .gaussian_sum import logsumexp as _logsumexp
+from .gaussian_sum import mixture_moments, tidy, UnscentedTransform
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
-from .sigma_points import merwe_weights
 from .transmission_error import model_tables
 from .trend_score import TrendScore
 from .units import ARCMIN, HOUR, UM
@@ -198,12 +200,6 @@ SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA = 1.0, 2.0, 0.0
 RATE_GRID = (-6.0, 14.0, 0.5, 0.3)
 """Components of the prior on ``θ``: from, to (relative to ln s0), spacing and sd."""
 
-
-MERGE_DISTANCE = 1.0 / 3.0
-"""Mahalanobis distance of two components' means below which they are merged."""
-
-PRUNE_LOG_WEIGHT = -23.0
-"""Components whose log weight falls this far below the best are dropped."""
 
 TREND_MEMORY = 0.7
 """Factor of the exponential average of the normalised innovations."""
@@ -613,40 +609,6 @@ def prior_components(config, new_unit_probability=None):
     return lw - _logsumexp(lw), np.array(means), np.array(covs)
 
 
-def _consider_bias(m, P, m0, P0, which):
-    """
-    Hold the fit's bias ``c`` at its prior moments: a consider state (Schmidt 1966).
-
-    ``c`` and the as-built offset ``b`` are seen only as ``h(w + b) + c``;
-    only the curvature of ``h`` over the wear the windows span tells them
-    apart. A window across which the lost motion does not grow carries none
-    of it, yet the unscented update, whose slope changes as ``b`` moves,
-    lends the pair a spurious separate identity, and a long recording at one
-    wear walked them along their ridge (measured: ``c`` from 0 to 4 prior sd
-    and the lost motion 30 % low under steady windows). For such a window
-    ``c`` keeps its mean and variance; its covariance with the other states
-    is updated, so the reported uncertainty still carries the bias the data
-    cannot remove.
-
-    Parameters
-    ----------
-    m, P : ndarray, shapes (C, 4), (C, 4, 4)
-        Updated moments, changed in place.
-    m0, P0 : ndarray
-        Prior moments.
-    which : ndarray of bool, shape (C,)
-        The components to which it applies.
-
-    """
-    m[which, 3] = m0[which, 3]
-    P[which, 3, 3] = P0[which, 3, 3]
-
-
-def _logsumexp(a):
-    top = float(np.max(a))
-    return top + math.log(float(np.sum(np.exp(a - top))))
-
-
 def _normal_score(t, dof):
     """
     Return the normal score of a Student-t value of ``dof`` degrees of freedom (Wallace 1959).
@@ -665,44 +627,6 @@ def _finite(value):
         return math.isfinite(float(value))
     except (TypeError, ValueError):
         return False
-
-
-def _chol(P):
-    """Batched Cholesky factor of covariances, made positive definite where they are not."""
-    try:
-        return np.linalg.cholesky(P)
-    except np.linalg.LinAlgError:
-        vals, vecs = np.linalg.eigh(0.5 * (P + np.swapaxes(P, -1, -2)))
-        floor = 1e-12 * np.maximum(vals.max(axis=-1, keepdims=True), 1e-300)
-        fixed = (vecs * np.maximum(vals, floor)[..., None, :]) @ np.swapaxes(vecs, -1, -2)
-        return np.linalg.cholesky(fixed)
-
-
-def mixture_moments(log_weights, means, covs):
-    """
-    Moment-match a Gaussian sum: its mean and covariance.
-
-    Parameters
-    ----------
-    log_weights : ndarray, shape (C,)
-        Log weights (need not be normalised).
-    means : ndarray, shape (C, n)
-        Component means.
-    covs : ndarray, shape (C, n, n)
-        Component covariances.
-
-    Returns
-    -------
-    tuple of ndarray
-        Mean (n,) and covariance (n, n).
-
-    """
-    w = np.exp(log_weights - np.max(log_weights))
-    w = w / w.sum()
-    m = w @ means
-    d = means - m
-    P = np.einsum('c,cij->ij', w, covs) + np.einsum('c,ci,cj->ij', w, d, d)
-    return m, 0.5 * (P + P.T)
 
 
 # --------------------------------------------------------------------------- filter
@@ -725,9 +649,8 @@ class WearEstimator:
         self.params = params
         self.config = config or EstimatorConfig()
         self._h = lost_motion_curve(params)
-        # The scaled sigma points' weights (filterpy's MerweScaledSigmaPoints, same numbers).
-        self._wm, self._wc = merwe_weights(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
-        self._spread = math.sqrt(SIGMA_ALPHA ** 2 * (N_FILTER + SIGMA_KAPPA))
+        # The scaled sigma points (filterpy's MerweScaledSigmaPoints' weights, same numbers).
+        self._ut = UnscentedTransform(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         # A reducer with a known service time is used (however little): its wear is
         # told by its service time and rate once the duty is known (:meth:`_serviced`).
         serviced = self.config.service_time_s > 0.0
@@ -754,12 +677,6 @@ class WearEstimator:
 
     # model functions -------------------------------------------------------------------
 
-    def _sigma(self, m, P):
-        """Sigma points of every component, shape (C, 2n+1, n)."""
-        L = _chol(P) * self._spread
-        cols = np.swapaxes(L, -1, -2)
-        return np.concatenate([m[:, None, :], m[:, None, :] + cols, m[:, None, :] - cols], axis=1)
-
     def _fx(self, X, increment):
         """Propagate sigma points: ``w' = W(S(w) + e^θ·Δa)``, the rest unchanged."""
         wp = self.params.wear
@@ -771,30 +688,6 @@ class WearEstimator:
     def _hx(self, X):
         """Observe sigma points: the unit's lost motion plus the window fit's bias."""
         return unit_lost_motion(X[..., 0], X[..., 2], self._h) + X[..., 3]
-
-    def _moments(self, X, Z=None):
-        """Weighted mean and covariance of sigma points (and of their observations)."""
-        m = np.einsum('k,ckn->cn', self._wm, X)
-        d = X - m[:, None, :]
-        P = np.einsum('k,cki,ckj->cij', self._wc, d, d)
-        if Z is None:
-            return m, P
-        return (m, P) + self._observed(Z, d)
-
-    def _observed(self, Z, d=None):
-        """
-        Mean and variance of the points' observations, and their covariance with the state.
-
-        ``d`` the points less their mean (:meth:`_moments`' terms); without it, only the
-        mean and variance. The state's own covariance, a sum over every point and pair
-        of states, is not formed where it is not wanted.
-        """
-        z = Z @ self._wm
-        dz = Z - z[:, None]
-        szz = (dz ** 2) @ self._wc
-        if d is None:
-            return z, szz
-        return z, szz, np.einsum('k,cki,ck->ci', self._wc, d, dz)
 
     # filter steps ----------------------------------------------------------------------
 
@@ -834,8 +727,8 @@ class WearEstimator:
     def _predict(self, exposure, increment):
         if exposure == 0.0 and increment == 0.0:
             return
-        X = self._fx(self._sigma(self._m, self._P), increment)
-        m, P = self._moments(X)
+        X = self._fx(self._ut.points(self._m, self._P), increment)
+        m, P = self._ut.moments(X)
         c = self.config
         P[:, 0, 0] += c.wear_noise_density * exposure
         P[:, 1, 1] += c.log_rate_scale_noise_density * exposure
@@ -947,10 +840,9 @@ class WearEstimator:
         if not taken:
             return
         m0, P0 = self._m, self._P
-        X = self._sigma(m0, P0)
-        d = X - np.einsum('k,ckn->cn', self._wm, X)[:, None, :]
+        X = self._ut.points(m0, P0)
         Z = run_in_free_wear(X[..., 0], wp) - np.exp(X[..., 1]) * total
-        zc, szz, cxz = self._observed(Z, d)
+        zc, szz, cxz = self._ut.observed(Z, X - self._ut.mean(X)[:, None, :])
         R = (sd * np.exp(m0[:, 1]) * past) ** 2
         S = szz + R
         gain = cxz / S[:, None]
@@ -996,9 +888,8 @@ class WearEstimator:
         rho, known = self._noise.fit()
         R = rho * sigma2 + smear
         m0, P0 = self._m, self._P
-        X = self._sigma(m0, P0)
-        zc, szz, cxz = self._observed(self._hx(X),
-                                      X - np.einsum('k,ckn->cn', self._wm, X)[:, None, :])
+        X = self._ut.points(m0, P0)
+        zc, szz, cxz = self._ut.observed(self._hx(X), X - self._ut.mean(X)[:, None, :])
         S = szz + R
         d2 = (z - zc) ** 2 / S
         w = np.exp(self._lw - self._lw.max())
@@ -1011,13 +902,22 @@ class WearEstimator:
         loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
         R_eff = (R + smear) * np.maximum(1.0, (nu + d2) / (nu + 1.0))
         # A window across which the lost motion does not grow adds nothing that tells the
-        # fit's bias from the as-built offset: the bias is a consider state for it.
+        # fit's bias from the as-built offset: the bias is a consider state for it (Schmidt
+        # 1966: its mean and variance stay, its covariances are updated). ``c`` and ``b``
+        # are seen only as h(w + b) + c; the unscented update, whose slope changes as ``b``
+        # moves, lent the pair a spurious separate identity, and a long recording at one
+        # wear walked them along their ridge (measured: ``c`` from 0 to 4 prior sd and the
+        # lost motion 30 % low under steady windows).
         consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
         # The growth law sees the window as the wear model does: its noise, the Student-t
         # weight and the lost motion's growth within the window (the components' smear).
         spread = float(w @ smear)
         self._score_trend(z, R + spread, R * max(1.0, (nu + nis) / (nu + 1.0)) + spread, rho)
-        self._m, self._P = self._posterior(m0, P0, z, R_eff, zc, szz, cxz, consider)
+        # A component whose w + b spans over 1 µm (where h bends across it) is relinearised
+        # about its posterior.
+        wide = (P0[:, 0, 0] + P0[:, 2, 2] + 2.0 * P0[:, 0, 2]) > UM ** 2
+        self._m, self._P = self._ut.posterior(m0, P0, z, R_eff, zc, szz, cxz, self._hx, wide,
+                                              (consider, 3))
         self._lw = self._lw + loglik
         self._lw -= _logsumexp(self._lw)
         self._project()
@@ -1082,52 +982,16 @@ class WearEstimator:
         c = self.config
         at = self._archard if self._observed_at is None else self._observed_at
         now = self._exposure_s if self._observed_exposure is None else self._observed_exposure
-        X = self._fx(self._sigma(snap['m'], snap['P']), at - snap['archard'])
-        m, P = self._moments(X)
+        X = self._fx(self._ut.points(snap['m'], snap['P']), at - snap['archard'])
+        m, P = self._ut.moments(X)
         elapsed = now - snap['exposure_s']
         P[:, 0, 0] += c.wear_noise_density * elapsed
         P[:, 1, 1] += c.log_rate_scale_noise_density * elapsed
         P = 0.5 * (P + np.swapaxes(P, 1, 2))
-        zc, szz = self._observed(self._hx(self._sigma(m, P)))
+        zc, szz = self._ut.observed(self._hx(self._ut.points(m, P)))
         v = szz + R
         return _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
                           - 0.5 * (z - zc) ** 2 / v)
-
-    def _posterior(self, m0, P0, z, R, zc, szz, cxz, consider):
-        """
-        Unscented update of every component, iterated by posterior linearisation if wide.
-
-        Parameters are the prior moments, the observation, the effective noise
-        per component, the prior's observed moments (the first iterate) and
-        the components for which the fit's bias is a consider state
-        (:func:`_consider_bias`).
-        """
-        S = szz + R
-        K = cxz / S[:, None]
-        m = m0 + K * (z - zc)[:, None]
-        P = P0 - np.einsum('ci,cj->cij', K, K) * S[:, None, None]
-        _consider_bias(m, P, m0, P0, consider)
-        wide = (P0[:, 0, 0] + P0[:, 2, 2] + 2.0 * P0[:, 0, 2]) > UM ** 2
-        if not wide.any():
-            return m, P
-        for _ in range(8):
-            X = self._sigma(m[wide], P[wide])
-            mi, Pi, zi, szi, cxi = self._moments(X, self._hx(X))
-            H = np.linalg.solve(Pi, cxi[..., None])[..., 0]
-            omega = np.maximum(szi - np.einsum('ci,cij,cj->c', H, Pi, H), 0.0)
-            P0w, m0w = P0[wide], m0[wide]
-            Sw = np.einsum('ci,cij,cj->c', H, P0w, H) + R[wide] + omega
-            Kw = np.einsum('cij,cj->ci', P0w, H) / Sw[:, None]
-            resid = z - (zi - np.einsum('ci,ci->c', H, mi)) - np.einsum('ci,ci->c', H, m0w)
-            new_m = m0w + Kw * resid[:, None]
-            new_P = P0w - np.einsum('ci,cj->cij', Kw, Kw) * Sw[:, None, None]
-            _consider_bias(new_m, new_P, m0w, P0w, consider[wide])
-            moved = np.abs(new_m - m[wide]) / np.sqrt(np.einsum('cii->ci', P[wide]))
-            m[wide] = new_m
-            P[wide] = new_P
-            if np.all(moved < 1e-3):
-                break
-        return m, P
 
     def _release_rate(self):
         """
@@ -1198,49 +1062,8 @@ class WearEstimator:
         np.clip(self._m[:, 3], -reach_c, reach_c, out=self._m[:, 3])
 
     def _tidy(self):
-        """Drop negligible components, merge converged ones, refresh the mixture's moments."""
-        keep = self._lw >= self._lw.max() + PRUNE_LOG_WEIGHT
-        if not keep.all():
-            self._lw, self._m, self._P = self._lw[keep], self._m[keep], self._P[keep]
-        if self._lw.size > 1:
-            order = np.argsort(self._m[:, 1], kind='stable')
-            lw, m, P = self._lw[order], self._m[order], self._P[order]
-            # Each neighbour's pair, solved at once (the same LAPACK solve per pair); a
-            # pair after a merge is solved on its own.
-            gaps = m[1:] - m[:-1]
-            try:
-                solved = np.linalg.solve(P[:-1] + P[1:], gaps[..., None])[..., 0]
-            except np.linalg.LinAlgError:
-                solved = None
-            if solved is not None and \
-                    np.all(np.einsum('ci,ci->c', gaps, solved) > MERGE_DISTANCE ** 2):
-                # No neighbours close enough: the components stay as they are (in order).
-                self._lw, self._m, self._P = lw, m, P
-                self._lw -= _logsumexp(self._lw)
-                self._refresh()
-                return
-            out = [[lw[0], m[0], P[0]]]
-            merged = False
-            for k in range(1, lw.size):
-                a = out[-1]
-                if merged or solved is None:
-                    d = m[k] - a[1]
-                    x = np.linalg.solve(a[2] + P[k], d)
-                else:
-                    d, x = gaps[k - 1], solved[k - 1]
-                # Means within a third of a standard deviation of each other (Mahalanobis
-                # distance under the summed covariance): one component does.
-                merged = d @ x <= MERGE_DISTANCE ** 2
-                if merged:
-                    both = np.array([a[0], lw[k]])
-                    mm, pp = mixture_moments(both, np.array([a[1], m[k]]), np.array([a[2], P[k]]))
-                    out[-1] = [_logsumexp(both), mm, pp]
-                else:
-                    out.append([lw[k], m[k], P[k]])
-            self._lw = np.array([o[0] for o in out])
-            self._m = np.array([o[1] for o in out])
-            self._P = np.array([o[2] for o in out])
-        self._lw -= _logsumexp(self._lw)
+        """Drop negligible components, merge converged ones (:func:`.gaussian_sum.tidy`)."""
+        self._lw, self._m, self._P = tidy(self._lw, self._m, self._P, order_by=1)
         self._refresh()
 
     def _refresh(self):
@@ -1442,9 +1265,9 @@ class WearEstimator:
             Mean and standard deviation.
 
         """
-        X = self._sigma(self._m, self._P)
+        X = self._ut.points(self._m, self._P)
         true = unit_lost_motion(X[..., 0], X[..., 2], self._h)
-        zc, szz = self._observed(true)
+        zc, szz = self._ut.observed(true)
         w = np.exp(self._lw - self._lw.max())
         w /= w.sum()
         mean = float(w @ zc)

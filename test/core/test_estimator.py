@@ -581,8 +581,8 @@ def test_the_two_models_are_scored_on_what_they_predicted_score_lag_windows_befo
     last = features[-1]
     then.predict(last.duty, fraction=0.5)
     R = est.noise_scale * max(last.lost_motion_std, est.config.min_lost_motion_std) ** 2
-    X = then._sigma(then._m, then._P)
-    zc, szz = then._observed(then._hx(X))
+    X = then._ut.points(then._m, then._P)
+    zc, szz = then._ut.observed(then._hx(X))
     w = np.exp(then._lw - then._lw.max())
     w /= w.sum()
     v = szz + R

@@ -102,7 +102,7 @@ def test_an_ok_that_is_the_models_rate_says_so():
     assert row['verdict'] == 'OK' and row['rate_resolved'] is False
     assert row['reason'].endswith("the remaining life is the model's wear rate at this duty, "
                                   "the unit's own not yet resolved (watch it longer, or give "
-                                  "its service time: service_time_s, the hour meter)")
+                                  'its service time: service_time_s, the hour meter)')
     reducer.summary['rate_resolved'] = True
     row = fleet_row(reducer, PARAMS)
     assert row['rate_resolved'] is True and 'wear rate' not in row['reason']
