@@ -37,18 +37,19 @@ import math
 
 import numpy as np
 
+from .duty_summary import duty_summaries, DutySummary
 from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .flanks import FlankPool
 from .friction_fit import FrictionFit
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
-from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice, TWO_PI
+from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .torque_smoothing import nominal_step, TorqueSmoothing
 from .transmission_error import model_tables
 from .velocity_check import VelocityCheck
-from .wear import wear_rate
 from .wear_fit import LostMotionFit
+from .window_cut import cut_windows, WINDOW_MODES
 
 _HARMONIC_FIT_TORQUE = 0.5
 """
@@ -62,48 +63,6 @@ flank only where it starts and brakes, at one end of the move, and a 1x harmonic
 as lost motion (independent generator, 120-window lives: bases 1022, 2008 and 4013 read
 0.15, 0.13 and 0.18 arcmin high; with half the test torque -0.00, 0.07 and 0.11).
 """
-
-
-@dataclass(frozen=True)
-class DutySummary:
-    """
-    What the reducer went through in one window (run-in-free wear exposure).
-
-    Attributes
-    ----------
-    duration_s : float
-        Stream time covered by the window's samples [s] (gaps excluded).
-    exposure_s : float
-        Operating seconds of wear exposure, ``duration_s·aging_factor`` [s].
-    archard_increment : float
-        ``aging·∫ wear_rate(T, omega, 0) dt`` [m]: Archard wear at rate
-        scale 1 without run-in (the estimator applies both itself).
-    mean_abs_torque : float
-        Time mean of ``|T|`` [N·m].
-    mean_abs_speed : float
-        Time mean of ``|omega|`` [rad/s]: the mean speed ``Nm`` of the
-        catalogue life formula.
-    cubic_mean_torque : float
-        ``Tm = (∫|omega|·|T|^(10/3) dt / ∫|omega| dt)^(3/10)`` [N·m], the
-        catalogue's equivalent torque (exponent ``rating.life_exponent``);
-        NaN when the joint did not move.
-    max_abs_torque : float
-        Largest ``|T|`` [N·m].
-
-    """
-
-    duration_s: float
-    exposure_s: float
-    archard_increment: float
-    mean_abs_torque: float
-    mean_abs_speed: float
-    cubic_mean_torque: float
-    max_abs_torque: float
-
-    @property
-    def mean_speed(self):
-        """Mean speed ``Nm`` of the catalogue life formula, ``mean_abs_speed`` [rad/s]."""
-        return self.mean_abs_speed
 
 
 @dataclass(frozen=True)
@@ -180,20 +139,15 @@ class WindowFeatures:
     implausible: bool = False
 
 
-WINDOW_MODES = ('auto', 'revolution', 'duration')
-"""How windows are cut (see :class:`WindowAnalyzer`)."""
-
-
 class WindowAnalyzer:
     """
     Streaming analysis of a TE stream in windows.
 
-    Windows never span a gap of the stream. ``window='duration'`` cuts
-    every ``window_s`` of stream; ``'revolution'`` after each output
-    revolution of net travel (or ``max_window_s``); ``'auto'`` (default)
-    after one revolution while the joint turns continuously in one
-    direction, otherwise after ``window_s`` (a window that turned
-    continuously past ``window_s`` ends when continuous motion stops).
+    Windows end as :func:`.window_cut.cut_windows` says: never across a gap
+    of the stream; ``window='duration'`` every ``window_s`` of stream;
+    ``'revolution'`` after each output revolution of net travel (or
+    ``max_window_s``); ``'auto'`` (default) after one revolution while the
+    joint turns continuously in one direction, otherwise after ``window_s``.
 
     Manufacturing orders and the time offset are hardware constants: they
     are fitted to recent windows pooled with an exponential memory of
@@ -653,49 +607,10 @@ class WindowAnalyzer:
 
     def _cut(self, final):
         """Return ``[(start, end, reason)]`` of the windows complete in the buffer."""
-        t, theta, speed = self._buf['t'], self._buf['theta'], self._buf['speed']
-        n = t.size
-        gaps = np.flatnonzero(self._buf['gap'])
-        cuts, s = [], 0
-        while s < n:
-            g = gaps[np.searchsorted(gaps, s, side='right')] if gaps.size and gaps[-1] > s else n
-            x = min(int(np.searchsorted(t, t[s] + self.max_window_s)), g)
-            d = int(np.searchsorted(t, t[s] + self.window_s))
-            cand = [(g, 'gap'), (x, 'max')]
-            if self.window == 'duration':
-                cand.append((d, 'duration'))
-            else:
-                # Searched in growing blocks from about one window; the turn only up to
-                # where the window ends anyway: a revolution found later is never the end.
-                shortest = s + self.min_window_samples
-                block = max(d, shortest) - s + 2
-                turn_until = x
-                if self.window == 'auto':
-                    direction = np.sign(speed[s])
-
-                    def stopped(a, b):
-                        v = speed[a:b]
-                        return ~((np.abs(v) >= self.min_speed) & (np.sign(v) == direction))
-                    c = _first_index(stopped, s, x, block, n)
-                    last = (d, 'duration') if c <= d else (c, 'motion')
-                    turn_until = min(x, max(last[0], shortest) + 1)
-                start_theta = theta[s]
-                r = _first_index(lambda a, b: np.abs(theta[a:b] - start_theta) >= TWO_PI,
-                                 s, turn_until, block, n)
-                cand.append((r, 'revolution'))
-                if self.window == 'auto':
-                    cand.append(last)
-            # Too few samples (a low rate) for the torque bins: the window goes on.
-            shortest = s + self.min_window_samples
-            cand = [(c if r in ('gap', 'max') else max(c, shortest), r) for c, r in cand]
-            end, reason = min(cand, key=lambda item: item[0])
-            if end >= n:
-                if not final:
-                    break
-                end, reason = n, 'flush'
-            cuts.append((s, end, reason))
-            s = end
-        return cuts
+        b = self._buf
+        return cut_windows(b['t'], b['theta'], b['speed'], b['gap'], final, self.window,
+                           self.window_s, self.max_window_s, self.min_window_samples,
+                           self.min_speed)
 
     def _analyze(self, buf, cuts):
         """Compute the features of the windows ``cuts`` of ``buf`` (vectorised over windows)."""
@@ -783,7 +698,7 @@ class WindowAnalyzer:
         with np.errstate(invalid='ignore', divide='ignore'):
             loaded_mean = ((y_sums - np.einsum('wj,jw->w', beta, x_sums))
                            / np.add.reduceat(loaded, starts))
-        duty = self._duty(torque, speed, dt, starts)
+        duty = duty_summaries(torque, speed, dt, starts, self.params, self.aging_factor)
         n_ord = len(self.orders)
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
@@ -831,25 +746,6 @@ class WindowAnalyzer:
             return self.min_bin_samples
         same_time = math.ceil(self.min_bin_samples * rate / FLANK_RATE_HZ - 1e-9)
         return min(self.min_bin_samples, max(same_time, LOW_RATE_MIN_FLANK_SAMPLES))
-
-    def _duty(self, torque, speed, dt, starts):
-        """Duty summaries per window."""
-        size, rate = np.abs(torque), np.abs(speed)
-        exponent = self.params.rating.life_exponent
-        archard = wear_rate(size, rate, 0.0, self.params)
-        rows = (dt, size * dt, rate * dt, rate * size ** exponent * dt, archard * dt)
-        sums = np.stack([np.add.reduceat(row, starts) for row in rows], axis=1)
-        peak = np.maximum.reduceat(size, starts)
-        out = []
-        for (dur, s_t, s_w, s_cube, s_wear), top in zip(sums.tolist(), peak.tolist()):
-            out.append(DutySummary(
-                duration_s=dur, exposure_s=dur * self.aging_factor,
-                archard_increment=s_wear * self.aging_factor,
-                mean_abs_torque=s_t / dur if dur > 0 else math.nan,
-                mean_abs_speed=s_w / dur if dur > 0 else math.nan,
-                cubic_mean_torque=(s_cube / s_w) ** (1.0 / exponent) if s_w > 0 else math.nan,
-                max_abs_torque=top))
-        return out
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
@@ -914,23 +810,6 @@ were noisier than the bins they added: over the bench's 72 truths (seeds 1000-10
 
 
 _BATCH_SAMPLES = 1 << 16
-
-
-def _first_index(test, start, stop, block, default):
-    """
-    First index in ``[start, stop)`` where ``test(a, b)`` (a mask of ``[a, b)``) holds.
-
-    Blocks of ``block`` samples, four times longer each time, are tested in turn, so a
-    hit near ``start`` does not cost a test of the whole span; ``default`` if none.
-    """
-    a = start
-    while a < stop:
-        b = min(stop, a + block)
-        hit = np.flatnonzero(test(a, b))
-        if hit.size:
-            return a + int(hit[0])
-        a, block = b, 4 * block
-    return default
 
 
 def _whole(name, value, lo, hi):
