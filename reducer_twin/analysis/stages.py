@@ -403,7 +403,7 @@ class JointBack:
         list of dict
             :meth:`process` of each record, in order; the output of the batch in which
             the reducer's service time was judged also has ``service``: ``(taken,
-            rate_scale, line, hours)`` (:func:`.core.pipeline.service_note`).
+            rate_scale, line, hours)`` (:func:`.core.service_time.service_note`).
 
         """
         said = self.twin.estimator.service_said

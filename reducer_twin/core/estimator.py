@@ -124,7 +124,7 @@ projecting each component's mean (Simon & Chia 2002).
 Service time. A reducer met used whose operating time ``H`` before the twin's
 first window is known (``service_time_s``: a robot's hour meter) starts from
 the used hypothesis, and once the duty's rate ``r`` is known the estimator takes
-``S(w) = e^θ·(r·H + a)`` as one pseudo-observation (:meth:`WearEstimator._serviced`):
+``S(w) = e^θ·(r·H + a)`` as one pseudo-observation (:mod:`.service_time`):
 the lost motion tells ``w``, so the hour meter tells ``θ``, which a short
 recording cannot (measured: ``bench/bench_service_time.py``, README Figures).
 
@@ -177,6 +177,7 @@ from .gaussian_sum import logsumexp as _logsumexp
 from .gaussian_sum import mixture_moments, tidy, UnscentedTransform
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
+from .service_time import implied_rate_scale, SERVICE_RATE_LIMIT, service_update
 from .transmission_error import model_tables
 from .trend_score import TrendScore
 from .units import ARCMIN, HOUR, UM
@@ -222,17 +223,6 @@ raised to the innovation, the next window moved the wear past the truth, the
 rate fell to let the truth catch up, and the disagreement came back the other
 way, every ten windows (a unit built 2 µm tight, whose rate the prior puts
 1.5x too low: P50 35-44 % short at 60 % of life; with the release: 0-5 %).
-"""
-
-SERVICE_RATE_LIMIT = 1000.0
-"""
-Rate scale beyond which a service time is not taken (:meth:`WearEstimator._serviced`).
-
-A service time that makes a unit's wear over it more than this many times the model's
-rate at its duty is far likelier a time in hours read as seconds (3 600 times) than a
-reducer that wore so fast all its life: the independent generator's units, whose lives
-ignore the model, wear up to about 80 times its rate. Such a unit's own windows show
-its rate soon anyway.
 """
 
 INTERP_SEARCH_BELOW = 1000
@@ -808,20 +798,10 @@ class WearEstimator:
         """
         Take the service time as what it says of the unit's wear and rate, once.
 
-        A reducer that ran ``H = service_time_s`` before the twin's first window at
-        the duty the twin has since seen (rate ``r``: run-in-free Archard wear per
-        operating second at ``s = 1``, known from :data:`.duty_rate.DUTY_BATCH_WINDOWS`
-        windows on, once above zero) has the run-in-free wear
-        ``S(w) = e^θ·(r·H + a)``, ``a`` the Archard exposure since; its past duty
-        is not known beyond the ratio ``e^ε``, ``ε ~ N(0, service_rate_log_std²)``
-        (with the recent rate's own standard error). Each component is updated with
-        the pseudo-observation ``S(w) - e^θ·(r·H + a) = 0`` (noise ``e^θ·r·H``
-        times that sd at its mean; unscented, as the windows), its weight by its
-        likelihood. The lost motion tells ``w``; with it the service time tells
-        ``θ``, which a short recording of a used unit cannot: without it that
-        remaining life is the model's rate at the duty, which may be many times off.
-        A service time that implies a rate beyond :data:`SERVICE_RATE_LIMIT` times
-        the model's is not taken (:attr:`service_verdict` says which).
+        Once the duty's rate ``r`` is known (:data:`.duty_rate.DUTY_BATCH_WINDOWS`
+        windows on, once above zero), as :mod:`.service_time` says; not taken beyond
+        :data:`.service_time.SERVICE_RATE_LIMIT` times the model's rate
+        (:attr:`service_verdict` says which).
         """
         rate = self._duty.rate
         if not rate > 0.0:
@@ -831,26 +811,17 @@ class WearEstimator:
         past = rate * c.service_time_s
         # The state is at the window's middle (the exposure there, when stepping one).
         total = past + (self._archard if self._observed_at is None else self._observed_at)
-        sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
         wp = self.params.wear
         # The rate the service time implies, from the wear the windows read so far.
-        implied = float(run_in_free_wear(max(self._x[0], 0.0), wp)) / total
+        implied = implied_rate_scale(run_in_free_wear(max(self._x[0], 0.0), wp), total)
         taken = implied <= SERVICE_RATE_LIMIT * c.initial_rate_scale
         self._service_verdict = (taken, implied)
         if not taken:
             return
-        m0, P0 = self._m, self._P
-        X = self._ut.points(m0, P0)
-        Z = run_in_free_wear(X[..., 0], wp) - np.exp(X[..., 1]) * total
-        zc, szz, cxz = self._ut.observed(Z, X - self._ut.mean(X)[:, None, :])
-        R = (sd * np.exp(m0[:, 1]) * past) ** 2
-        S = szz + R
-        gain = cxz / S[:, None]
-        self._m = m0 - gain * zc[:, None]
-        P = P0 - np.einsum('ci,cj->cij', gain, gain) * S[:, None, None]
-        self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
-        self._lw = self._lw - 0.5 * (np.log(S) + zc ** 2 / S)
-        self._lw -= _logsumexp(self._lw)
+        sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
+        self._lw, self._m, self._P = service_update(
+            self._ut, self._lw, self._m, self._P, lambda w: run_in_free_wear(w, wp), past,
+            total, sd)
         self._project()
         self._tidy()
         # The growth law counts from new too (its exponent prior the physics', as for a

@@ -21,6 +21,7 @@ from .errors import InvalidInput, InvalidParameter
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
+from .service_time import service_note
 from .units import HOUR
 
 DUTY_FIELDS = ('duration_s', 'exposure_s', 'archard_increment', 'mean_abs_torque',
@@ -603,35 +604,6 @@ def trend_from_record(record):
         cov[i, j] = cov[j, i] = float(record[key])
     return GrowthTrendState(float(record['trend_probability']), mean, cov,
                             float(record['archard_exposure_m']))
-
-
-def service_note(verdict, service_time_s):
-    """
-    Say how a reducer's service time was taken (:attr:`.estimator.WearEstimator.service_verdict`).
-
-    Parameters
-    ----------
-    verdict : tuple
-        ``(taken, rate_scale)``.
-    service_time_s : float
-        The service time [s].
-
-    Returns
-    -------
-    str
-        One line; one that is not taken names the likely mistake (hours given as seconds).
-
-    """
-    from .estimator import SERVICE_RATE_LIMIT
-    taken, scale = verdict
-    hours = service_time_s / HOUR
-    if taken:
-        return (f'service time {hours:,.0f} h taken: its wear over it is {scale:.3g} times the '
-                "model's rate at this duty")
-    return (f'service time {service_time_s:g} s ({hours:,.1f} h) not taken: it would make the '
-            f"unit's wear {scale:,.0f} times the model's rate at this duty (more than "
-            f'{SERVICE_RATE_LIMIT:,.0f}); service_time_s is in seconds ({service_time_s:g} h '
-            f'would be {service_time_s * HOUR:.4g} s)')
 
 
 RATE_RESOLVED_SD = 0.5

@@ -4,7 +4,7 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
-from reducer_twin.core.pipeline import service_note
+from reducer_twin.core.service_time import service_note
 from reducer_twin.core.units import HOUR, m_to_um
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
 from reducer_twin.nodes.parameters import SpecParameters

@@ -24,7 +24,7 @@ from reducer_twin.core.estimator import (
     wear_from_run_in_free, WearEstimator)
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
-from reducer_twin.core.pipeline import service_note
+from reducer_twin.core.service_time import service_note
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.trend_score import SCORE_LAG
 from reducer_twin.core.units import ARCMIN, HOUR, UM
