@@ -93,17 +93,10 @@ A wide prior (a reducer of unknown history) makes the first update strongly
 nonlinear: the update is iterated by posterior linearisation
 (García-Fernández et al. 2015) while the prior sd of ``w + b`` exceeds 1 µm.
 
-Persistent disagreement is never gated out. When the normalised
-innovations keep one sign (their exponential average beyond ±1.5 for two
-windows) while each is inside the gate, the rate has drifted from the
-model's: the variance of ``θ`` is raised by :data:`RATE_RELEASE_SD`
-squared and the data move the rate. When ``max_consecutive_rejections``
-outliers come in a row, or the disagreement includes outliers (a jump of
-the lost motion, a rate many times the model's), the components are spread
-again over the prior range of ``θ``, weighted about the current estimate,
-and the wear variance is raised so that the innovation is one standard
-deviation; the data then move the rate and the wear. Both count as a
-recovery. Both tests take the normalised innovation as its normal score
+Persistent disagreement is never gated out (:mod:`.recovery`): a drift
+within the gate releases the rate, a jump or outliers in a row spread the
+components again over the prior range of ``θ``; both count as a recovery.
+Both tests take the normalised innovation as its normal score
 under the noise scale's own uncertainty: a Student-t of as many degrees of
 freedom as the innovations ``ρ`` is learnt from (the prior's
 :data:`.noise_scale.NOISE_PRIOR_WINDOWS` included), the prediction's share by
@@ -177,6 +170,7 @@ from .gaussian_sum import logsumexp as _logsumexp
 from .gaussian_sum import mixture_moments, tidy, UnscentedTransform
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
+from .recovery import Disagreement, release_rate, respread
 from .service_time import implied_rate_scale, SERVICE_RATE_LIMIT, service_update
 from .transmission_error import model_tables
 from .trend_score import TrendScore
@@ -202,28 +196,11 @@ RATE_GRID = (-6.0, 14.0, 0.5, 0.3)
 """Components of the prior on ``θ``: from, to (relative to ln s0), spacing and sd."""
 
 
-TREND_MEMORY = 0.7
-"""Factor of the exponential average of the normalised innovations."""
-
-TREND_LIMIT = 1.5
-"""Average normalised innovation that, held for two windows, counts as disagreement."""
-
 PRIOR_REACH = 4.0
 """Sds of their priors beyond which the as-built offset and the fit's bias are not taken."""
 
 BIAS_SEPARATION = 0.01
 """Lost-motion growth across a window, in the window's sd, below which ``c`` is not updated."""
-
-RATE_RELEASE_SD = 0.3
-"""
-Sd added to ``ln s`` when a disagreement within the gate is found (a third of the rate).
-
-A re-spread of the whole prior range overshot there: with the wear variance
-raised to the innovation, the next window moved the wear past the truth, the
-rate fell to let the truth catch up, and the disagreement came back the other
-way, every ten windows (a unit built 2 µm tight, whose rate the prior puts
-1.5x too low: P50 35-44 % short at 60 % of life; with the release: 0-5 %).
-"""
 
 INTERP_SEARCH_BELOW = 1000
 """
@@ -654,8 +631,7 @@ class WearEstimator:
         self._window_increment = 0.0
         self._observed_exposure = None
         self._noise = NoiseScale()
-        self._trend = 0.0
-        self._trend_count = 0
+        self._disagreement = Disagreement()
         self._exposure_s = 0.0
         self._exposure_since_reset_s = 0.0
         self._duty = DutyRate(self.config.duty_horizon_s, self.config.duty_min_windows)
@@ -897,25 +873,22 @@ class WearEstimator:
         # The tests of disagreement take the innovation as the normal score it has while
         # rho is known from few windows (a t of those degrees of freedom, Satterthwaite).
         e = _normal_score(y / math.sqrt(v_mix + R), known * ((v_mix + R) / R) ** 2)
-        self._trend = TREND_MEMORY * self._trend + (1.0 - TREND_MEMORY) * e
-        self._trend_count = self._trend_count + 1 if abs(self._trend) > TREND_LIMIT else 0
         outlier = e * e > c.gate_nis
         if outlier:
             self._counters['rejected'] += 1
             self._counters['consecutive_rejected'] += 1
         else:
             self._counters['consecutive_rejected'] = 0
-        if self._trend_count >= 2 and not outlier and \
-                self._counters['consecutive_rejected'] == 0:
-            self._release_rate()
-            self._tidy()
-            return UpdateResult('recovered', y, nis)
-        if self._trend_count >= 2 or \
-                self._counters['consecutive_rejected'] >= c.max_consecutive_rejections:
+        action = self._disagreement.judge(e, outlier, self._counters['consecutive_rejected'],
+                                          c.max_consecutive_rejections)
+        if action == 'release':
+            release_rate(self._P)
+            self._recovered()
+        elif action == 'respread':
             self._respread(y, v_mix + R)
-            self._tidy()
-            return UpdateResult('recovered', y, nis)
         self._tidy()
+        if action is not None:
+            return UpdateResult('recovered', y, nis)
         return UpdateResult('rejected' if outlier else 'accepted', y, nis)
 
     def _score_trend(self, z, R_score, R, rho):
@@ -964,27 +937,15 @@ class WearEstimator:
         return _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
                           - 0.5 * (z - zc) ** 2 / v)
 
-    def _release_rate(self):
-        """
-        Let the rate move after a disagreement the gate admits (a drift, not a jump).
-
-        The rate's variance of every component is raised by
-        :data:`RATE_RELEASE_SD` squared; wear, as-built offset and bias keep
-        theirs, so the next windows move the rate and the wear follows it.
-        """
-        self._P[:, 1, 1] += RATE_RELEASE_SD ** 2
-        self._trend = 0.0
-        self._trend_count = 0
-        self._counters['recoveries'] += 1
-        self._counters['consecutive_rejected'] = 0
-
     def _respread(self, y, s_mix):
         """
         Search the rate again over the prior's range after persistent disagreement.
 
-        The predictions made before (:meth:`_snapshot`) were of another reducer (a
-        jump, a rate many times the model's): both models are scored again only on
-        predictions made :data:`.trend_score.SCORE_AFTER` usable windows from here on.
+        The wear's variance is raised so that the innovation ``y`` (of predicted
+        variance ``s_mix``) is one sd (:func:`.recovery.respread`). The predictions
+        made before (:meth:`_snapshot`) were of another reducer (a jump, a rate many
+        times the model's): both models are scored again only on predictions made
+        :data:`.trend_score.SCORE_AFTER` usable windows from here on.
         """
         # Nor are those it makes while the data choose the rate again (their wear was
         # 12-31 um on a unit at 0.5 after a respread on two noisy windows: the growth law
@@ -994,24 +955,16 @@ class WearEstimator:
         lo, hi, step, sd = RATE_GRID
         theta0 = math.log(self.config.initial_rate_scale)
         thetas = theta0 + np.arange(lo, hi + 0.5 * step, step)
-        offsets = thetas - m[1]
-        base = P.copy()
-        base[1, :] = 0.0
-        base[:, 1] = 0.0
-        base[1, 1] = sd ** 2
-        # Let the wear follow: its variance such that the innovation is one sd.
         step_w = 0.05 * UM
         slope = abs(float(self._h(m[0] + m[2] + step_w) - self._h(m[0] + m[2] - step_w))) / (
             2 * step_w)
-        base[0, 0] += max(y * y - s_mix, 0.0) / max(slope, 1e-6) ** 2
-        self._m = np.tile(m, (offsets.size, 1))
-        self._m[:, 1] = m[1] + offsets
-        self._P = np.tile(base, (offsets.size, 1, 1))
-        # Weights: a broad bump about the current rate, so the data choose again.
-        self._lw = -0.5 * (offsets / max(3.0 * math.sqrt(P[1, 1]), 2.0)) ** 2
-        self._lw -= _logsumexp(self._lw)
-        self._trend = 0.0
-        self._trend_count = 0
+        self._lw, self._m, self._P = respread(
+            m, P, thetas, sd, max(y * y - s_mix, 0.0) / max(slope, 1e-6) ** 2)
+        self._recovered()
+
+    def _recovered(self):
+        """Count a recovery; the disagreement starts over."""
+        self._disagreement.clear()
         self._counters['recoveries'] += 1
         self._counters['consecutive_rejected'] = 0
 
@@ -1122,8 +1075,7 @@ class WearEstimator:
         self._service_verdict = None
         self._archard = 0.0
         self._noise = NoiseScale()
-        self._trend = 0.0
-        self._trend_count = 0
+        self._disagreement.clear()
         self._exposure_since_reset_s = 0.0
         self._counters['consecutive_rejected'] = 0
         self._events.append({'exposure_s': self._exposure_s, 'reason': reason})

@@ -19,6 +19,7 @@ from .estimator import (
     STATE_VERSION, WearEstimator)
 from .growth import GrowthTrend, window_terms
 from .noise_scale import NoiseScale
+from .recovery import Disagreement
 from .trend_score import SCORE_AFTER, SCORE_LAG
 
 
@@ -88,7 +89,7 @@ def estimator_state(est):
         'service_pending': bool(est._service_pending),
         'service_verdict': None if est._service_verdict is None else [
             bool(est._service_verdict[0]), float(est._service_verdict[1])],
-        'trend': [float(est._trend), int(est._trend_count)],
+        'trend': [float(est._disagreement.trend), int(est._disagreement.count)],
         'exposure_s': est._exposure_s,
         'exposure_since_reset_s': est._exposure_since_reset_s,
         **est._duty.state(),
@@ -206,7 +207,7 @@ def restore_estimator(params, d, config=None):
     est._service_pending = bool(d.get('service_pending', False))
     est._service_verdict = verdict
     est._noise = NoiseScale(noise)
-    est._trend, est._trend_count = trend
+    est._disagreement = Disagreement(*trend)
     est._exposure_s = scalars['exposure_s']
     est._exposure_since_reset_s = scalars['exposure_since_reset_s']
     est._duty.restore(scalars['duty_increment'], scalars['duty_exposure'], batch, sums)
