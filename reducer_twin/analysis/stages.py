@@ -352,7 +352,7 @@ class JointBack:
         if state == NEW_REDUCER:
             # Fitted by a recorded replacement: new, whatever the configuration says of
             # the unit the twin first met (its service time).
-            estimator_config, state = EstimatorConfig(new_unit_probability=1.0), None
+            estimator_config, state = (estimator_config or EstimatorConfig()).fitted_new(), None
         self.twin = TwinBack(params, life_config, EstimatorStage(params, estimator_config))
         if state is not None:
             self.twin.restore(state)

@@ -156,7 +156,7 @@ and without the rate's drift (``log_rate_scale_noise_density = 0``; that
 simulator's rate is constant): coverage 87-89 %.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 import hashlib
 import json
@@ -281,6 +281,15 @@ class EstimatorConfig(_Validated):
 
         """
         return cls(**{'new_unit_probability': 0.0, **changes})
+
+    def fitted_new(self):
+        """
+        Return this tuning for a reducer fitted new (a recorded replacement).
+
+        Known new (``new_unit_probability = 1``), whatever the configuration says of the
+        unit the twin first met: its service time does not apply (``service_time_s = 0``).
+        """
+        return replace(self, new_unit_probability=1.0, service_time_s=0.0)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ Windows wait in memory up to :data:`MAX_PENDING_WINDOWS`; beyond that the oldest
 dropped from the store (counted; their operating time still counts).
 """
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import datetime
 import os
 from pathlib import Path
@@ -605,9 +605,8 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
         stage.restored_from = f'fleet store {store} ({robot}/{joint})'
     elif start.new_reducer:
         # Fitted new: not the unit the configuration's service time was of.
-        stage.estimator = WearEstimator(params, replace(
-            estimator_config or EstimatorConfig(), new_unit_probability=1.0,
-            service_time_s=0.0))
+        stage.estimator = WearEstimator(params,
+                                        (estimator_config or EstimatorConfig()).fitted_new())
         stage.restored_from = None
     log(start.note)
     if start.state is not None or start.new_reducer:

@@ -28,7 +28,7 @@ from reducer_twin.core.service_time import service_note
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.trend_score import SCORE_LAG
 from reducer_twin.core.units import ARCMIN, HOUR, UM
-from wear_windows import DutySummary, features_at, NOISE, synthetic_run, WINDOW
+from wear_windows import features_at, NOISE, synthetic_run, WINDOW, window_duty
 from wear_windows import WindowFeatures
 
 DATA = Path(__file__).resolve().parent / 'data'
@@ -76,7 +76,7 @@ def test_prediction_alone_follows_integrate_wear_when_the_prior_is_sharp(params)
     est = WearEstimator(params, config)
     assert est.components == 1
     for e, a in zip(exposure, increment):
-        est.predict(DutySummary(10.0, e, a))
+        est.predict(window_duty(10.0, e, a))
     np.testing.assert_allclose(est.wear, truth[-1], rtol=1e-6)
     assert est.exposure_s == pytest.approx(400 * WINDOW, rel=1e-12)
     assert est.archard_exposure == pytest.approx(increment.sum(), rel=1e-12)
@@ -111,7 +111,7 @@ def test_the_lost_motion_curve_and_its_inverse_agree_beyond_both_ends_of_the_tab
 def test_duty_rate_is_the_archard_rate_of_a_steady_duty(params):
     est = WearEstimator(params)
     for _ in range(50):
-        est.predict(DutySummary(10.0, WINDOW, 3e-8))
+        est.predict(window_duty(10.0, WINDOW, 3e-8))
     assert est.duty_rate == pytest.approx(3e-8 / WINDOW, rel=1e-12)
     assert est.duty_rate_rel_std == 0.0
 
@@ -120,9 +120,9 @@ def test_the_duty_rate_error_is_small_for_a_periodic_duty_and_large_for_a_changi
     periodic, changing = WearEstimator(params), WearEstimator(params)
     cycle = [1e-8, 5e-8, 0.0, 2e-8, 4e-8]
     for k in range(200):
-        periodic.predict(DutySummary(10.0, WINDOW, cycle[k % 5]))
+        periodic.predict(window_duty(10.0, WINDOW, cycle[k % 5]))
         # A duty that switches between a light and a heavy program every 30 windows.
-        changing.predict(DutySummary(10.0, WINDOW, (0.5e-8 if (k // 30) % 2 else 6e-8)))
+        changing.predict(window_duty(10.0, WINDOW, (0.5e-8 if (k // 30) % 2 else 6e-8)))
     assert periodic.duty_rate_rel_std < 0.02
     assert changing.duty_rate_rel_std > 0.1
 
@@ -246,10 +246,10 @@ def test_a_reported_sd_wider_than_the_scatter_is_learnt_down(params, tables):
 
 
 @pytest.mark.parametrize('duty, message', [
-    (DutySummary(1.0, math.nan, 0.0), 'exposure_s'),
-    (DutySummary(1.0, -1.0, 0.0), 'exposure_s'),
-    (DutySummary(1.0, 1.0, -1e-9), 'archard_increment'),
-    (DutySummary(1.0, 1.0, math.inf), 'archard_increment'),
+    (window_duty(1.0, math.nan, 0.0), 'exposure_s'),
+    (window_duty(1.0, -1.0, 0.0), 'exposure_s'),
+    (window_duty(1.0, 1.0, -1e-9), 'archard_increment'),
+    (window_duty(1.0, 1.0, math.inf), 'archard_increment'),
     (object(), 'exposure_s'),
 ])
 def test_a_bad_duty_raises_invalid_input_naming_the_field(params, duty, message):
@@ -533,7 +533,7 @@ def linear_run(params, seed, n=160):
     z = lm + rng.normal(0.0, 0.03 * ARCMIN, n)
     return [WindowFeatures(t_end=10.0 * (k + 1), lost_motion=float(z[k]),
                            lost_motion_std=0.03 * ARCMIN, wear_fit=1e-6,
-                           duty=DutySummary(10.0, WINDOW, float(increment[k])))
+                           duty=window_duty(10.0, WINDOW, float(increment[k])))
             for k in range(n)]
 
 
@@ -671,7 +671,7 @@ def test_predicted_wear_never_decreases_without_observations(params, increments)
     est = WearEstimator(params)
     previous = est.wear
     for a in increments:
-        est.predict(DutySummary(1.0, WINDOW, a))
+        est.predict(window_duty(1.0, WINDOW, a))
         assert est.wear >= previous - 1e-18
         previous = est.wear
 
@@ -689,3 +689,12 @@ def test_estimates_after_sixty_windows_are_micrometres_with_sub_micrometre_sd(pa
 def test_bad_values_of_the_per_unit_settings_are_rejected(name, value):
     with pytest.raises(InvalidParameter, match=f'estimator.{name}'):
         EstimatorConfig(**{name: value})
+
+
+def test_a_reducer_fitted_new_keeps_its_tuning_but_is_known_new_without_a_service_time():
+    config = EstimatorConfig(service_time_s=6000.0 * HOUR, new_unit_probability=0.3,
+                             fit_bias_std=0.02 * ARCMIN)
+    fitted = config.fitted_new()
+    assert fitted.new_unit_probability == 1.0 and fitted.service_time_s == 0.0
+    assert fitted.fit_bias_std == config.fit_bias_std
+    assert not WearEstimator(ReducerParams(), fitted).service_pending

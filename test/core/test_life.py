@@ -18,7 +18,7 @@ from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accurac
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
-from wear_windows import DutySummary, WINDOW, WindowFeatures
+from wear_windows import WINDOW, window_duty, WindowFeatures
 
 
 @pytest.fixture(scope='module')
@@ -42,7 +42,7 @@ def state(wear_m, scale=1.0, wear_sd=0.2e-6, log_scale_sd=0.05, rho=0.0):
 def rated_duty(params, torque=None, speed=None):
     t = params.rating.rated_torque if torque is None else torque
     n = params.rating.rated_output_speed if speed is None else speed
-    return DutySummary(10.0, WINDOW, 0.0, t, n, t, n, t)
+    return window_duty(10.0, WINDOW, 0.0, t, n)
 
 
 # --------------------------------------------------------------------------- RUL
@@ -223,7 +223,7 @@ def test_the_estimator_median_life_is_within_15_percent_at_half_life(params):
     eol = int(np.argmax(true_w >= limit_wear(params)))
     est = WearEstimator(params)
     for k in range(eol // 2):
-        duty = DutySummary(10.0, WINDOW, float(increment[k]), 0, 0, 0, 0, 0)
+        duty = window_duty(10.0, WINDOW, float(increment[k]))
         est.step(WindowFeatures(k * 10.0, float(z[k]), 0.05 * ARCMIN, duty))
     life = remaining_life(est, est.duty_rate, params, rng=np.random.default_rng(5))
     true_rul = (eol - eol // 2 + 0.5) * WINDOW
@@ -427,7 +427,7 @@ def test_the_p10_p90_interval_covers_the_true_life_from_both_sides(params):
         est = WearEstimator(params, config)
         marks = [int(f * eol) for f in (0.3, 0.5, 0.7)]
         for k in range(marks[-1] + 1):
-            duty = DutySummary(10.0, window, float(increment[k]), 0, 0, 0, 0, 0)
+            duty = window_duty(10.0, window, float(increment[k]))
             est.step(WindowFeatures(k * 10.0, float(z[k]), 0.05 * ARCMIN, duty))
             if k in marks:
                 life = remaining_life(est, est.duty_rate, params,

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 from reducer_twin.core import wear
+from reducer_twin.core.duty_summary import DutySummary
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 
@@ -21,18 +22,9 @@ WINDOW = 10.0 * HOUR
 """Exposure of one window (a time-compressed recording)."""
 
 
-@dataclass(frozen=True)
-class DutySummary:
-    """Duty of one window, as the TE extraction delivers it (SI units)."""
-
-    duration_s: float
-    exposure_s: float
-    archard_increment: float
-    mean_abs_torque: float = 0.0
-    mean_abs_speed: float = 0.0
-    cubic_mean_torque: float = 0.0
-    mean_speed: float = 0.0
-    max_abs_torque: float = 0.0
+def window_duty(duration_s, exposure_s, archard_increment, torque=0.0, speed=0.0):
+    """Return a window's duty (the window analysis's DutySummary) at one load and speed."""
+    return DutySummary(duration_s, exposure_s, archard_increment, torque, speed, torque, torque)
 
 
 @dataclass(frozen=True)
@@ -80,11 +72,11 @@ def synthetic_run(params, scale, seed, n=3000, window=WINDOW, as_built=0.0, wear
     eol = int(np.argmax(tables.lost_motion(true_w + as_built) >= 3.0 * ARCMIN))
     features = [WindowFeatures(t_end=(k + 1) * 10.0, lost_motion=float(z[k]),
                                lost_motion_std=NOISE, wear_fit=float(fit[k]),
-                               duty=DutySummary(10.0, float(exposure[k]), float(increment[k])))
+                               duty=window_duty(10.0, float(exposure[k]), float(increment[k])))
                 for k in range(eol + 1)]
     return features, true_w[:eol + 1], eol
 
 
 def features_at(lost_motion, increment=1e-8, exposure=WINDOW, std=NOISE, t_end=0.0):
     return WindowFeatures(t_end=t_end, lost_motion=lost_motion, lost_motion_std=std,
-                          duty=DutySummary(10.0, exposure, increment), wear_fit=1e-6)
+                          duty=window_duty(10.0, exposure, increment), wear_fit=1e-6)
