@@ -32,12 +32,23 @@ _POOL_EXPOSURE_S = 100.0 * 3600.0
 
 _POOL_FRICTION_JUMP = 0.01
 """
-Change of the friction taken out of the effort [fraction of rated torque, at the window's
-RMS speed] for which the pooled fit restarts: its flank groups were formed with another torque.
+Change of the friction taken out of the effort [fraction of rated torque] for which the
+pooled fit restarts: its flank groups were formed with another torque.
+
+The change is that of the map from effort to torque, evaluated at the window's RMS speed
+and RMS load: ``|ΔFc| + |ΔFv|·ω_rms + ½·|Δ(1/η − η)|·T_rms``. A window whose load differs
+from the pool's (a joint loaded by its accelerations, a payload changed) under the same
+friction and efficiency keeps the pool: its samples are placed in their flank groups by
+the same map. (Counting the efficiency's loss at each window's own RMS load restarted the
+pool of a third-generator base, loaded by its accelerations alone, at about every other
+window: 8 of its 153 windows read a lost motion.)
 """
 
 _POOL_JUMP = 0.01
 """Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
+
+_NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
+"""``friction_taken`` of a window from which no friction is taken out."""
 
 
 class FlankPool:
@@ -70,7 +81,7 @@ class FlankPool:
         n_par = 2 * len(orders) + 1
         n_groups = 2 * self.torque_bins
         self._te_ref = None
-        self._pool_friction = np.zeros(2)
+        self._pool_friction = np.array([0.0, 0.0, 1.0])   # Coulomb, viscous, efficiency
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
                       'st': np.zeros(n_groups), 'stt': np.zeros(n_groups),
@@ -207,8 +218,9 @@ class FlankPool:
         window shortens the pool where the lost motion moves (time-compressed
         recordings). The residual variance is each window's own, under its
         own flank lines. ``friction_taken`` (per window ``(Coulomb, viscous,
-        RMS speed)`` of what :meth:`.friction_fit.FrictionFit.fit` took out of the effort, or
-        None) restarts the pool where it changed.
+        RMS speed, efficiency, RMS load)`` of what :meth:`.friction_fit.FrictionFit.fit`
+        took out of the effort, or None) restarts the pool where it changed
+        (:data:`_POOL_FRICTION_JUMP`).
 
         Returns
         -------
@@ -238,13 +250,15 @@ class FlankPool:
             # friction taken out: where that changed by more than the flanks can absorb (the
             # friction identified, a window after the first ones that carried all of it), the
             # pooled groups mix two torques and start afresh too.
-            friction = friction_taken[k] if friction_taken is not None else np.zeros(3)
-            moved = (abs(friction[0] - self._pool_friction[0])
-                     + abs(friction[1] - self._pool_friction[1]) * friction[2])
+            friction = friction_taken[k] if friction_taken is not None else _NO_FRICTION
+            fc, fv, speed, eta, load = friction
+            fc0, fv0, eta0 = self._pool_friction
+            moved = (abs(fc - fc0) + abs(fv - fv0) * speed
+                     + 0.5 * abs((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
             if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref = te_mean[k]
-                self._pool_friction = friction[:2].copy()
+                self._pool_friction = np.array([fc, fv, eta])
                 for value in pool.values():
                     value[...] = 0.0
             d = te_mean[k] - self._te_ref

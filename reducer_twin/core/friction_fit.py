@@ -118,7 +118,8 @@ class FrictionFit:
             taken out of it [N·m] (which may be drag of the link that the
             reducer does carry); the effort as the fit explains it [N·m] (NaN
             at the windows' edges); per window the friction taken out
-            ``(Coulomb, viscous, RMS speed)``; and per window whether the fit
+            ``(Coulomb [N·m], viscous [N·m·s/rad], RMS speed [rad/s], efficiency,
+            RMS load [N·m])``; and per window whether the fit
             could not yet tell friction from the load (too few samples of one
             direction of motion).
 
@@ -147,7 +148,7 @@ class FrictionFit:
         x[7] = speed
         use = inner & np.isfinite(effort_s) & np.isfinite(accel)
         out = torque.copy()
-        taken = np.zeros((starts.size, 3))
+        taken = np.zeros((starts.size, 5))
         unknown = np.zeros(starts.size, dtype=bool)
         # The drive's efficiency: the load regressors also times the share of the
         # Coulomb shape where the effort drives the load and where it is driven back.
@@ -177,14 +178,10 @@ class FrictionFit:
             load = beta[:6] @ x[:6, a:b]
             rms_speed = float(np.sqrt(np.mean(speed[a:b] ** 2)))
             gain = 1.0 + (1.0 / eta - 1.0) * driving[a:b] - (1.0 - eta) * back[a:b]
-            # The efficiency counts as Coulomb friction at the window's RMS load when the
-            # pool decides whether the torque moved.
-            loss = 0.5 * (1.0 / eta - eta) * float(np.sqrt(np.mean(load ** 2))) \
-                if eta < 1.0 else 0.0
-            taken[k] = (fc + loss, fv, rms_speed)
+            taken[k] = (fc, fv, rms_speed, eta, float(np.sqrt(np.mean(load ** 2))))
             if fc + fv * rms_speed < _FRICTION_FLOOR * self.rated_torque:
                 fc = fv = 0.0
-                taken[k, :2] = (loss, 0.0)
+                taken[k, :2] = 0.0
             # The effort as the fit explains it, where its acceleration is whole (the
             # window's edges keep NaN), taken as the torque is: its friction terms less
             # what is taken out, the efficiency divided out of all.
