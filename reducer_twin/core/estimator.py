@@ -911,7 +911,8 @@ class WearEstimator:
         the law keeps ``R/rho`` and applies the latest ``rho`` to all its windows.
         """
         exposure = self._archard if self._observed_at is None else self._observed_at
-        self._scoring.add(exposure, z, R_score, R, rho, self._model_logpdf)
+        self._scoring.add(exposure, z, R_score, R, rho, self._model_predictive,
+                          self.config.trend_probability)
 
     def _snapshot(self):
         """
@@ -925,12 +926,18 @@ class WearEstimator:
         return {'archard': self._archard, 'exposure_s': self._exposure_s,
                 'lw': np.zeros(1), 'm': x[None, :].copy(), 'P': P[None, :, :].copy()}
 
-    def _model_logpdf(self, snap, z, R):
+    def _model_predictive(self, snap):
         """
-        Log predictive density of ``z`` under the wear model, from ``snap`` (:meth:`_snapshot`).
+        Predictive mean of ``z`` under the wear model from ``snap`` (:meth:`_snapshot`).
 
-        Its components are predicted to the window's middle through the Archard
-        increment and the operation since, with their process noise.
+        The snapshot (one moment-matched component) is predicted to the window's middle
+        through the Archard increment and the operation since, with its process noise.
+
+        Returns
+        -------
+        tuple of float
+            The mean [rad] and the variance without the window's noise [rad²].
+
         """
         c = self.config
         at = self._archard if self._observed_at is None else self._observed_at
@@ -942,9 +949,7 @@ class WearEstimator:
         P[:, 1, 1] += c.log_rate_scale_noise_density * elapsed
         P = 0.5 * (P + np.swapaxes(P, 1, 2))
         zc, szz = self._ut.observed(self._hx(self._ut.points(m, P)))
-        v = szz + R
-        return _logsumexp(snap['lw'] - _logsumexp(snap['lw']) - 0.5 * np.log(v)
-                          - 0.5 * (z - zc) ** 2 / v)
+        return float(zc[0]), float(szz[0])
 
     def _respread(self, y, s_mix):
         """
@@ -1117,6 +1122,19 @@ class WearEstimator:
         the law counts its exposure from the start (:mod:`.growth`, two origins).
         """
         return self._scoring.probability(self.config.trend_probability)
+
+    @property
+    def forecast_scale(self):
+        """
+        Factor (>= 1) by which both models' predictions of the windows fell short.
+
+        Of the predictions made :data:`.trend_score.SCORE_LAG` windows ahead
+        (:meth:`.trend_score.TrendScore.forecast_scale`): above 1 where the lost motion
+        grows by a law neither the model's curve nor the power law follows. The
+        remaining life takes the rate's and the growth law's variances times it
+        (:meth:`.pipeline.EstimatorStage.record`).
+        """
+        return self._scoring.forecast_scale()
 
     def growth_trend(self):
         """

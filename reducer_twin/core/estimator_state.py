@@ -10,6 +10,7 @@ state of the two-state filter. The files themselves are :mod:`reducer_twin.io.st
 """
 
 from dataclasses import asdict, fields
+import math
 
 import numpy as np
 
@@ -67,7 +68,8 @@ def estimator_state(est):
         ``kind``, ``version``, ``params_sha256``, ``config``, ``x`` and
         ``P`` (the mixture's moments, for people and tools),
         ``components`` (``[log weight, mean, covariance]`` each),
-        ``noise`` (recent innovations ``[y, V, σ²]``), ``trend``, exposures, duty sums,
+        ``noise`` (recent innovations ``[y, V, σ²]``), ``trend``, the lagged predictions'
+        squared errors (``forecast_errors``), exposures, duty sums,
         ``t_end``, ``counters``, ``events``.
 
     """
@@ -86,6 +88,7 @@ def estimator_state(est):
         'archard_exposure': float(est._archard),
         'trend_score': [float(est._scoring.score), int(est._scoring.scored)],
         'score_settle': int(est._scoring.settle),
+        'forecast_errors': [float(v) for v in est._scoring.forecast],
         'service_pending': bool(est._service_pending),
         'service_verdict': None if est._service_verdict is None else [
             bool(est._service_verdict[0]), float(est._service_verdict[1])],
@@ -172,6 +175,10 @@ def restore_estimator(params, d, config=None):
             archard = float(d['archard_exposure'])
             score = (float(d['trend_score'][0]), int(d['trend_score'][1]))
         settle = int(d.get('score_settle', 0))     # (not in earlier states: 0)
+        # (nor these: the lagged errors' mean starts afresh, from its prior)
+        forecast = [float(v) for v in d.get('forecast_errors', [0.0, 0.0])]
+        if len(forecast) != 2 or not all(math.isfinite(v) and v >= 0.0 for v in forecast):
+            raise ValueError(f'forecast_errors must be two finite sums >= 0, got {forecast}')
         verdict = d.get('service_verdict')         # (nor this: None)
         if verdict is not None:
             verdict = (bool(verdict[0]), float(verdict[1]))
@@ -203,6 +210,7 @@ def restore_estimator(params, d, config=None):
     scoring.recent_terms = [window_terms(*row) for row in recent]
     scoring.score, scoring.scored = score
     scoring.settle = settle
+    scoring.forecast = forecast
     # (not in earlier states: the service time, if any, was taken)
     est._service_pending = bool(d.get('service_pending', False))
     est._service_verdict = verdict

@@ -35,13 +35,15 @@ _POOL_FRICTION_JUMP = 0.01
 Change of the friction taken out of the effort [fraction of rated torque] for which the
 pooled fit restarts: its flank groups were formed with another torque.
 
-The change is that of the map from effort to torque, evaluated at the window's RMS speed
-and RMS load: ``|ΔFc| + |ΔFv|·ω_rms + ½·|Δ(1/η − η)|·T_rms``. A window whose load differs
-from the pool's (a joint loaded by its accelerations, a payload changed) under the same
-friction and efficiency keeps the pool: its samples are placed in their flank groups by
-the same map. (Counting the efficiency's loss at each window's own RMS load restarted the
-pool of a third-generator base, loaded by its accelerations alone, at about every other
-window: 8 of its 153 windows read a lost motion.)
+The change is that of the map from effort to torque, both maps evaluated at this window's
+RMS speed and RMS load: ``|ΔFc + ½·Δ(1/η − η)·T_rms| + |ΔFv|·ω_rms`` (the fit may trade
+a Coulomb friction for an efficiency's loss, which at the window's load take out the same
+torque). A window whose load differs from the pool's first (a joint loaded by its
+accelerations, a payload changed) under the same friction and efficiency keeps the pool:
+its samples are placed in their flank groups by the same map. (The pool's map was taken at
+its first window's load and this window's at its own, so a steady efficiency under a
+changing load restarted the pool of a third-generator base, loaded by its accelerations
+alone, at about every other window: 8 of its 153 windows read a lost motion.)
 """
 
 _POOL_JUMP = 0.01
@@ -253,8 +255,8 @@ class FlankPool:
             friction = friction_taken[k] if friction_taken is not None else _NO_FRICTION
             fc, fv, speed, eta, load = friction
             fc0, fv0, eta0 = self._pool_friction
-            moved = (abs(fc - fc0) + abs(fv - fv0) * speed
-                     + 0.5 * abs((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
+            moved = (abs(fc - fc0 + 0.5 * ((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
+                     + abs(fv - fv0) * speed)
             if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref = te_mean[k]

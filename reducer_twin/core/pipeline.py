@@ -291,6 +291,12 @@ class EstimatorStage:
         stamp_s : float
             Stamp of the record [s].
 
+        The variances the remaining life extrapolates with, of ``ln s`` and of the
+        growth law's ``k`` and ``g``, are the estimator's times its forecast scale
+        (:attr:`.estimator.WearEstimator.forecast_scale`: how far both models'
+        predictions eight windows ahead fell short of what they claimed), their
+        correlations kept; the wear, the lost motion and ``β`` are the estimator's.
+
         Returns
         -------
         dict
@@ -301,9 +307,12 @@ class EstimatorStage:
         x, P = est.x, est.P
         trend = est.growth_trend()
         lm, lm_std = est.lost_motion(trend)
+        widen = math.sqrt(est.forecast_scale)
+        P = _widened(P, (1,), widen)
+        rate_std = math.sqrt(math.expm1(P[1, 1]) * math.exp(2.0 * x[1] + P[1, 1]))
         rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
-            'rate_scale': est.rate_scale, 'rate_scale_std': est.rate_scale_std,
+            'rate_scale': est.rate_scale, 'rate_scale_std': rate_std,
             'duty_rate_m_per_s': est.duty_rate, 'lost_motion_rad': lm,
             'lost_motion_obs_rad': self.last_observation,
             'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected,
@@ -321,6 +330,13 @@ class EstimatorStage:
         for (i, j), key in _TREND_COVARIANCE_KEYS.items():
             rec[key] = float(cov[i, j])
         return rec
+
+
+def _widened(cov, rows, factor):
+    """Return ``cov`` with the sds of ``rows`` times ``factor``, the correlations kept."""
+    scale = np.ones(cov.shape[0])
+    scale[list(rows)] = factor
+    return cov * np.outer(scale, scale)
 
 
 _COVARIANCE_KEYS = {

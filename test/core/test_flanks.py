@@ -92,6 +92,15 @@ def test_the_pool_restarts_where_the_torque_map_changed(second):
     assert pooled[0] == own[0] and pooled[1] == own[1], 'the second window starts afresh'
 
 
+def test_a_coulomb_friction_traded_for_an_efficiency_at_the_window_s_load_keeps_the_pool():
+    # The fit may explain the same torque at the window's load by a higher efficiency and
+    # more Coulomb friction: the samples fall into the same flank groups.
+    loss = 0.5 * ((1.0 / 0.75 - 0.75) - (1.0 / 0.8 - 0.8)) * 250.0
+    taken = np.array([[20.0, 5.0, 0.5, 0.75, 250.0], [20.0 + loss, 5.0, 0.5, 0.8, 250.0]])
+    pooled, own = _pool_counts(taken, windows=2)
+    np.testing.assert_allclose(pooled, np.cumsum(own))
+
+
 def test_a_window_without_friction_taken_keeps_the_pool():
     pooled, own = _pool_counts(None)
     np.testing.assert_allclose(pooled, np.cumsum(own))
