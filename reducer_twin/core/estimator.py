@@ -1131,7 +1131,7 @@ class WearEstimator:
         Of the predictions made :data:`.trend_score.SCORE_LAG` windows ahead
         (:meth:`.trend_score.TrendScore.forecast_scale`): above 1 where the lost motion
         grows by a law neither the model's curve nor the power law follows. The
-        remaining life takes the rate's and the growth law's variances times it
+        remaining life takes the variance of ``ln s`` times it
         (:meth:`.pipeline.EstimatorStage.record`).
         """
         return self._scoring.forecast_scale()

@@ -291,11 +291,12 @@ class EstimatorStage:
         stamp_s : float
             Stamp of the record [s].
 
-        The variances the remaining life extrapolates with, of ``ln s`` and of the
-        growth law's ``k`` and ``g``, are the estimator's times its forecast scale
-        (:attr:`.estimator.WearEstimator.forecast_scale`: how far both models'
-        predictions eight windows ahead fell short of what they claimed), their
-        correlations kept; the wear, the lost motion and ``β`` are the estimator's.
+        The variance of ``ln s`` the remaining life extrapolates with is the estimator's
+        times its forecast scale (:attr:`.estimator.WearEstimator.forecast_scale`: how
+        far both models' predictions eight windows ahead fell short of what they
+        claimed), its correlations kept; the wear, the lost motion and the growth law
+        are the estimator's (the law's samples are not widened: how far its exponent
+        should be is not measured).
 
         Returns
         -------

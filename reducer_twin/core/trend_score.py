@@ -14,8 +14,8 @@ error of their mixture, in its own predictive sds, has mean 1 when the predictio
 calibrated. Where neither model is the unit's growth (a run-in then a straight line, a
 rate that steps), the lagged errors exceed what both claim, and :meth:`TrendScore.
 forecast_scale` (their mean, forgotten over :data:`FORECAST_MEMORY` windows, at least 1)
-is the factor by which the remaining life's rate and growth-law variances are widened
-(:meth:`.pipeline.EstimatorStage.record`). Measured with the windows read right
+is the factor by which the variance of the rate the remaining life extrapolates with is
+widened (:meth:`.pipeline.EstimatorStage.record`). Measured with the windows read right
 (``bench_accuracy.py``, seed 1, mean per unit over 25-75 % of life): 0.77 on the model's
 simulator, 0.82 on the independent generator, 3.3 on the third generator (pooled 6.2).
 """
