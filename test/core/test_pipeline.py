@@ -280,6 +280,31 @@ def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn
         assert 'wear rate at this duty' not in stage.process(record)[2]
 
 
+def test_the_record_widens_the_rate_by_how_far_the_lagged_predictions_fell_short(windows):
+    # Where both models' predictions eight windows ahead miss by more than they claim
+    # (trend_score.TrendScore.forecast_scale), the remaining life extrapolates with the
+    # rate's variance times that factor, its correlations kept; the wear stays the filter's.
+    stage = EstimatorStage(PARAMS)
+    run(stage, windows[:30])
+    est = stage.estimator
+    assert est.forecast_scale == 1.0
+    calibrated = stage.record(windows[29].t_end)
+    assert calibrated['var_log_rate'] == pytest.approx(est.P[1, 1])
+    est._scoring.forecast = [40.0, 4.0 * 40.0 + 3.0 * 8.0]     # a mean of 4 with the prior
+    assert est.forecast_scale == pytest.approx(4.0)
+    wide = stage.record(windows[29].t_end)
+    assert wide['var_log_rate'] == pytest.approx(4.0 * calibrated['var_log_rate'])
+    assert wide['cov_wear_log_rate_m'] == pytest.approx(2.0 * calibrated['cov_wear_log_rate_m'])
+    assert wide['var_wear_m2'] == calibrated['var_wear_m2']
+    assert wide['rate_scale_std'] > calibrated['rate_scale_std']
+    # The wear model's share of the remaining life is the wider (the growth law's is not
+    # widened: here the model's alone).
+    life = LifeStage(PARAMS)
+    narrow, _, _ = life.process({**calibrated, 'trend_probability': 0.0})
+    widened, _, _ = life.process({**wide, 'trend_probability': 0.0})
+    assert widened['p90_s'] - widened['p10_s'] > 1.3 * (narrow['p90_s'] - narrow['p10_s'])
+
+
 def test_the_duty_uncertainty_of_the_record_widens_the_interval(worn_record):
     stage = LifeStage(PARAMS)
     narrow, _, _ = stage.process({**worn_record, 'duty_rate_rel_std': 0.0})
