@@ -39,6 +39,7 @@ def test_a_state_survives_a_json_round_trip_bit_for_bit(params):
         restored.step(f)
         assert np.array_equal(restored.x, est.x) and np.array_equal(restored.P, est.P)
         assert restored.trend_probability == est.trend_probability
+        assert restored.forecast_scale == est.forecast_scale
 
 
 def test_a_state_with_a_service_time_taken_continues_with_it(params):
@@ -64,6 +65,7 @@ def test_a_state_of_other_parameters_is_refused(params):
     ({'components': [[0.0, [1.0], [1.0]]]}, 'state is malformed: ValueError'),
     ({'service_verdict': 'yes'}, 'state is malformed'),
     ({'score_settle': 99}, 'score_settle must be 0 .. 9, got 99'),
+    ({'forecast_errors': [1.0, -2.0]}, 'forecast_errors must be two finite sums >= 0'),
 ])
 def test_a_malformed_state_is_refused_naming_what_is_wrong(params, change, message):
     state = {**WearEstimator(params).state_dict(), **change}
@@ -77,3 +79,12 @@ def test_a_state_from_before_the_service_time_restores_as_taken_or_not_given(par
         del state[key]
     restored = restore_estimator(params, state)
     assert not restored.service_pending and restored.service_verdict is None
+
+
+def test_a_state_from_before_the_lagged_errors_were_kept_starts_them_afresh(params):
+    est, _ = stepped_estimator(params)
+    state = json.loads(json.dumps(est.state_dict()))
+    assert state['forecast_errors'][0] > 0.0
+    del state['forecast_errors']
+    restored = restore_estimator(params, state)
+    assert restored._scoring.forecast == [0.0, 0.0] and restored.forecast_scale == 1.0
