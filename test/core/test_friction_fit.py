@@ -51,6 +51,18 @@ def test_friction_the_effort_carries_is_identified_and_taken_out_of_the_torque()
                                                            rel=0.05)
 
 
+def _through_gearing(eta, samples):
+    """Simulate a gravity-loaded joint; return it and its drive's effort at efficiency eta."""
+    cfg = SimConfig(load='gravity', load_torque_nm=470.0, effort_noise_nm=7.8,
+                    rate_hz=500.0, initial_wear_m=10e-6, aging_factor=0.0, exact_mesh=False,
+                    seed=4)
+    b = JointSimulator(PARAMS, cfg).step(samples)
+    moving = np.tanh(b.link_velocity / 0.01)
+    driving = np.maximum(np.sign(b.effort) * moving, 0.0)
+    back = np.maximum(-np.sign(b.effort) * moving, 0.0)
+    return b, b.effort * (1.0 + (1.0 / eta - 1.0) * driving - (1.0 - eta) * back)
+
+
 @pytest.mark.parametrize('eta', [0.8, 0.7])
 def test_a_drive_torque_through_a_gearing_of_efficiency_eta_reads_the_lost_motion_right(eta):
     # A drive reports T/eta while it drives the load and T*eta while the load drives it
@@ -59,14 +71,7 @@ def test_a_drive_torque_through_a_gearing_of_efficiency_eta_reads_the_lost_motio
     # bins where the lost motion is read: 0.4-1.2 arcmin low there, and here 78 % low.
     # The fit now weighs efficiencies 1 to 0.65 as a factor of the rigid-body load and
     # divides it out.
-    cfg = SimConfig(load='gravity', load_torque_nm=470.0, effort_noise_nm=7.8,
-                    rate_hz=500.0, initial_wear_m=10e-6, aging_factor=0.0, exact_mesh=False,
-                    seed=4)
-    b = JointSimulator(PARAMS, cfg).step(60000)
-    moving = np.tanh(b.link_velocity / 0.01)
-    driving = np.maximum(np.sign(b.effort) * moving, 0.0)
-    back = np.maximum(-np.sign(b.effort) * moving, 0.0)
-    effort = b.effort * (1.0 + (1.0 / eta - 1.0) * driving - (1.0 - eta) * back)
+    b, effort = _through_gearing(eta, 60000)
     stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO, max_gap_s=0.05)
     analyzer = WindowAnalyzer(PARAMS)
     feats = analyzer.update(stream, effort, b.link_velocity) + analyzer.flush()
@@ -94,14 +99,7 @@ def test_the_friction_taken_out_is_the_map_from_effort_to_torque_not_a_loss_at_e
     # with the load and restarted the pool at about every other window of a
     # third-generator base (8 of its 153 windows read a lost motion).
     eta = 0.75
-    cfg = SimConfig(load='gravity', load_torque_nm=470.0, effort_noise_nm=7.8,
-                    rate_hz=500.0, initial_wear_m=10e-6, aging_factor=0.0, exact_mesh=False,
-                    seed=4)
-    b = JointSimulator(PARAMS, cfg).step(40000)
-    moving = np.tanh(b.link_velocity / 0.01)
-    driving = np.maximum(np.sign(b.effort) * moving, 0.0)
-    back = np.maximum(-np.sign(b.effort) * moving, 0.0)
-    effort = b.effort * (1.0 + (1.0 / eta - 1.0) * driving - (1.0 - eta) * back)
+    b, effort = _through_gearing(eta, 40000)
     starts = np.arange(0, b.t.size, 1000)
     ends = np.append(starts[1:], b.t.size)
     win = np.repeat(np.arange(starts.size), ends - starts)
