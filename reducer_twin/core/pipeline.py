@@ -286,17 +286,17 @@ class EstimatorStage:
         """
         Return the current estimate as a ``wear`` record.
 
-        Parameters
-        ----------
-        stamp_s : float
-            Stamp of the record [s].
-
         The variance of ``ln s`` the remaining life extrapolates with is the estimator's
         times its forecast scale (:attr:`.estimator.WearEstimator.forecast_scale`: how
         far both models' predictions eight windows ahead fell short of what they
         claimed), its correlations kept; the wear, the lost motion and the growth law
         are the estimator's (the law's samples are not widened: how far its exponent
         should be is not measured).
+
+        Parameters
+        ----------
+        stamp_s : float
+            Stamp of the record [s].
 
         Returns
         -------
