@@ -505,8 +505,9 @@ def estimate(run, params, config=None):
     dict of ndarray
         Per window: ``wear``, ``wear_std``, ``lm``, ``lm_std`` (estimated lost
         motion), ``p10``, ``p50``, ``p90``, ``pit`` (share of predicted lives
-        below the true one), ``nis`` (NaN when not updated), ``usable``; and ``rho``,
-        the learnt noise scale after the last window (one value).
+        below the true one), ``nis`` (NaN when not updated), ``usable``; and ``rho``
+        and ``forecast``, the learnt noise scale and the forecast scale after the last
+        window (one value each).
 
     """
     stage = EstimatorStage(params, config)
@@ -539,6 +540,7 @@ def estimate(run, params, config=None):
         out['nis'].append(result.nis if result.status in ('accepted', 'recovered') else np.nan)
         out['usable'].append(np.isfinite(f.lost_motion))
     out['rho'] = [stage.estimator.noise_scale]
+    out['forecast'] = [getattr(stage.estimator, 'forecast_scale', math.nan)]
     return {k: np.array(v, dtype=float) for k, v in out.items()}
 
 
@@ -580,6 +582,7 @@ def evaluate(run, est):
     out['p50_60'] = (est['p50'][k60] - true_rul[k60]) / true_rul[k60]
     out['usable'] = int(est['usable'].sum())
     out['rho'] = float(est['rho'][-1]) if 'rho' in est else math.nan
+    out['forecast'] = float(est['forecast'][-1]) if 'forecast' in est else math.nan
     out['windows'] = int(est['usable'].size)
     return out
 
@@ -638,6 +641,12 @@ def report_case(name, results, unit_name):
     if rho.size:
         print(f'  learnt noise scale (observed over reported window variance) at the end of '
               f'life: median {np.median(rho):.2f}, {np.min(rho):.2f}-{np.max(rho):.2f}')
+    scale = np.array([r.get('forecast', math.nan) for r in results])
+    scale = scale[np.isfinite(scale)]
+    if scale.size:
+        print(f"  forecast scale (lagged predictions' squared error in their sds, at least 1) at "
+              f'the end of life: median {np.median(scale):.2f}, 90th pct '
+              f'{np.quantile(scale, 0.9):.2f}, {np.min(scale):.2f}-{np.max(scale):.2f}')
     print(f'  NEES mean {np.mean(cat["nees"]):.2f} (median {np.median(cat["nees"]):.2f}) '
           f'[0.5, 2]; NIS mean {np.mean(cat["nis"]):.2f} (median {np.median(cat["nis"]):.2f}, '
           f'{cat["nis"].size} updates)')

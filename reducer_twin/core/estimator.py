@@ -585,6 +585,15 @@ def prior_components(config, new_unit_probability=None):
     return lw - _logsumexp(lw), np.array(means), np.array(covs)
 
 
+def lognormal_sd(mu, var):
+    """
+    Return the standard deviation of ``exp(X)``, ``X ~ N(mu, var)`` (a rate scale from ``ln s``).
+
+    ``sqrt((exp(var) - 1)·exp(2·mu + var))``.
+    """
+    return math.sqrt(math.expm1(var) * math.exp(2.0 * mu + var))
+
+
 def _normal_score(t, dof):
     """
     Return the normal score of a Student-t value of ``dof`` degrees of freedom (Wallace 1959).
@@ -1183,8 +1192,7 @@ class WearEstimator:
     @property
     def rate_scale_std(self):
         """Return the standard deviation of the (log-normal) rate scale."""
-        mu, var = self._x[1], self._Px[1, 1]
-        return math.sqrt(math.expm1(var) * math.exp(2.0 * mu + var))
+        return lognormal_sd(self._x[1], self._Px[1, 1])
 
     @property
     def baseline(self):

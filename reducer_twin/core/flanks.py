@@ -43,7 +43,7 @@ accelerations, a payload changed) under the same friction and efficiency keeps t
 its samples are placed in their flank groups by the same map. (The pool's map was taken at
 its first window's load and this window's at its own, so a steady efficiency under a
 changing load restarted the pool of a third-generator base, loaded by its accelerations
-alone, at about every other window: 8 of its 153 windows read a lost motion.)
+alone, at about every other window: 8 of its 153 windows read a lost motion, counted once.)
 """
 
 _POOL_JUMP = 0.01

@@ -18,6 +18,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter
+from .estimator import lognormal_sd
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
@@ -308,12 +309,12 @@ class EstimatorStage:
         x, P = est.x, est.P
         trend = est.growth_trend()
         lm, lm_std = est.lost_motion(trend)
-        widen = math.sqrt(est.forecast_scale)
-        P = _widened(P, (1,), widen)
-        rate_std = math.sqrt(math.expm1(P[1, 1]) * math.exp(2.0 * x[1] + P[1, 1]))
+        widen = math.sqrt(est.forecast_scale)     # P is a copy: the filter's stays
+        P[1, :] *= widen
+        P[:, 1] *= widen
         rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
-            'rate_scale': est.rate_scale, 'rate_scale_std': rate_std,
+            'rate_scale': est.rate_scale, 'rate_scale_std': lognormal_sd(x[1], P[1, 1]),
             'duty_rate_m_per_s': est.duty_rate, 'lost_motion_rad': lm,
             'lost_motion_obs_rad': self.last_observation,
             'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected,
@@ -331,13 +332,6 @@ class EstimatorStage:
         for (i, j), key in _TREND_COVARIANCE_KEYS.items():
             rec[key] = float(cov[i, j])
         return rec
-
-
-def _widened(cov, rows, factor):
-    """Return ``cov`` with the sds of ``rows`` times ``factor``, the correlations kept."""
-    scale = np.ones(cov.shape[0])
-    scale[list(rows)] = factor
-    return cov * np.outer(scale, scale)
 
 
 _COVARIANCE_KEYS = {

@@ -75,7 +75,7 @@ def test_the_pool_keeps_windows_whose_load_differs_under_the_same_friction_and_e
     # A base loaded by its accelerations, or a payload changed: the RMS load moves from
     # window to window while the map from effort to torque stays. Counting the efficiency's
     # loss at each window's own load restarted the pool at about every other window of a
-    # third-generator base (8 of its 153 windows read a lost motion; now 21).
+    # third-generator base (8 of its 153 windows read a lost motion, counted once; now 20).
     taken = np.array([[20.0, 5.0, 0.5, 0.75, load] for load in (40.0, 250.0, 600.0)])
     pooled, own = _pool_counts(taken)
     np.testing.assert_allclose(pooled, np.cumsum(own))
