@@ -514,7 +514,7 @@ def estimate(run, params, config=None):
     life = LifeStage(params)
     curve = lost_motion_curve(params)
     out = {k: [] for k in ('wear', 'wear_std', 'lm', 'lm_std', 'p10', 'p50', 'p90', 'pit',
-                           'nis', 'usable')}
+                           'nis', 'usable', 'scale', 'rho_w')}
     out['rho'] = []
     fields = TE_FEATURES.fields
     for row, t_op in zip(run.records, run.t_end):
@@ -539,6 +539,8 @@ def estimate(run, params, config=None):
         out['pit'].append(float(np.mean(pred.samples < true_rul)))
         out['nis'].append(result.nis if result.status in ('accepted', 'recovered') else np.nan)
         out['usable'].append(np.isfinite(f.lost_motion))
+        out['scale'].append(record.get('forecast_scale', stage.estimator.forecast_scale))
+        out['rho_w'].append(stage.estimator.noise_scale)
     out['rho'] = [stage.estimator.noise_scale]
     out['forecast'] = [getattr(stage.estimator, 'forecast_scale', math.nan)]
     return {k: np.array(v, dtype=float) for k, v in out.items()}
@@ -569,7 +571,8 @@ def evaluate(run, est):
     err = (value - truth)[sel]
     out = {'err': err, 'rel_err': err / truth[sel], 'nees': (err / sd[sel]) ** 2,
            'below': (true_rul < est['p10'])[sel], 'above': (true_rul > est['p90'])[sel],
-           'pit': est['pit'][sel], 'nis': est['nis'][np.isfinite(est['nis'])]}
+           'pit': est['pit'][sel], 'nis': est['nis'][np.isfinite(est['nis'])],
+           'scale': est['scale'][sel], 'rho_w': est['rho_w'][sel]}
     before = true_rul > 0.0
     t, p50, r = run.t_end[before], est['p50'][before], true_rul[before]
     t0 = np.concatenate([[0.0], t])
@@ -603,10 +606,27 @@ def _pct(x):
     return f'{100.0 * x:.0f} %'
 
 
+def _coverage_by(cat, key, name, edges):
+    """
+    Print P10-P90 coverage and NEES of the evaluations binned by one of the twin's signals.
+
+    Whether a signal the twin has at the time (the forecast scale, the learnt noise
+    scale) tells the evaluations whose interval misses from those whose does not: a
+    calibrated interval covers 80 % in every bin.
+    """
+    for lo, hi in zip(edges, edges[1:] + (math.inf,)):
+        k = (cat[key] >= lo) & (cat[key] < hi)
+        if k.any():
+            below, above = cat['below'][k].mean(), cat['above'][k].mean()
+            print(f'  {name} {lo:g}-{hi:g}: {_pct(k.mean())} of evaluations, P10-P90 coverage '
+                  f'{_pct(1.0 - below - above)} (below {_pct(below)}, above {_pct(above)}), '
+                  f'NEES {np.mean(cat["nees"][k]):.2f}')
+
+
 def report_case(name, results, unit_name):
     """Print the figures of one case; return them as a dict."""
     cat = {k: np.concatenate([r[k] for r in results]) for k in
-           ('err', 'rel_err', 'nees', 'below', 'above', 'pit', 'nis')}
+           ('err', 'rel_err', 'nees', 'below', 'above', 'pit', 'nis', 'scale', 'rho_w')}
     al50 = np.mean([r['al50'] for r in results])
     al75 = np.mean([r['al75'] for r in results])
     p50_60 = np.array([r['p50_60'] for r in results])
@@ -647,6 +667,8 @@ def report_case(name, results, unit_name):
         print(f"  forecast scale (lagged predictions' squared error in their sds, at least 1) at "
               f'the end of life: median {np.median(scale):.2f}, 90th pct '
               f'{np.quantile(scale, 0.9):.2f}, {np.min(scale):.2f}-{np.max(scale):.2f}')
+    _coverage_by(cat, 'scale', 'forecast scale', (1.0, 1.5, 2.0, 3.0))
+    _coverage_by(cat, 'rho_w', 'noise scale', (0.0, 1.5, 2.5, 4.0))
     print(f'  NEES mean {np.mean(cat["nees"]):.2f} (median {np.median(cat["nees"]):.2f}) '
           f'[0.5, 2]; NIS mean {np.mean(cat["nis"]):.2f} (median {np.median(cat["nis"]):.2f}, '
           f'{cat["nis"].size} updates)')
