@@ -77,6 +77,9 @@ def estimator_status(stage, rejected, live=None):
               # How the windows scatter against their reported sd (the ratio of variances
               # the observation noise is scaled by): well above 1, a noisy effort.
               'window_noise_scale': est.noise_scale,
+              # How far both growth models' predictions eight windows ahead fell short of
+              # the sd they claimed (1: as claimed); it widens the remaining life's rate.
+              'forecast_scale': est.forecast_scale,
               'rejected_messages': rejected,
               'state_writes_failed': writer.failures if writer else 0,
               'state_writes_recovered': writer.recoveries if writer else 0,

@@ -21,7 +21,7 @@ from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
-from reducer_twin.core.units import HOUR
+from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.io.state_file import backup_path, decode_state
 from reducer_twin.msg_adapters.layouts import record_values, TE_BATCH, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
@@ -214,6 +214,19 @@ def test_the_diagnostics_say_how_the_windows_scatter_against_their_reported_sd(
     assert learnt != 1.0, 'twelve windows teach the noise scale something'
     status = est.status(lambda s: ros.key_values(s)['updates'] == '12')
     assert float(ros.key_values(status)['window_noise_scale']) == pytest.approx(learnt, rel=1e-4)
+
+
+def test_the_diagnostics_say_how_far_the_forecasts_fell_short(ros, tmp_path, records):
+    # Windows that jump between two levels every five: no growth law foresees them.
+    jumping = [dict(r, lost_motion_rad=r['lost_motion_rad'] + 0.3 * ARCMIN * (k % 10 >= 5))
+               for k, r in enumerate(records)]
+    est = Estimator(ros, tmp_path)
+    est.send(jumping)
+    est.latest(est.wear, jumping[-1]['window_end_s'])
+    scale = est.node.stage.estimator.forecast_scale
+    assert scale > 1.1, 'forecasts eight windows ahead missed the jumps'
+    status = est.status(lambda s: ros.key_values(s)['updates'] == str(len(jumping)))
+    assert float(ros.key_values(status)['forecast_scale']) == pytest.approx(scale, rel=1e-4)
 
 
 def test_the_diagnostics_say_the_service_time_and_what_became_of_it(ros, tmp_path, records):
