@@ -10,6 +10,7 @@ the bag go to its list (:func:`warn`).
 from dataclasses import replace
 
 import numpy as np
+from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
 from reducer_twin.core.ingest import CLOCK_SCATTER
 from reducer_twin.core.ingest import retimed_message, step_scatter
 from reducer_twin.io.mcap_reader import ReadWarning
@@ -223,8 +224,9 @@ def merge_partial_messages(batch):
                            batch.frame_id, log, ())
 
 
-def _read_worker(chunks, queue):
+def _read_worker(chunks, queue, parent):
     """Read and decode the chunks in a forked process; end with the counts and warnings."""
+    end_with_parent(parent)
     try:
         for chunk in chunks:
             queue.put(chunk)
@@ -258,7 +260,7 @@ class ForkedBagChunks:
         self.step_scatter = chunks.step_scatter
         self._queue = ctx.Queue(maxsize=3)
         self._proc = ctx.Process(target=_read_worker, name='reducer-twin-reader',
-                                 args=(chunks, self._queue), daemon=True)
+                                 args=(chunks, self._queue, parent_of_fork()), daemon=True)
         self._proc.start()
 
     def __iter__(self):

@@ -16,6 +16,7 @@ samples and records in the same order.
 from typing import NamedTuple
 
 import numpy as np
+from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
@@ -527,8 +528,9 @@ def _warm_up(params, life_config):
         JointBack('', reducer, life_config).initial(0.0)
 
 
-def _back_worker(inbox, outbox):
+def _back_worker(inbox, outbox, parent):
     """Run the estimator and life stages on records sent by the analysing process."""
+    end_with_parent(parent)
     try:
         # Warm up while the parent imports, opens the bag and reads the first chunk.
         from reducer_twin.core import estimator, life  # noqa: F401
@@ -574,7 +576,8 @@ class WorkerBacks:
         self._inbox = ctx.Queue()
         self._outbox = ctx.Queue()
         self._proc = ctx.Process(target=_back_worker, name='reducer-twin-stages',
-                                 args=(self._inbox, self._outbox), daemon=True)
+                                 args=(self._inbox, self._outbox, parent_of_fork()),
+                                 daemon=True)
         self._proc.start()
         self.states = {}
 

@@ -123,8 +123,10 @@ def _analyze_all(args, settings, outs, worker):
         return results
     import concurrent.futures
     import multiprocessing
+    from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
     pool = concurrent.futures.ProcessPoolExecutor(
-        jobs, mp_context=multiprocessing.get_context('fork'))
+        jobs, mp_context=multiprocessing.get_context('fork'), initializer=end_with_parent,
+        initargs=(parent_of_fork(),))
     with pool:
         futures = {bag: pool.submit(analyze_bag, bag, out, settings, args.overwrite, False)
                    for bag, out in zip(args.bags, outs)}

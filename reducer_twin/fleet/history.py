@@ -382,8 +382,10 @@ def run_local(chains, start, settings, overwrite, jobs, worker):
         return
     import concurrent.futures
     import multiprocessing
+    from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
     pool = concurrent.futures.ProcessPoolExecutor(
-        min(jobs, len(chains)), mp_context=multiprocessing.get_context('fork'))
+        min(jobs, len(chains)), mp_context=multiprocessing.get_context('fork'),
+        initializer=end_with_parent, initargs=(parent_of_fork(),))
     with pool:
         futures = [pool.submit(_run_chain, items, start.get(robot, {}), settings, overwrite)
                    for robot, items in chains.items()]
