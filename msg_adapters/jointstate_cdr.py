@@ -66,6 +66,14 @@ class JointStateBatch:
     repeated_names : int
         Entries left out because their message named the joint before (the first entry
         of a name counts).
+    named : numpy.ndarray or None
+        int64[J], per column, the messages that named it; None when every message
+        named every column (a column of a name a message lacks is NaN in its row: it
+        is absent, not a bad value).
+    effort_faults : tuple
+        ``(messages, first problem)``: messages whose ``effort[]`` was neither empty nor
+        one per name (their efforts are NaN: which entry a value belongs to cannot be
+        known), and the first one's problem (None when there was none).
 
     """
 
@@ -78,6 +86,8 @@ class JointStateBatch:
     log_time_ns: object = None
     rejected: tuple = ()
     repeated_names: int = 0
+    named: object = None
+    effort_faults: tuple = (0, None)
 
     def __len__(self):
         """Return the number of messages N."""
@@ -122,13 +132,16 @@ class JointStateBatch:
         Returns
         -------
         JointStateBatch
-            The selected messages with the same joint columns.
+            The selected messages with the same joint columns (``named`` kept when
+            they are all of them, reordered).
 
         """
         log = None if self.log_time_ns is None else self.log_time_ns[index]
+        stamps = self.stamps_ns[index]
         return JointStateBatch(
-            self.stamps_ns[index], self.names, self.position[index], self.velocity[index],
-            self.effort[index], self.frame_id, log, ())
+            stamps, self.names, self.position[index], self.velocity[index],
+            self.effort[index], self.frame_id, log, (),
+            named=self.named if stamps.shape[0] == len(self) else None)
 
 
 def empty_batch(names=()):
@@ -679,6 +692,7 @@ def _assemble(n, pieces):
     items = sorted(pieces.items, key=lambda item: int(item[0][0]) if item[0].size else n)
     first_layout = items[0][1]
     repeated = 0
+    faults = _effort_faults(items)
     for k, (index, layout, stamps, values) in enumerate(items):
         names = tuple(dict.fromkeys(layout.names))
         if len(names) != len(layout.names):  # a name given twice: its first entry counts
@@ -691,7 +705,7 @@ def _assemble(n, pieces):
         shape = (n, len(layout.names))
         out = [v if v is not None else np.full(shape, np.nan) for v in values]
         return JointStateBatch(stamps, layout.names, *out, frame_id=layout.frame_id,
-                               repeated_names=repeated)
+                               repeated_names=repeated, effort_faults=faults)
     columns = {}
     for _, layout, _, _ in items:
         for name in layout.names:
@@ -703,15 +717,33 @@ def _assemble(n, pieces):
     n_out = int(keep.sum())
     stamps_out = np.zeros(n_out, np.int64)
     out = [np.full((n_out, len(columns)), np.nan) for _ in FIELDS]
+    named = np.zeros(len(columns), np.int64)
     for index, layout, stamps, values in items:
         rows = row_of[index]
         stamps_out[rows] = stamps
         cols = np.array([columns[name] for name in layout.names], np.int64)
+        named[cols] += index.shape[0]
         for target, value in zip(out, values):
             if value is not None:
                 target[rows[:, None], cols[None, :]] = value
     return JointStateBatch(stamps_out, tuple(columns), *out, frame_id=first_layout.frame_id,
-                           rejected=tuple(sorted(pieces.rejected)), repeated_names=repeated)
+                           rejected=tuple(sorted(pieces.rejected)), repeated_names=repeated,
+                           named=None if (named == n_out).all() else named,
+                           effort_faults=faults)
+
+
+def _effort_faults(items):
+    """Count the messages whose effort[] is neither empty nor one per name; the first's."""
+    count, first, first_index = 0, None, None
+    for index, layout, _, _ in items:
+        entries = layout.fields[2][1]
+        if entries and entries != len(layout.names) and index.size:
+            count += int(index.size)
+            if first_index is None or int(index[0]) < first_index:
+                first_index = int(index[0])
+                first = (f'effort[] has {entries} entries for {len(layout.names)} names (a '
+                         'JointState has one per name)')
+    return count, first
 
 
 def concat_batches(batches):
@@ -739,6 +771,16 @@ def concat_batches(batches):
             names.setdefault(name, len(names))
     names = tuple(names)
     same = all(batch.names == names for batch in batches)
+    named = None
+    if not same or any(b.named is not None for b in batches):
+        named = np.zeros(len(names), np.int64)
+        for batch in batches:
+            cols = [names.index(name) for name in batch.names]
+            named[cols] += batch.named if batch.named is not None else len(batch)
+        if (named == sum(len(b) for b in batches)).all():
+            named = None
+    faults = sum(b.effort_faults[0] for b in batches)
+    first = next((b.effort_faults[1] for b in batches if b.effort_faults[0]), None)
     if same:
         fields = [np.concatenate([getattr(b, f) for b in batches]) for f in FIELDS]
     else:
@@ -757,4 +799,5 @@ def concat_batches(batches):
     return JointStateBatch(np.concatenate([b.stamps_ns for b in batches]), names, *fields,
                            frame_id=frame_id, log_time_ns=logs,
                            rejected=tuple(r for b in batches for r in b.rejected),
-                           repeated_names=sum(b.repeated_names for b in batches))
+                           repeated_names=sum(b.repeated_names for b in batches),
+                           named=named, effort_faults=(faults, first))

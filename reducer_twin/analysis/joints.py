@@ -82,19 +82,28 @@ def check_configured_topics(bag, settings):
                            f'found: {_topic_list(bag)}')
 
 
-def _first_names(bag, topic, malformed=None):
-    """Joint names of the first readable messages of a topic (count malformed ones before)."""
+def _first_names(bag, topic, malformed=None, every=False):
+    """
+    Joint names of the first readable messages of a topic (count malformed ones before).
+
+    With ``every``, the names of all its messages, in order of first appearance: a name
+    the first messages lack (a second broadcaster that starts late) is found too, at
+    the cost of reading the whole topic.
+    """
     batches = bag.iter_joint_states([topic])
+    names = {}
     try:
         for _, decoded in batches:
             if decoded.rejected and malformed is not None:
                 count, first = malformed.get(topic, (0, decoded.rejected[0][1]))
                 malformed[topic] = (count + len(decoded.rejected), first)
             if len(decoded):
-                return decoded.names
+                if not every:
+                    return decoded.names
+                names.update(dict.fromkeys(decoded.names))
     finally:
         batches.close()
-    return ()
+    return tuple(names)
 
 
 def plan_joints(bag, settings):
@@ -129,7 +138,24 @@ def plan_joints(bag, settings):
         If the bag has no JointState topic (naming the topics it has), no pairs, or
         lacks a configured joint or topic.
 
+    Notes
+    -----
+    The names are those of each topic's first readable messages (one storage chunk):
+    reading every message to plan would cost the analysis a second read. A pair the
+    first messages lack is found by the analysis as it reads (:func:`late_joints`); a
+    bag whose first messages give no pair, or lack a configured joint, is planned
+    again from the names of all its messages before it is refused.
+
     """
+    try:
+        return _plan_joints(bag, settings, every=False)
+    except BagError:
+        # A joint may first appear later in the recording (a second broadcaster that
+        # starts late): the whole topics are read before the bag is refused.
+        return _plan_joints(bag, settings, every=True)
+
+
+def _plan_joints(bag, settings, every):
     states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
     if not states:
         raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
@@ -138,7 +164,7 @@ def plan_joints(bag, settings):
 
     def names_of(topic):
         if topic not in names:
-            names[topic] = _first_names(bag, topic, malformed)
+            names[topic] = _first_names(bag, topic, malformed, every)
         return names[topic]
 
     suffix = settings.motor_suffix
@@ -179,6 +205,47 @@ def plan_joints(bag, settings):
                    f'<joint>{suffix} in one JointState message, or a motor JointState topic '
                    f'(twin.motor_topic in --config){hint}; JointState topics and names: '
                    f'{found}')
+
+
+def late_joints(plan, seen, settings):
+    """
+    Plan the pairs an analysis met that its plan, made from the first messages, lacks.
+
+    Parameters
+    ----------
+    plan : JointPlan
+        The plan analysed (entry names with its ``prefix``).
+    seen : dict of str to iterable of str
+        Per topic of the plan, every entry name its messages carried (prefixed).
+    settings : AnalysisSettings
+        Suffix and configured joints.
+
+    Returns
+    -------
+    JointPlan or None
+        The same topics with the joints found late (the motor/link pairing rules of
+        :func:`plan_joints`); None when there is none, or ``twin.joints`` chose the
+        joints.
+
+    """
+    if settings.joints is not None:
+        return None
+    suffix = settings.motor_suffix
+    link = [n for n in seen.get(plan.link_topic, ()) if n not in plan.joints]
+    if plan.motor_topic is None:
+        have = set(seen.get(plan.link_topic, ()))
+        joints = [n for n in link if n + suffix in have]
+        entries = [n + suffix for n in joints]
+    else:
+        # The motor topic's entries carry no prefix beyond the plan's own.
+        motor = [n[len(plan.prefix):] for n in seen.get(plan.motor_topic, ())]
+        bare, entries = _motor_entries([n[len(plan.prefix):] for n in link], motor, suffix)
+        joints = [plan.prefix + n for n in bare]
+        entries = [plan.prefix + n for n in entries]
+    if not joints:
+        return None
+    return JointPlan(plan.link_topic, plan.motor_topic, tuple(joints), tuple(entries),
+                     prefix=plan.prefix)
 
 
 def _motor_entries(link_names, motor_names, suffix):

@@ -45,12 +45,14 @@ results are identical.
 """
 
 from dataclasses import replace
+from datetime import datetime, timezone
 import math
 from pathlib import Path
 import time
 
 import numpy as np
-from reducer_twin.analysis.joints import check_configured_topics, plan_joints, robot_plans
+from reducer_twin.analysis.joints import check_configured_topics, late_joints, plan_joints
+from reducer_twin.analysis.joints import robot_plans
 from reducer_twin.analysis.reading import BagChunks, ForkedBagChunks, joint_columns
 from reducer_twin.analysis.reading import stamp_scatter, warn
 from reducer_twin.analysis.results import BagResult, is_damage, JointResult
@@ -223,11 +225,39 @@ def motor_direction(t_link, link, t_motor, motor):
     return math.copysign(1.0, product) if product else math.nan
 
 
-class _Output:
-    """Channels and writes of the derived bag."""
+def stamps_before_epoch(bag, topic, earliest_ns):
+    """
+    Return the error of header stamps before 1970-01-01 (the derived bag is logged at them).
 
-    def __init__(self, writer, joints, truth_topics, diagnostics=None):
+    Parameters
+    ----------
+    bag : Bag
+        The recording (its path is named).
+    topic : str
+        The JointState topic whose stamps the derived messages carry.
+    earliest_ns : int
+        The earliest stamp seen [ns since 1970-01-01 UTC], < 0.
+
+    Returns
+    -------
+    InvalidInput
+        One line naming the bag, the topic, the stamp and the allowed range.
+
+    """
+    when = datetime.fromtimestamp(earliest_ns // 1_000_000_000, timezone.utc)
+    return InvalidInput(
+        f'{bag.path}: the header stamps on {topic} go back to {earliest_ns * 1e-9:.3f} s '
+        f'({when:%Y-%m-%d %H:%M:%S} UTC), before 1970; expected stamps >= 0 s (1970-01-01 '
+        '00:00:00 UTC or later): the derived bag is logged at the stamps, and a log time '
+        'cannot be negative')
+
+
+class _Output:
+    """Channels and writes of the derived bag (logged at the stamps of ``stamps_of``)."""
+
+    def __init__(self, writer, joints, truth_topics, diagnostics=None, stamps_of=None):
         self.writer = writer
+        self.stamps_of = stamps_of      # (bag, topic) whose header stamps the log times are
         self.channels = {}
         check_topic_tokens(joints)
         for joint in joints:
@@ -244,16 +274,91 @@ class _Output:
     def arrays(self, joint, suffix, layout, log_ns, values):
         values = np.asarray(values, dtype=np.float64)
         if values.shape[0]:
-            self.writer.write_batch(self.channels[joint, suffix], np.asarray(log_ns, np.int64),
+            self.writer.write_batch(self.channels[joint, suffix], self._stamped(log_ns),
                                     *encode_multiarrays(layout, values))
 
-    def raw(self, channel, log_ns, payloads):
+    def raw(self, channel, log_ns, payloads, stamped=True):
+        """Write serialised messages, logged at header stamps unless not ``stamped``."""
         if not payloads:
             return
         bounds = np.zeros(len(payloads) + 1, np.int64)
         np.cumsum([len(p) for p in payloads], out=bounds[1:])
-        self.writer.write_batch(channel, np.asarray(log_ns, np.int64), b''.join(payloads),
-                                bounds)
+        log_ns = self._stamped(log_ns) if stamped else np.asarray(log_ns, np.int64)
+        self.writer.write_batch(channel, log_ns, b''.join(payloads), bounds)
+
+    def _stamped(self, log_ns):
+        """Log times taken from header stamps; stamps before 1970 are refused by name."""
+        log_ns = np.asarray(log_ns, np.int64)
+        if log_ns.size and self.stamps_of is not None and log_ns.min() < 0:
+            raise stamps_before_epoch(*self.stamps_of, int(log_ns.min()))
+        return log_ns
+
+
+class _EntryCounts:
+    """
+    Per topic of a plan, the messages that named each entry, and every name met.
+
+    An entry a message does not name (a joint whose broadcaster starts late or stops,
+    a second publisher's joints) is NaN in its row, as a bad value is: the counts tell
+    the two apart (``JointStateBatch.named``), for ``messages`` and ``rejected``.
+    """
+
+    def __init__(self, plan):
+        if plan.motor_topic is None:
+            self.entries = {plan.link_topic: [x for j, m in zip(plan.joints, plan.motor_names)
+                                              for x in (j, m)]}
+        else:
+            self.entries = {plan.link_topic: list(plan.joints),
+                            plan.motor_topic: list(plan.motor_names)}
+        self.rows = dict.fromkeys(self.entries, 0)
+        self.named = {t: np.zeros(len(e), np.int64) for t, e in self.entries.items()}
+        self.finite = {t: np.zeros(len(e), np.int64) for t, e in self.entries.items()}
+        self.seen = {t: {} for t in self.entries}     # every name met, in order
+        self.effort_faults = {}     # topic -> (messages, first problem)
+        self._columns = {}          # topic -> (names of the last batch, their columns)
+
+    def add(self, topic, batch):
+        """Count one chunk's messages of a topic."""
+        if batch is None or not len(batch):
+            return
+        n = len(batch)
+        self.rows[topic] += n
+        last = self._columns.get(topic)
+        if last is None or last[0] is not batch.names:
+            index = {name: k for k, name in enumerate(batch.names)}
+            cols = np.array([index.get(e, -1) for e in self.entries[topic]], np.int64)
+            last = self._columns[topic] = (batch.names, cols, (cols >= 0).all())
+            self.seen[topic].update(dict.fromkeys(batch.names))
+        _, cols, whole = last
+        if batch.named is None:
+            # Merged messages of several publishers carry no count: there an entry is
+            # taken as named where it has a value (as the reader merged them).
+            finite = np.count_nonzero(np.isfinite(batch.position), axis=0)
+            self.finite[topic] += np.where(cols >= 0, finite[cols], 0)
+            if whole:
+                self.named[topic] += n
+            else:
+                self.named[topic] += np.where(cols >= 0, n, 0)
+        else:
+            named = np.where(cols >= 0, batch.named[cols], 0)
+            self.named[topic] += named
+            self.finite[topic] += named
+        count, first = batch.effort_faults
+        if count:
+            before = self.effort_faults.get(topic, (0, first))
+            self.effort_faults[topic] = (before[0] + count, before[1])
+
+    def of(self, topic, columns, chunks):
+        """
+        Return the messages that named, and the rows that lacked, each of some entries.
+
+        Where several publishers' messages were merged (:func:`.reading.
+        merge_partial_messages`: the reader then has counts of names), an entry of a
+        merged message is taken as named where it has a value.
+        """
+        counts = self.finite if chunks.name_messages.get(topic) is not None else self.named
+        named = [int(counts[topic][c]) for c in columns]
+        return named, [self.rows[topic] - k for k in named]
 
 
 class _Run:
@@ -272,7 +377,7 @@ class _Run:
             if bag.topics.get(topic, (None,))[0] == MULTIARRAY:
                 truth[joint] = topic
         self.truth_topics = truth
-        self.out = _Output(writer, plan.joints, truth, diagnostics)
+        self.out = _Output(writer, plan.joints, truth, diagnostics, (bag, plan.link_topic))
         for joint in plan.joints:
             if topic_token(joint) != joint:
                 warn(bag, f'{joint}: its derived topics are {joint_topic(joint, "...")} (a '
@@ -298,6 +403,7 @@ class _Run:
         self.messages_read = 0
         self.angles = {}     # joint -> 'raw' / 'output', as the data show them
         self.span = {}       # joint -> [first, last] stamp of its paired samples [ns]
+        self.entries = _EntryCounts(plan)
         for joint, front in self.fronts.items():
             front.effort_topic = plan.link_topic if settings.effort_source != 'motor' or \
                 not plan.motor_topic else plan.motor_topic
@@ -389,10 +495,16 @@ class _Run:
             if not plan.motor_topic else list(plan.joints)
         for chunk in chunks:
             link = chunk[plan.link_topic]
+            self.entries.add(plan.link_topic, link)
+            if plan.motor_topic:
+                self.entries.add(plan.motor_topic, chunk[plan.motor_topic])
             if len(self.angles) < len(plan.joints):
                 self._resolve_angles(link, chunk[plan.motor_topic] if plan.motor_topic else None,
                                      link_names)
             if not self.started and link is not None and len(link):
+                if link.stamps_ns[0] < 0:   # refused before any work: see stamps_before_epoch
+                    raise stamps_before_epoch(self.bag, plan.link_topic,
+                                              int(link.stamps_ns.min()))
                 self._start(int(link.stamps_ns[0]))
             if plan.motor_topic is None:
                 self._combined(link_clean, link, link_names)
@@ -497,7 +609,8 @@ class _Run:
         for topic, raw in self.bag.iter_raw(list(topics)):
             joint = topics[topic]
             payloads = [raw.payload(i) for i in range(len(raw))]
-            self.out.raw(self.out.channels[joint, 'ground_truth'], raw.log_time_ns, payloads)
+            self.out.raw(self.out.channels[joint, 'ground_truth'], raw.log_time_ns, payloads,
+                         stamped=False)
             for p in payloads:
                 try:
                     rows[joint].append(decode_multiarray(p).values(GROUND_TRUTH))
@@ -528,6 +641,16 @@ class _Run:
                     + (f' and {plan.motor_topic}' if plan.motor_topic else '')
                     + f' ({counts.get("unpaired", 0)} unpaired)')
         return front.analyzer.not_observed_reason(front.effort_topic)
+
+    def _effort_said(self, reason):
+        """Name malformed effort arrays as the cause of a joint's missing effort."""
+        faults = self.entries.effort_faults
+        if reason is None or not reason.startswith('no effort on ') or not faults:
+            return reason
+        said = '; '.join(f'{count:,} of {self.entries.rows[topic]:,} JointState messages '
+                         f'on {topic} are malformed: {first}'
+                         for topic, (count, first) in faults.items())
+        return f'{said}; their efforts are not read: {reason}'
 
     def _note_gaps(self, joint, front):
         """Say how much of a joint's stream fell in holes, not counted as operation."""
@@ -636,6 +759,11 @@ class _Run:
             if count:   # as Bag.read_joint_states reports them
                 warn(self.bag, f'{count} malformed JointState message(s) on '
                      f'{topic} skipped; the first: {chunks.first_problem.get(topic)}')
+        effort_faults = self.entries.effort_faults
+        for topic, (count, first) in effort_faults.items():
+            warn(self.bag, f'{count} malformed JointState message(s) on {topic}: {first}; '
+                 'their efforts are not read (which entry a value belongs to cannot be '
+                 'known), their positions are')
         statuses = []
         last_ns = 0
         for k, (joint, front) in enumerate(self.fronts.items()):
@@ -655,12 +783,18 @@ class _Run:
                           {'pairing': SHARED_STAMPS, 'tick_paired': 0})
             counts.update({k: int(v) for k, v in front.spikes.counts.items()})
             counts['published'] = int(front.samples)
-            malformed = sum(chunks.malformed.values())
+            malformed = sum(chunks.malformed.values()) + sum(
+                count for count, _ in effort_faults.values())
             counts['malformed_messages'] = int(malformed)
+            res.messages = 0
+            for side, _, columns in sides:
+                # An entry a message did not name is absent, not a non-finite value.
+                topic = plan.motor_topic if side == 'motor' else plan.link_topic
+                named, absent = self.entries.of(topic, columns, chunks)
+                res.messages += named[0]     # the joint's own entry: <joint> or its motor
+                counts[f'{side}_non_finite'] = max(
+                    0, counts.get(f'{side}_non_finite', 0) - int(sum(absent)))
             res.counts = counts
-            res.messages = chunks.joint_messages(plan.link_topic, joint) + (
-                chunks.joint_messages(plan.motor_topic, plan.motor_names[k])
-                if plan.motor_topic else 0)
             res.rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
                 counts.get(f'{side}_{r}', 0) for side, _, _ in sides for r in _REPAIRED
                 if r != 'clock_jump')
@@ -676,7 +810,7 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._not_observed(front, counts, sides)
+            res.reason = self._effort_said(self._not_observed(front, counts, sides))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
             self._inputs_said(joint, front)
@@ -766,20 +900,39 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                       'reducer_twin.joints': ','.join(every)}
             needed = DERIVED_BYTES_PER_SAMPLE * sum(
                 len(p.joints) * bag.topics[p.link_topic].count for p in plans)
-            joints, messages, diagnostics = {}, 0, None
+            joints, messages, diagnostics, late = {}, 0, None, []
             with BagDirWriter(out_dir, compression=settings.compression, custom_data=custom,
                               overwrite=overwrite, needed=needed,
                               what='derived bag') as writer:
                 for robot in plans:
-                    topics = [robot.link_topic] + ([robot.motor_topic] if robot.motor_topic
-                                                   else [])
-                    chunks = BagChunks(bag, topics, CHUNK_MESSAGES, robot.prefix)
-                    if reader_process:   # forked before the writer opens its file and threads
-                        chunks = ForkedBagChunks(chunks)
-                    run = _Run(bag, robot, settings, writer, backs, aging, chunks, diagnostics)
+                    run = _analyse_robot(bag, robot, settings, writer, backs, aging,
+                                         diagnostics, reader_process)
+                    chunks = run.chunks
                     diagnostics = run.out.diagnostics
                     joints.update(run.run())
                     messages += run.messages_read
+                    found = late_joints(robot, run.entries.seen, settings)
+                    if found is not None:
+                        late.append(found)
+                states = dict(backs.states)
+                if late:
+                    # Pairs the first messages lacked (a broadcaster that started late):
+                    # the recording is read again for them, as if planned from the start.
+                    every += [j for p in late for j in p.joints]
+                    writer.custom_data['reducer_twin.joints'] = ','.join(every)
+                    backs.configure({j: settings.params_of(j) for j in every}, settings.life,
+                                    initial_states, {j: settings.estimator_of(j) for j in every})
+                    said = list(bag.warnings)
+                    for robot in late:
+                        # Read here: a reader forked now would inherit the writer's threads.
+                        run = _analyse_robot(bag, robot, settings, writer, backs, aging,
+                                             diagnostics, False)
+                        chunks = run.chunks
+                        joints.update(run.run())
+                        states.update(backs.states)
+                    # What the second read says of the topics again is said once.
+                    bag.warnings[len(said):] = [w for w in bag.warnings[len(said):]
+                                                if w not in said]
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):
@@ -791,4 +944,13 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         backs.close()
     return BagResult(Path(path), Path(out_dir), plan, joints, messages,
                      time.perf_counter() - start, aging, warnings,
-                     any(is_damage(w) for w in warnings), dict(backs.states))
+                     any(is_damage(w) for w in warnings), states)
+
+
+def _analyse_robot(bag, plan, settings, writer, backs, aging, diagnostics, reader_process):
+    """Return the analysis of one plan's joints (a :class:`_Run`, not yet run)."""
+    topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
+    chunks = BagChunks(bag, topics, CHUNK_MESSAGES, plan.prefix)
+    if reader_process:   # forked before the writer opens its file and threads
+        chunks = ForkedBagChunks(chunks)
+    return _Run(bag, plan, settings, writer, backs, aging, chunks, diagnostics)

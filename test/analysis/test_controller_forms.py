@@ -26,6 +26,8 @@ from reducer_twin.core.units import ARCMIN
 from reducer_twin.io.bag import BagDirWriter, open_bag, write_bag_dir
 from reducer_twin.msg_adapters.jointstate_cdr import encode_joint_states, JointStateBatch
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import get_typestore, Stores
 
 AGING = 180_000.0
 SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
@@ -632,3 +634,112 @@ def test_stamps_taken_on_arrival_are_re_timed_and_read_like_the_controllers(
     for joint, got in out['joints'].items():
         assert got['observed'] and got['rejected'] <= 5
         assert got['wear_um'] == pytest.approx(clean['joints'][joint]['wear_um'], rel=0.02)
+
+
+JAZZY = get_typestore(Stores.ROS2_JAZZY)
+
+
+def _write_with_rosbags(path, js, names_of=None, effort_of=None):
+    """
+    Write the recording's JointState messages with rosbags' MCAP writer, one by one.
+
+    ``names_of(i)`` gives the entries message ``i`` names (default: all of them), as a
+    broadcaster that starts late or stops publishes them; ``effort_of(i, effort)`` its
+    ``effort[]``. rosbags closes an MCAP chunk at 1 MiB (about 7000 of these messages).
+    """
+    msg, header, time = (JAZZY.types[t] for t in (JOINT_STATE, 'std_msgs/msg/Header',
+                                                  'builtin_interfaces/msg/Time'))
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        writer.set_custom_data(AGING_KEY, repr(AGING))
+        channel = writer.add_connection('/joint_states', JOINT_STATE, typestore=JAZZY)
+        for i, stamp in enumerate(js.stamps_ns.tolist()):
+            names = names_of(i) if names_of else js.names
+            cols = [js.names.index(n) for n in names]
+            effort = js.effort[i, cols]
+            sec, nanosec = divmod(stamp, 1_000_000_000)
+            writer.write(channel, stamp, JAZZY.serialize_cdr(msg(
+                header=header(stamp=time(sec=sec, nanosec=nanosec), frame_id=''),
+                name=list(names), position=js.position[i, cols],
+                velocity=js.velocity[i, cols],
+                effort=effort_of(i, effort) if effort_of else effort), JOINT_STATE))
+    return path
+
+
+LATE = 8_000
+"""Message from which joint_2 is published: after rosbags' first MCAP chunk (about 7000)."""
+
+
+def test_a_joint_whose_broadcaster_starts_late_is_analysed_as_if_planned_from_the_start(
+        original, tmp_path, capsys):
+    # joint_2 and joint_2_motor first appear 32 s into the recording, as when a second
+    # joint_state_broadcaster starts late: joint_2 was planned from the first messages
+    # only and left out without a word (exit 0, joint_1 alone in --json).
+    js = original[0]
+    first = ('joint_1', 'joint_1_motor')
+    late = _write_with_rosbags(tmp_path / 'late', js,
+                               lambda i: js.names if i >= LATE else first)
+    # The same samples with joint_2 named from the first message (NaN until LATE).
+    position = js.position.copy()
+    position[:LATE, [js.names.index('joint_2'), js.names.index('joint_2_motor')]] = np.nan
+    planned = analyze_bag(_rewrite(js, tmp_path, 'planned', position=position),
+                          tmp_path / 'planned_d')
+    code, out, err = _cli_json(late, tmp_path, capsys)
+    assert code == 0 and 'joint_2' in out['joints']
+    got, want = out['joints']['joint_2'], planned.joints['joint_2'].summary()
+    assert got['observed'] is True and got['windows'] == want['windows'] >= 3
+    assert got['wear_um'] == pytest.approx(want['wear_um'], rel=1e-9)
+    assert got['rul_p50_h'] == pytest.approx(want['rul_p50_h'], rel=1e-9)
+    assert got['messages'] == len(js) - LATE and got['rejected'] == 0
+    assert out['joints']['joint_1']['messages'] == len(js)
+    with open_bag(tmp_path / 'd') as derived:
+        assert '/reducer_twin/joint_2/wear' in derived.topics
+        assert derived.metadata['reducer_twin.joints'] == 'joint_1,joint_2'
+
+
+def test_a_joint_configured_in_twin_joints_that_appears_late_is_analysed(
+        original, tmp_path, capsys):
+    # With twin.joints naming it, the bag was refused: "configured joints ['joint_2']
+    # have no motor/link pair".
+    js = original[0]
+    late = _write_with_rosbags(tmp_path / 'late', js, lambda i: js.names if i >= LATE
+                               else ('joint_1', 'joint_1_motor'))
+    config = tmp_path / 'twin.yaml'
+    config.write_text(f'twin:\n  joints: [joint_2]\n  aging_factor: {AGING}\n')
+    code, out, _ = _cli_json(late, tmp_path, capsys, '--config', config)
+    assert code == 0 and list(out['joints']) == ['joint_2']
+    assert out['joints']['joint_2']['observed'] is True
+
+
+def test_messages_and_rejected_leave_out_the_messages_that_do_not_name_the_joint(
+        original, tmp_path, capsys):
+    # joint_2 named by the messages 1000 .. 9999 only (late, then no longer published):
+    # it was reported with every message of the recording, and its absent entries as
+    # rejected non-finite samples (2 per message).
+    js = original[0]
+    bag = _write_with_rosbags(tmp_path / 'some', js, lambda i: js.names if 1000 <= i < 10_000
+                              else ('joint_1', 'joint_1_motor'))
+    code, out, _ = _cli_json(bag, tmp_path, capsys)
+    assert code == 0
+    assert out['joints']['joint_2']['messages'] == 9000
+    assert out['joints']['joint_2']['rejected'] == 0
+    assert out['joints']['joint_1']['messages'] == len(js)
+    assert out['joints']['joint_1']['rejected'] == 0
+
+
+def test_an_effort_array_not_one_per_name_is_named_malformed_and_counted_as_rejected(
+        original, tmp_path, capsys):
+    # effort[] of 2 entries for 4 names in every message read as "no effort on
+    # /joint_states" with rejected 0, where a short position[] is named malformed.
+    js = original[0]
+    bag = _write_with_rosbags(tmp_path / 'short_effort', js,
+                              effort_of=lambda i, effort: effort[[0, 2]])
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert 'effort[] has 2 entries for 4 names' in got['reason']
+        assert got['messages'] == len(js) and got['rejected'] == len(js)
+        assert any(x.startswith(f'WARNING: {joint}: not observed') and 'effort[] has 2'
+                   in x for x in err.splitlines())
+    assert f'{len(js)} malformed JointState message(s) on /joint_states: effort[] has 2 ' \
+        'entries for 4 names' in err
