@@ -584,7 +584,7 @@ class LifeStage:
         if pred.limit_reached:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
         else:
-            message += growth_note(wear_record) + rate_note(wear_record)
+            message += growth_note(wear_record, self.limit) + rate_note(wear_record)
         if level == 'OK' and int(wear_record.get('updates', 0)) == 0:
             # A prediction from the duty alone is no assessment: never 'OK' without evidence.
             level = 'STALE'
@@ -669,7 +669,7 @@ def rate_resolved(wear_record):
     return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2
 
 
-def growth_note(wear_record):
+def growth_note(wear_record, limit=None):
     """
     Say when the observed lost-motion trend departs from the model's curve.
 
@@ -677,18 +677,31 @@ def growth_note(wear_record):
     ----------
     wear_record : mapping
         A ``wear`` record.
+    limit : float, optional
+        The lost-motion limit [rad]: the clause then says how far beyond the exposure
+        seen the law's mean reaches it, ``((limit - β)/k)^(1/g)`` times.
 
     Returns
     -------
     str
         ``''`` while the model's curve is the likelier law, else a clause for
         the life message: the prediction follows the observed trend, with the
-        exponent of its power law in the Archard exposure.
+        exponent of its power law in the Archard exposure and, with ``limit``, how
+        far it is extrapolated. The law is weighed by its predictions a few windows
+        ahead, not by how far it carries: learnt on a short part of a life (a recording
+        of the first 1 % of it), it is extrapolated a hundred times over and its
+        interval is only as good as the power law's form.
 
     """
     p = float(wear_record.get('trend_probability', 0.0))
     if not p > 0.5:
         return ''
     g = float(wear_record['trend_exponent'])
-    return (f'; lost motion grows unlike the wear model (as exposure^{g:.2f}, '
+    note = (f'; lost motion grows unlike the wear model (as exposure^{g:.2f}, '
             f'probability {p:.2f}): the prediction follows the observed trend')
+    beta = float(wear_record.get('trend_new_rad', math.nan))
+    k = float(wear_record.get('trend_growth_rad', math.nan))
+    if limit is not None and k > 0.0 and g > 0.0 and limit > beta + k:
+        note += (f', extrapolated to {((limit - beta) / k) ** (1.0 / g):.0f}x the exposure '
+                 'it was learnt on')
+    return note

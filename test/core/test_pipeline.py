@@ -264,6 +264,18 @@ def test_the_life_message_says_when_the_prediction_follows_the_observed_trend(wo
     assert 'the prediction follows the observed trend' in noted
 
 
+def test_the_life_message_says_how_far_the_observed_trend_is_extrapolated(worn_record):
+    # A law learnt on the first 1 % of a life carries a hundredfold: the engineer is told.
+    law = {**worn_record, 'trend_probability': 0.98, 'trend_exponent': 1.0,
+           'trend_new_rad': 0.45 * ARCMIN, 'trend_growth_rad': 0.05 * ARCMIN}
+    _, _, noted = LifeStage(PARAMS).process(law)
+    # (3 - 0.45) / 0.05 = 51 times the exposure seen at exponent 1.
+    assert noted.endswith('the prediction follows the observed trend, extrapolated to 51x '
+                          'the exposure it was learnt on')
+    _, _, past = LifeStage(PARAMS).process({**law, 'trend_growth_rad': 2.6 * ARCMIN})
+    assert 'extrapolated' not in past, 'a law already past the limit reaches it now'
+
+
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):
     # A twin started on a used unit with a short recording: its rate is the prior's
     # (ln s sd near 2) and its remaining life the model's at this duty (P10 24 000 h on a
