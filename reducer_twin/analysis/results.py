@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import rate_resolved
+from reducer_twin.core.pipeline import growth_law, rate_resolved
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -78,7 +78,11 @@ class JointResult:
             the velocity field, found to be the link angle's rate; ``'link_angle'``: the
             rate of the link angle, where the field is missing or is not that rate; None
             without samples) and ``rate_resolved`` (whether the remaining life rests on
-            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed)
+            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
+            ``growth_law`` (where the remaining life follows the lost motion's observed growth
+            law rather than the wear model's curve: its ``probability``, ``exponent`` and
+            ``extrapolation``, the times the exposure seen it is extrapolated to,
+            :func:`.pipeline.growth_law`; else None)
             and ``service`` (how the service time of a reducer met without state was
             taken: ``hours``, ``taken``, ``rate_scale``; ``taken`` None while too few
             windows have judged it; None without one).
@@ -99,6 +103,8 @@ class JointResult:
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
         out['rate_resolved'] = rate_resolved(wear) if observed and wear else None
+        out['growth_law'] = growth_law(wear, life.get('lost_motion_limit_rad')) \
+            if observed and wear else None
         out['service'] = self.service
         return out
 
@@ -158,7 +164,7 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            'rate_resolved': None, 'service': None}
+                            'rate_resolved': None, 'growth_law': None, 'service': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

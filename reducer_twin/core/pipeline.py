@@ -669,6 +669,42 @@ def rate_resolved(wear_record):
     return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2
 
 
+def growth_law(wear_record, limit=None):
+    """
+    Return the observed growth law a ``wear`` record's remaining life follows, if it does.
+
+    Parameters
+    ----------
+    wear_record : mapping
+        A ``wear`` record.
+    limit : float, optional
+        The lost-motion limit [rad].
+
+    Returns
+    -------
+    dict or None
+        None while the model's curve is the likelier law; else ``probability`` (that the
+        law holds), ``exponent`` (``g`` of ``z = β + k·(A/A_now)^g`` in the Archard
+        exposure) and ``extrapolation``: how many times the exposure seen the law's mean
+        reaches the limit at, ``((limit - β)/k)^(1/g)`` (None without ``limit``, or where
+        the law does not reach it or has passed it). The law is weighed by its
+        predictions a few windows ahead, not by how far it carries: learnt on a short
+        part of a life (a recording of its first 1 %), it is extrapolated a hundred times
+        over, and its interval is only as good as the power law's form there.
+
+    """
+    p = float(wear_record.get('trend_probability', 0.0))
+    if not p > 0.5:
+        return None
+    g = float(wear_record['trend_exponent'])
+    beta = float(wear_record.get('trend_new_rad', math.nan))
+    k = float(wear_record.get('trend_growth_rad', math.nan))
+    reach = None
+    if limit is not None and k > 0.0 and g > 0.0 and limit > beta + k:
+        reach = float(((limit - beta) / k) ** (1.0 / g))
+    return {'probability': p, 'exponent': g, 'extrapolation': reach}
+
+
 def growth_note(wear_record, limit=None):
     """
     Say when the observed lost-motion trend departs from the model's curve.
@@ -679,7 +715,7 @@ def growth_note(wear_record, limit=None):
         A ``wear`` record.
     limit : float, optional
         The lost-motion limit [rad]: the clause then says how far beyond the exposure
-        seen the law's mean reaches it, ``((limit - β)/k)^(1/g)`` times.
+        seen the law is extrapolated (:func:`growth_law`).
 
     Returns
     -------
@@ -687,21 +723,15 @@ def growth_note(wear_record, limit=None):
         ``''`` while the model's curve is the likelier law, else a clause for
         the life message: the prediction follows the observed trend, with the
         exponent of its power law in the Archard exposure and, with ``limit``, how
-        far it is extrapolated. The law is weighed by its predictions a few windows
-        ahead, not by how far it carries: learnt on a short part of a life (a recording
-        of the first 1 % of it), it is extrapolated a hundred times over and its
-        interval is only as good as the power law's form.
+        far it is extrapolated.
 
     """
-    p = float(wear_record.get('trend_probability', 0.0))
-    if not p > 0.5:
+    law = growth_law(wear_record, limit)
+    if law is None:
         return ''
-    g = float(wear_record['trend_exponent'])
-    note = (f'; lost motion grows unlike the wear model (as exposure^{g:.2f}, '
-            f'probability {p:.2f}): the prediction follows the observed trend')
-    beta = float(wear_record.get('trend_new_rad', math.nan))
-    k = float(wear_record.get('trend_growth_rad', math.nan))
-    if limit is not None and k > 0.0 and g > 0.0 and limit > beta + k:
-        note += (f', extrapolated to {((limit - beta) / k) ** (1.0 / g):.0f}x the exposure '
-                 'it was learnt on')
+    note = (f'; lost motion grows unlike the wear model (as exposure^{law["exponent"]:.2f}, '
+            f'probability {law["probability"]:.2f}): the prediction follows the observed '
+            'trend')
+    if law['extrapolation'] is not None:
+        note += f', extrapolated to {law["extrapolation"]:.0f}x the exposure it was learnt on'
     return note

@@ -111,7 +111,9 @@ def fleet_row(reducer, params):
         ``lost_motion_limit_arcmin``, ``rul_censored``, ``rule``, ``live_segments``,
         ``hours_live`` (the part of ``hours_observed`` a live ``wear_estimator`` wrote;
         ``bags`` counts recorded bags only), ``rate_resolved`` (False while the
-        remaining life is the model's wear rate, not the unit's own; None unknown) and
+        remaining life is the model's wear rate, not the unit's own; None unknown),
+        ``growth_law`` (the observed growth law the remaining life follows, as
+        ``analyze --json`` gives it; None otherwise or unknown) and
         ``service_hours`` (the operating time it had before the twin first saw it, where
         the configuration gave one and it was taken; else None).
 
@@ -129,6 +131,7 @@ def fleet_row(reducer, params):
     state = (r.state or {}).get('estimator')
     summary = r.summary or {}
     row['rate_resolved'] = summary.get('rate_resolved')
+    row['growth_law'] = summary.get('growth_law')
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
         if verdict is not None and verdict[0] else None
@@ -199,6 +202,13 @@ def _judge(row, r, state, params):
             else 'watch it longer, or give its service time: service_time_s, the hour meter'
         row['reason'] += ("; the remaining life is the model's wear rate at this duty, the "
                           f"unit's own not yet resolved ({remedy})")
+    law = row['growth_law']
+    if law and law.get('extrapolation'):
+        # The law is weighed by predictions a few windows ahead, not by how far it carries.
+        row['reason'] += (f"; the remaining life follows the lost motion's observed growth "
+                          f"(as exposure^{law['exponent']:.2f}), extrapolated to "
+                          f"{law['extrapolation']:,.0f}x the exposure it was learnt on: "
+                          'its interval holds only if that law does')
 
 
 def rank(rows):

@@ -19,7 +19,8 @@ from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
-from reducer_twin.core.pipeline import features_from_record, LifeConfig, LifeStage
+from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
+from reducer_twin.core.pipeline import LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
@@ -274,6 +275,10 @@ def test_the_life_message_says_how_far_the_observed_trend_is_extrapolated(worn_r
                           'the exposure it was learnt on')
     _, _, past = LifeStage(PARAMS).process({**law, 'trend_growth_rad': 2.6 * ARCMIN})
     assert 'extrapolated' not in past, 'a law already past the limit reaches it now'
+    assert growth_law(law, 3.0 * ARCMIN) == pytest.approx(
+        {'probability': 0.98, 'exponent': 1.0, 'extrapolation': 51.0})
+    assert growth_law(law)['extrapolation'] is None, 'no limit, no reach'
+    assert growth_law({**law, 'trend_probability': 0.4}, 3.0 * ARCMIN) is None
 
 
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):

@@ -108,6 +108,21 @@ def test_an_ok_that_is_the_models_rate_says_so():
     assert row['rate_resolved'] is True and 'wear rate' not in row['reason']
 
 
+def test_a_life_that_follows_the_observed_growth_says_how_far_it_is_extrapolated():
+    # A 300-h recording of a 25 000-h life: the law that won on predictions a few windows
+    # ahead carries the remaining life twenty times the exposure it was learnt on.
+    reducer = _reducer(24000.0)
+    reducer.summary['growth_law'] = {'probability': 0.98, 'exponent': 1.16,
+                                     'extrapolation': 21.8}
+    row = fleet_row(reducer, PARAMS)
+    assert row['reason'].endswith("the remaining life follows the lost motion's observed "
+                                  'growth (as exposure^1.16), extrapolated to 22x the '
+                                  'exposure it was learnt on: its interval holds only if '
+                                  'that law does')
+    reducer.summary['growth_law'] = None
+    assert 'observed growth' not in fleet_row(reducer, PARAMS)['reason']
+
+
 def test_a_unit_known_since_new_is_only_told_to_be_watched_longer():
     # Fitted by a recorded replacement: its service time is known (none), so the hour
     # meter is no remedy.
