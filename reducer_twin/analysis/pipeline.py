@@ -619,7 +619,7 @@ class _Run:
         for joint, values in rows.items():
             self.results[joint].truth = np.array(values) if values else None
 
-    def _not_observed(self, front, counts, sides):
+    def _not_observed(self, joint, front, counts, sides):
         """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
         if front.analyzer.windows_read and front.analyzer.effort_fault is None:
             return None
@@ -630,6 +630,9 @@ class _Run:
             if dup and dup >= 0.5 * max(front.samples + dup, 1):
                 return (f'stamps do not advance on {topic}: {dup} samples repeat an earlier '
                         'stamp (frozen clock or all-zero header stamps)')
+        slow = self._too_slow(joint, front, counts)
+        if slow is not None:
+            return slow
         spikes = counts.get('spike', 0)
         if spikes and spikes >= front.samples:
             return (f'{spikes} of {spikes + front.samples} motor/link sample pairs were '
@@ -641,6 +644,25 @@ class _Run:
                     + (f' and {plan.motor_topic}' if plan.motor_topic else '')
                     + f' ({counts.get("unpaired", 0)} unpaired)')
         return front.analyzer.not_observed_reason(front.effort_topic)
+
+    def _too_slow(self, joint, front, counts):
+        """
+        Say a stream whose samples are further apart than the twin bridges (None if not).
+
+        Every step then starts a new segment: no transmission error, and the motor's turns
+        between samples look like spikes (a 10 Hz stream was said to be in degrees).
+        """
+        pairs = front.samples + counts.get('spike', 0)
+        if joint not in self.span or pairs < 2:
+            return None
+        first, last = (t * 1e-9 for t in self.span[joint])
+        step = (last - first) / (pairs - 1)
+        if not step > self.settings.max_gap_s:
+            return None
+        return (f'its samples on {self.plan.link_topic} are {step:.3f} s apart on average '
+                f'({1.0 / step:.0f} Hz), further than the {self.settings.max_gap_s:g} s the '
+                'twin bridges (twin.max_gap_s): too slow to read the transmission error; '
+                'record the joint states at 100 Hz or more')
 
     def _effort_said(self, reason):
         """Name malformed effort arrays as the cause of a joint's missing effort."""
@@ -810,7 +832,7 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._effort_said(self._not_observed(front, counts, sides))
+            res.reason = self._effort_said(self._not_observed(joint, front, counts, sides))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
             self._inputs_said(joint, front)

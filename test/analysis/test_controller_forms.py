@@ -222,6 +222,26 @@ def test_two_publishers_of_one_topic_each_with_its_joints_lose_no_sample(
     _assert_same_estimate(result, original, rel=0.005)
 
 
+def test_a_stream_too_slow_for_the_transmission_error_is_said_to_be(
+        original, tmp_path, capsys):
+    # Every 25th message of the 250 Hz recording: 10 Hz, 0.1 s between samples, where the
+    # twin bridges 0.05 s. It was said to be "positions in degrees or counts".
+    js = original[0]
+    keep = np.arange(0, len(js.stamps_ns), 25)
+    thin = JointStateBatch(js.stamps_ns[keep], js.names, js.position[keep],
+                           js.velocity[keep], js.effort[keep])
+    bag = write_bag_dir(tmp_path / 'ten_hz', {'/joint_states': thin}, custom_data=CUSTOM)
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    for joint in ('joint_1', 'joint_2'):
+        got = out['joints'][joint]
+        assert got['observed'] is False and got['rul_p50_h'] is None
+        assert got['reason'].startswith('its samples on /joint_states are 0.100 s apart on '
+                                        'average (10 Hz), further than the 0.05 s the twin '
+                                        'bridges (twin.max_gap_s)')
+        assert 'degrees' not in got['reason']
+
+
 def _cli_json(bag, tmp_path, capsys, *extra, out='d'):
     code = main(['analyze', str(bag), '--out', str(tmp_path / out), '--json',
                  *(str(x) for x in extra)])
