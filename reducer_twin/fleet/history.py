@@ -30,6 +30,7 @@ import tempfile
 from reducer_twin.analysis.stages import NEW_REDUCER
 from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreError
+from reducer_twin.io.mcap_reader import ReadWarning
 
 FINGERPRINT_BYTES = 1 << 20
 """Bytes read from each end of every storage file for a bag's fingerprint."""
@@ -445,6 +446,16 @@ def store_done(store, done, settings, engine):
     if isinstance(result, Exception):
         return result
     segments = segments_of(done.item, result, settings)
+    for joint in result.joints:
+        if joint not in done.item.joints:
+            # Planned from the bag's first messages (the store's chain of each reducer is
+            # fixed before the analysis): a joint that appears later is analysed, not stored.
+            result.warnings.append(ReadWarning(
+                done.item.info.path, None,
+                f'{joint} first appears partway through the recording: analysed into the '
+                f'derived bag, not stored in the fleet history of robot '
+                f'{done.item.info.robot} (its joints are planned from the first messages); '
+                'name it in twin.joints (--config) to store it'))
     worker = dict(done.worker, engine=engine)
     for seg in segments:
         seg.worker = worker

@@ -716,6 +716,23 @@ def test_a_joint_whose_broadcaster_starts_late_is_analysed_as_if_planned_from_th
         assert derived.metadata['reducer_twin.joints'] == 'joint_1,joint_2'
 
 
+def test_a_late_joint_the_fleet_store_cannot_take_is_said_not_dropped(
+        original, tmp_path, capsys):
+    # The store plans each reducer's chain from the bag's first messages: the late joint
+    # is analysed into the derived bag, and stderr says it is not in the history and how.
+    js = original[0]
+    late = _write_with_rosbags(tmp_path / 'late', js, lambda i: js.names if i >= LATE
+                               else ('joint_1', 'joint_1_motor'))
+    code, out, err = _cli_json(late, tmp_path, capsys, '--store', tmp_path / 'fleet.db',
+                               '--robot', 'r1')
+    assert code == 0 and out['joints']['joint_2']['observed'] is True
+    assert ('joint_2 first appears partway through the recording: analysed into the derived '
+            'bag, not stored in the fleet history of robot r1') in err
+    code = main(['fleet', '--store', str(tmp_path / 'fleet.db'), '--json'])
+    reducers = json.loads(capsys.readouterr().out)['reducers']
+    assert code == 0 and [r['joint'] for r in reducers] == ['joint_1']
+
+
 def test_a_joint_configured_in_twin_joints_that_appears_late_is_analysed(
         original, tmp_path, capsys):
     # With twin.joints naming it, the bag was refused: "configured joints ['joint_2']
