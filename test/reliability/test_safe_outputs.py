@@ -34,30 +34,24 @@ from reducer_twin.io.bag import open_bag
 from reducer_twin.io.bag_writer import foreign_bag_entries
 from reducer_twin.io.outputs import DiskFull, OutputDir, TEMP_TAG
 from reducer_twin.io.rosbag2_compression import _zstd
+from small_bags import small_bag
 import yaml
 
 pytestmark = pytest.mark.timeout(300, method='thread')
 
 REAL_BAGS = Path(__file__).resolve().parents[2].parent / 'shared' / 'data' / 'rosbag2-jazzy'
-SMALL = SimulationSpec(hours=1000.0, aging_factor=360_000.0, joints=2, rate_hz=500.0, seed=31)
-"""10 s of stream, 5000 ticks of two joints: analysed in well under a second."""
 
 
 @pytest.fixture(scope='module')
 def bag(tmp_path_factory):
     """Simulate a bag of two joints."""
-    out = tmp_path_factory.mktemp('safe') / 'rec'
-    simulate_bag(out, SMALL)
-    return out
+    return small_bag(tmp_path_factory, 'safe')
 
 
 @pytest.fixture(scope='module')
 def one_joint(tmp_path_factory):
     """Simulate a bag of one joint (fewer derived messages than ``bag``)."""
-    out = tmp_path_factory.mktemp('safe1') / 'rec1'
-    simulate_bag(out, SimulationSpec(hours=1000.0, aging_factor=360_000.0, joints=1,
-                                     rate_hz=500.0, seed=32))
-    return out
+    return small_bag(tmp_path_factory, 'safe1', 'rec1', joints=1, seed=32)
 
 
 @pytest.fixture(scope='module')

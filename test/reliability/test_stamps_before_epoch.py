@@ -13,12 +13,13 @@ import json
 from pathlib import Path
 
 import pytest
-from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
+from reducer_twin.analysis.simulate import AGING_KEY
 from reducer_twin.cli import main
 from reducer_twin.io.outputs import TEMP_TAG
 from rosbags.highlevel import AnyReader
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
+from small_bags import small_bag
 
 JOINT_STATE = 'sensor_msgs/msg/JointState'
 SEC = 1_000_000_000
@@ -27,10 +28,7 @@ SEC = 1_000_000_000
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory):
     """Simulate 10 s of two joints at 500 Hz."""
-    out = tmp_path_factory.mktemp('epoch') / 'rec'
-    simulate_bag(out, SimulationSpec(hours=1000.0, aging_factor=360_000.0, joints=2,
-                                     rate_hz=500.0, seed=31))
-    return out
+    return small_bag(tmp_path_factory, 'epoch')
 
 
 def restamped(recording, root, first_stamp_ns):
