@@ -11,18 +11,19 @@ Stages exchange plain records keyed like the topic layouts of
 and an offline analysis carry the same values.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from types import SimpleNamespace
 
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter
-from .estimator import lognormal_sd
+from .estimator import EstimatorConfig, lognormal_sd
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
 from .service_time import service_note
+from .trend_score import SCORE_AFTER, SCORE_LAG
 from .units import HOUR
 
 DUTY_FIELDS = ('duration_s', 'exposure_s', 'archard_increment', 'mean_abs_torque',
@@ -515,8 +516,11 @@ class LifeStage:
                 and drift >= 0.0):
             raise InvalidInput(f'wear record holds a bad duty_rate_rel_std ({measured!r}) or '
                                f'log_rate_drift_per_s ({drift!r}): both must be finite and >= 0')
+        trend = trend_from_record(wear_record)
+        if trend is not None:
+            trend = replace(trend, probability=life_trend_probability(wear_record, self.limit))
         return LifeQuery((x, P), rate, float(np.hypot(measured, self.duty_rate_rel_std)), drift,
-                         trend_from_record(wear_record))
+                         trend)
 
     def process(self, wear_record):
         """
@@ -669,6 +673,43 @@ def rate_resolved(wear_record):
     return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2
 
 
+TREND_PRIOR = EstimatorConfig().trend_probability
+"""Prior probability of the observed growth law (the estimator's default)."""
+
+SCORED_FROM = SCORE_AFTER + SCORE_LAG
+"""Usable window at which the two models' lagged predictions are first scored."""
+
+
+def life_trend_probability(wear_record, limit):
+    """
+    Return the weight of the observed growth law in the remaining life.
+
+    The probability that the law holds comes from predictions a few windows ahead, scored
+    over the exposure from the first scored window to now: a log-span ``S = ln(n/16)`` for
+    ``n`` usable windows of a steady duty. The remaining life extrapolates the law over
+    ``L = ln(A_lim/A_now)`` (its mean's reach of the limit). Beyond the span its evidence
+    was gathered on it says nothing, so the weight moves back towards the prior ``p0``
+    in proportion: ``p0 + (p - p0)·min(1, S/L)``.
+    """
+    p = float(wear_record.get('trend_probability', 0.0))
+    reach = _law_reach(wear_record, limit)
+    if reach is None or reach <= 1.0:
+        return p
+    span = math.log(max(float(wear_record.get('updates', 0.0)), SCORED_FROM) / SCORED_FROM)
+    share = min(1.0, span / math.log(reach))
+    return TREND_PRIOR + (p - TREND_PRIOR) * share
+
+
+def _law_reach(wear_record, limit):
+    """The times the exposure seen at which the law's mean meets ``limit`` (None: never)."""
+    g = float(wear_record.get('trend_exponent', math.nan))
+    beta = float(wear_record.get('trend_new_rad', math.nan))
+    k = float(wear_record.get('trend_growth_rad', math.nan))
+    if limit is not None and k > 0.0 and g > 0.0 and limit > beta + k:
+        return float(((limit - beta) / k) ** (1.0 / g))
+    return None
+
+
 def growth_law(wear_record, limit=None):
     """
     Return the observed growth law a ``wear`` record's remaining life follows, if it does.
@@ -684,25 +725,22 @@ def growth_law(wear_record, limit=None):
     -------
     dict or None
         None while the model's curve is the likelier law; else ``probability`` (that the
-        law holds), ``exponent`` (``g`` of ``z = β + k·(A/A_now)^g`` in the Archard
+        law holds, by its predictions a few windows ahead), ``weight`` (its weight in the
+        remaining life, :func:`life_trend_probability`: lower where the law is
+        extrapolated beyond the span it was scored on; the probability without
+        ``limit``), ``exponent`` (``g`` of ``z = β + k·(A/A_now)^g`` in the Archard
         exposure) and ``extrapolation``: how many times the exposure seen the law's mean
         reaches the limit at, ``((limit - β)/k)^(1/g)`` (None without ``limit``, or where
-        the law does not reach it or has passed it). The law is weighed by its
-        predictions a few windows ahead, not by how far it carries: learnt on a short
-        part of a life (a recording of its first 1 %), it is extrapolated a hundred times
-        over, and its interval is only as good as the power law's form there.
+        the law does not reach it or has passed it).
 
     """
     p = float(wear_record.get('trend_probability', 0.0))
     if not p > 0.5:
         return None
-    g = float(wear_record['trend_exponent'])
-    beta = float(wear_record.get('trend_new_rad', math.nan))
-    k = float(wear_record.get('trend_growth_rad', math.nan))
-    reach = None
-    if limit is not None and k > 0.0 and g > 0.0 and limit > beta + k:
-        reach = float(((limit - beta) / k) ** (1.0 / g))
-    return {'probability': p, 'exponent': g, 'extrapolation': reach}
+    return {'probability': p,
+            'weight': p if limit is None else life_trend_probability(wear_record, limit),
+            'exponent': float(wear_record['trend_exponent']),
+            'extrapolation': _law_reach(wear_record, limit)}
 
 
 def growth_note(wear_record, limit=None):
@@ -734,4 +772,6 @@ def growth_note(wear_record, limit=None):
             'trend')
     if law['extrapolation'] is not None:
         note += f', extrapolated to {law["extrapolation"]:.0f}x the exposure it was learnt on'
+        if law['weight'] < law['probability']:
+            note += f' (weighed {law["weight"]:.2f}: its score spans less)'
     return note

@@ -20,7 +20,7 @@ from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
-from reducer_twin.core.pipeline import LifeStage
+from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
@@ -268,17 +268,50 @@ def test_the_life_message_says_when_the_prediction_follows_the_observed_trend(wo
 def test_the_life_message_says_how_far_the_observed_trend_is_extrapolated(worn_record):
     # A law learnt on the first 1 % of a life carries a hundredfold: the engineer is told.
     law = {**worn_record, 'trend_probability': 0.98, 'trend_exponent': 1.0,
-           'trend_new_rad': 0.45 * ARCMIN, 'trend_growth_rad': 0.05 * ARCMIN}
+           'trend_new_rad': 0.45 * ARCMIN, 'trend_growth_rad': 0.05 * ARCMIN, 'updates': 10 ** 6}
     _, _, noted = LifeStage(PARAMS).process(law)
     # (3 - 0.45) / 0.05 = 51 times the exposure seen at exponent 1.
     assert noted.endswith('the prediction follows the observed trend, extrapolated to 51x '
                           'the exposure it was learnt on')
+    # Scored over fewer windows than that reach: its weight in the life is said too.
+    _, _, short = LifeStage(PARAMS).process({**law, 'updates': 144})
+    weight = 0.5 + 0.48 * math.log(144 / 16) / math.log(51.0)
+    assert short.endswith(f'learnt on (weighed {weight:.2f}: its score spans less)')
     _, _, past = LifeStage(PARAMS).process({**law, 'trend_growth_rad': 2.6 * ARCMIN})
     assert 'extrapolated' not in past, 'a law already past the limit reaches it now'
     assert growth_law(law, 3.0 * ARCMIN) == pytest.approx(
-        {'probability': 0.98, 'exponent': 1.0, 'extrapolation': 51.0})
+        {'probability': 0.98, 'weight': 0.98, 'exponent': 1.0, 'extrapolation': 51.0})
     assert growth_law(law)['extrapolation'] is None, 'no limit, no reach'
     assert growth_law({**law, 'trend_probability': 0.4}, 3.0 * ARCMIN) is None
+
+
+def test_a_law_scored_on_a_short_span_weighs_towards_its_prior_beyond_it(worn_record):
+    # The 2-kHz recording of the model's simulator: the law won (0.98) on 144 windows, 128
+    # of them scored (ln(144/16) = 2.20 of log-exposure), and reaches the limit at 22 times
+    # the exposure seen (ln 22 = 3.10): its weight in the remaining life is
+    # 0.5 + 0.48 * 2.20 / 3.10.
+    law = {**worn_record, 'trend_probability': 0.98, 'trend_exponent': 1.16,
+           'trend_new_rad': 0.44 * ARCMIN, 'trend_growth_rad': 0.07 * ARCMIN, 'updates': 144}
+    reach = ((3.0 - 0.44) / 0.07) ** (1.0 / 1.16)
+    want = 0.5 + 0.48 * math.log(144 / 16) / math.log(reach)
+    assert life_trend_probability(law, 3.0 * ARCMIN) == pytest.approx(want, rel=1e-12)
+    assert 0.83 < want < 0.85
+    # Scored over a span longer than the extrapolation: the score stands.
+    assert life_trend_probability({**law, 'updates': 2000}, 3.0 * ARCMIN) == 0.98
+    # A law that never meets the limit is not extrapolated to it: the score stands.
+    assert life_trend_probability({**law, 'trend_growth_rad': 0.0}, 3.0 * ARCMIN) == 0.98
+
+
+def test_the_remaining_life_takes_the_law_at_its_weight_beyond_the_scored_span(worn_record):
+    # Nothing scored yet (16 windows): the law weighs its prior, whatever the score says.
+    law = {**worn_record, 'trend_exponent': 1.0, 'trend_new_rad': 0.44 * ARCMIN,
+           'trend_growth_rad': 0.07 * ARCMIN}
+    stage = LifeStage(PARAMS)
+    early = stage.prediction({**law, 'trend_probability': 0.99, 'updates': 16})
+    prior = stage.prediction({**law, 'trend_probability': 0.5, 'updates': 5000})
+    assert (early.p10, early.p50, early.p90) == (prior.p10, prior.p50, prior.p90)
+    late = stage.prediction({**law, 'trend_probability': 0.99, 'updates': 5000})
+    assert late.p50 != early.p50
 
 
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):
@@ -315,10 +348,11 @@ def test_the_record_widens_the_rate_by_how_far_the_lagged_predictions_fell_short
     assert wide['var_wear_m2'] == calibrated['var_wear_m2']
     assert wide['rate_scale_std'] > calibrated['rate_scale_std']
     # The wear model's share of the remaining life is the wider (the growth law's is not
-    # widened: here the model's alone).
+    # widened: here the model's alone, its score spanning more than the extrapolation).
     life = LifeStage(PARAMS)
-    narrow, _, _ = life.process({**calibrated, 'trend_probability': 0.0})
-    widened, _, _ = life.process({**wide, 'trend_probability': 0.0})
+    alone = {'trend_probability': 0.0, 'updates': 10 ** 6}
+    narrow, _, _ = life.process({**calibrated, **alone})
+    widened, _, _ = life.process({**wide, **alone})
     assert widened['p90_s'] - widened['p10_s'] > 1.3 * (narrow['p90_s'] - narrow['p10_s'])
 
 
