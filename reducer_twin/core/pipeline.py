@@ -701,7 +701,7 @@ def life_trend_probability(wear_record, limit):
 
 
 def _law_reach(wear_record, limit):
-    """The times the exposure seen at which the law's mean meets ``limit`` (None: never)."""
+    """Return how many times the exposure seen the law's mean meets ``limit`` at (None: never)."""
     g = float(wear_record.get('trend_exponent', math.nan))
     beta = float(wear_record.get('trend_new_rad', math.nan))
     k = float(wear_record.get('trend_growth_rad', math.nan))
