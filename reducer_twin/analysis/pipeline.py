@@ -353,10 +353,10 @@ class _EntryCounts:
         Return the messages that named, and the rows that lacked, each of some entries.
 
         Where several publishers' messages were merged (:func:`.reading.
-        merge_partial_messages`: the reader then has counts of names), an entry of a
-        merged message is taken as named where it has a value.
+        merge_partial_messages`: the reader notes the topic), an entry of a merged
+        message is taken as named where it has a value.
         """
-        counts = self.finite if chunks.name_messages.get(topic) is not None else self.named
+        counts = self.finite if topic in chunks.merged_topics else self.named
         named = [int(counts[topic][c]) for c in columns]
         return named, [self.rows[topic] - k for k in named]
 

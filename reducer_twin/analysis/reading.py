@@ -42,7 +42,7 @@ class BagChunks:
         self.stamp_clashes = dict.fromkeys(self.topics, 0)
         self.step_scatter = {}      # topic -> [(period, scatter)] of each chunk [ns]
         self.zero_stamps = dict.fromkeys(self.topics, 0)
-        self.name_messages = {}     # topic -> name -> messages, once a message was partial
+        self.merged_topics = set()  # topics of which some messages named only some joints
         self._last_stamp = {}
 
     def __iter__(self):
@@ -73,22 +73,11 @@ class BagChunks:
             batch = replace(batch, names=tuple(self.prefix + n for n in batch.names))
         absent = np.isnan(batch.position)
         merged = merge_partial_messages(batch) if absent.any() else batch
-        counts = self.name_messages.get(topic)
         if merged is not batch:     # several publishers: a joint is in the messages naming it
-            counts = self.name_messages.setdefault(topic, {})
-            for name, n in zip(batch.names, len(batch) - np.count_nonzero(absent, axis=0)):
-                counts[name] = counts.get(name, 0) + int(n)
-        elif counts is not None:    # (a NaN value alone is a bad sample of a message naming it)
-            for name in batch.names:
-                counts[name] = counts.get(name, 0) + len(batch)
+            self.merged_topics.add(topic)
         batch = merged
         self._note_stamps(topic, batch.stamps_ns, batch.position)
         return batch
-
-    def joint_messages(self, topic, name):
-        """Messages of ``topic`` that carried ``name`` (all of them, unless partial)."""
-        counts = self.name_messages.get(topic)
-        return self.messages[topic] if counts is None else counts.get(name, 0)
 
     def _note_stamps(self, topic, stamps, position):
         """
@@ -231,7 +220,7 @@ def _read_worker(chunks, queue, parent):
         for chunk in chunks:
             queue.put(chunk)
         queue.put((READ_END, {'messages': chunks.messages, 'malformed': chunks.malformed,
-                              'name_messages': chunks.name_messages,
+                              'merged_topics': chunks.merged_topics,
                               'first_problem': chunks.first_problem,
                               'step_scatter': chunks.step_scatter,
                               'warnings': list(chunks.bag.warnings)}))
@@ -255,7 +244,7 @@ class ForkedBagChunks:
         self.bag = chunks.bag
         self.messages = chunks.messages
         self.malformed = chunks.malformed
-        self.name_messages = chunks.name_messages
+        self.merged_topics = chunks.merged_topics
         self.first_problem = chunks.first_problem
         self.step_scatter = chunks.step_scatter
         self._queue = ctx.Queue(maxsize=3)
@@ -274,7 +263,7 @@ class ForkedBagChunks:
                 raise RuntimeError(f'the bag reading process failed: {payload}')
             self.messages = payload['messages']
             self.malformed = payload['malformed']
-            self.name_messages = payload['name_messages']
+            self.merged_topics = payload['merged_topics']
             self.first_problem = payload['first_problem']
             self.step_scatter = payload['step_scatter']
             for warning in payload['warnings']:
@@ -282,8 +271,6 @@ class ForkedBagChunks:
                     self.bag.warnings.append(warning)
             break
         self._proc.join(timeout=10)
-
-    joint_messages = BagChunks.joint_messages
 
     def terminate(self):
         """Stop the reading process (after an error)."""

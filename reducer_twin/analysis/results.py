@@ -80,9 +80,9 @@ class JointResult:
             without samples) and ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
-            law rather than the wear model's curve: its ``probability``, ``exponent`` and
-            ``extrapolation``, the times the exposure seen it is extrapolated to,
-            :func:`.pipeline.growth_law`; else None)
+            law rather than the wear model's curve: its ``probability``, its ``weight`` in
+            the remaining life, ``exponent`` and ``extrapolation``, the times the exposure
+            seen it is extrapolated to, :func:`.pipeline.growth_law`; else None)
             and ``service`` (how the service time of a reducer met without state was
             taken: ``hours``, ``taken``, ``rate_scale``; ``taken`` None while too few
             windows have judged it; None without one).

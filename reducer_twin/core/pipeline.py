@@ -691,8 +691,12 @@ def life_trend_probability(wear_record, limit):
     was gathered on it says nothing, so the weight moves back towards the prior ``p0``
     in proportion: ``p0 + (p - p0)·min(1, S/L)``.
     """
+    return _weighed(wear_record, _law_reach(wear_record, limit))
+
+
+def _weighed(wear_record, reach):
+    """:func:`life_trend_probability` of a record whose law's reach is ``reach`` (or None)."""
     p = float(wear_record.get('trend_probability', 0.0))
-    reach = _law_reach(wear_record, limit)
     if reach is None or reach <= 1.0:
         return p
     span = math.log(max(float(wear_record.get('updates', 0.0)), SCORED_FROM) / SCORED_FROM)
@@ -737,10 +741,9 @@ def growth_law(wear_record, limit=None):
     p = float(wear_record.get('trend_probability', 0.0))
     if not p > 0.5:
         return None
-    return {'probability': p,
-            'weight': p if limit is None else life_trend_probability(wear_record, limit),
-            'exponent': float(wear_record['trend_exponent']),
-            'extrapolation': _law_reach(wear_record, limit)}
+    reach = _law_reach(wear_record, limit)    # None without a limit: the weight is p
+    return {'probability': p, 'weight': _weighed(wear_record, reach),
+            'exponent': float(wear_record['trend_exponent']), 'extrapolation': reach}
 
 
 def growth_note(wear_record, limit=None):
