@@ -390,7 +390,8 @@ class TwinFront:
         """
         found = self.analyzer.update(stream, effort, velocity)
         for f in found:
-            self.calibration.observe(f)
+            if self.calibration.observe(f):
+                self.analyzer.retime(self.calibration.applied)
         self.windows += len(found)
         return found
 

@@ -549,6 +549,24 @@ class WindowAnalyzer:
         self.derived_velocity += int(np.count_nonzero(fill))
         return out
 
+    def retime(self, delta_s):
+        """
+        Take ``delta_s`` added to the link encoder's stamps (the learnt time offset).
+
+        The TE of the buffered samples and of the pooled windows was extracted
+        before: both are referred to the new stamps (:meth:`.flanks.FlankPool.retime`),
+        so the next windows' fits see one offset.
+
+        Parameters
+        ----------
+        delta_s : float
+            Time added to the link encoder's stamps [s].
+
+        """
+        if self._buf['te'].size:
+            self._buf['te'] = self._buf['te'] - delta_s * self._buf['speed']
+        self._flanks.retime(delta_s)
+
     def flush(self):
         """
         Close the current partial window.

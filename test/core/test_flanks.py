@@ -104,3 +104,33 @@ def test_a_coulomb_friction_traded_for_an_efficiency_at_the_window_s_load_keeps_
 def test_a_window_without_friction_taken_keeps_the_pool():
     pooled, own = _pool_counts(None)
     np.testing.assert_allclose(pooled, np.cumsum(own))
+
+
+def test_retiming_the_pool_equals_pooling_the_retimed_te():
+    # Once the calibration adds the learnt offset to the link stamps, the pooled windows'
+    # TE is referred to the new stamps, y - delta*omega, by a linear map of the sums:
+    # the pool is as if its windows had been extracted with the offset applied.
+    rng = np.random.default_rng(2)
+    windows, samples, delta = 3, 2000, 50e-6
+    n = windows * samples
+    theta = np.linspace(0.0, 12.0, n)
+    torque = 300.0 * np.sin(np.linspace(0.0, 40.0 * np.pi, n))
+    speed = 0.5 + 0.4 * np.cos(np.linspace(0.0, 31.0, n))
+    y = 1e-4 * np.sign(torque) + delta * speed + 1e-6 * rng.standard_normal(n)
+    starts = np.arange(windows) * samples
+    win = np.repeat(np.arange(windows), samples)
+
+    def pooled(te):
+        pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 0.9)
+        z = pool.regressors(pool.harmonics(theta), speed, te)
+        stats = pool.group_stats(z, torque, pool.bins(z, torque), win, starts,
+                                 starts + samples)
+        pool.fit_harmonics(stats, windows, np.zeros(windows), np.ones(windows), None)
+        return pool
+
+    retimed = pooled(y)
+    retimed.retime(delta)
+    direct = pooled(y - delta * speed)
+    for key, value in direct._pool.items():
+        np.testing.assert_allclose(retimed._pool[key], value, rtol=1e-9, atol=1e-18,
+                                   err_msg=key)
