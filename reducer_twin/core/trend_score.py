@@ -9,6 +9,22 @@ probability that the law, not the model's curve, holds
 (:attr:`.estimator.WearEstimator.trend_probability`). The wear model's part of each
 prediction is the estimator's own (it is given as a function).
 
+Each window scores the two predicted means under one variance, the mean of the two
+predictive variances: the choice is between two extrapolations, which their means decide.
+Under each model's own variance the sharper of two predictions that both hold wins by the
+ratio of their sds on every window, and the wear model predicts eight windows ahead
+through its rate's uncertainty, which the law's fitted growth does not carry as widely. On
+the model's own simulator, 300 h from new, both predicted the windows alike and both wider
+than their errors (squared errors 0.3-0.6 and 0.5-0.8 of their variances), the law's sd
+0.6 of the model's: the law won by about 0.2 nats a window, took the remaining life in 21
+of 30 joints and put its P50 at a third of the truth (``bench_early_life.py``). On the
+means, a law that predicts no better than the curve gains nothing; one whose means do
+still wins by their squared errors. Each squared error counts up to
+:data:`FORECAST_ERROR_CAP` variances: under one variance the score of a window far from
+both means grows with its distance times the means' difference (a lost motion that jumped
+by 10 µm of wear moved it by 6 nats a window), and a jump or a misread window tells
+neither law.
+
 The same lagged predictions say how well the two models extrapolate at all: the squared
 error of their mixture, in its own predictive sds, has mean 1 when the predictions are
 calibrated. Where neither model is the unit's growth (a run-in then a straight line, a
@@ -140,11 +156,14 @@ class TrendScore:
             snap = self.lagged[0]
             m_model, v_model = model_predictive(snap)
             v_model = v_model + R_score
-            log_model = -0.5 * math.log(v_model) - 0.5 * (z - m_model) ** 2 / v_model
             lw, mean, var = self._law_predictive(snap, exposure, R_score)
-            log_law = logsumexp(lw - 0.5 * np.log(var) - 0.5 * (z - mean) ** 2 / var)
-            # The error of the two models' mixture, as it stood, in its own sds.
             m_law, v_law = mixture_moments(lw, mean[:, None], var[:, None, None])
+            # Both models' means, under one variance (the module's docstring).
+            v_score = 0.5 * (v_model + float(v_law[0, 0]))
+            log_model = -0.5 * min((z - m_model) ** 2 / v_score, FORECAST_ERROR_CAP)
+            log_law = logsumexp(lw - 0.5 * np.minimum((z - mean) ** 2 / v_score,
+                                                      FORECAST_ERROR_CAP))
+            # The error of the two models' mixture, as it stood, in its own sds.
             p = self.probability(p0)
             with np.errstate(divide='ignore'):     # p of 0 or 1: one model alone
                 m_mix, v_mix = mixture_moments(np.log([1.0 - p, p]), np.array([[m_model], m_law]),

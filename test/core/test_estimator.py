@@ -585,11 +585,15 @@ def test_the_two_models_are_scored_on_what_they_predicted_score_lag_windows_befo
     zc, szz = then._ut.observed(then._hx(X))
     w = np.exp(then._lw - then._lw.max())
     w /= w.sum()
-    v = szz + R
-    model = math.log(w @ (np.exp(-0.5 * (last.lost_motion - zc) ** 2 / v) / np.sqrt(v)))
+    m_model = w @ zc
+    v_model = w @ (szz + zc ** 2) - m_model ** 2 + R
     then._scoring.law.set_noise_scale(est.noise_scale)   # the latest noise scale, as always
     lw, m, vg = then._scoring.law.predictive(then.archard_exposure, R)
-    law = math.log(np.exp(lw) @ (np.exp(-0.5 * (last.lost_motion - m) ** 2 / vg) / np.sqrt(vg)))
+    wl = np.exp(lw)
+    # Both means under one variance, the mean of the two models' predictive variances.
+    v = 0.5 * (v_model + wl @ (vg + m ** 2) - (wl @ m) ** 2)
+    model = -0.5 * (last.lost_motion - m_model) ** 2 / v
+    law = math.log(wl @ np.exp(-0.5 * (last.lost_motion - m) ** 2 / v))
     before = est._scoring.score
     est.step(last)
     # The window's own growth adds a little to R in the estimator (a 1e-4 share here), and

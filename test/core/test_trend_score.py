@@ -83,11 +83,41 @@ def test_the_law_predicts_a_window_as_it_stood_when_the_snapshot_was_taken():
     z = _lost_motion(a)
     score.add(a, z, NOISE ** 2, NOISE ** 2, 1.0, model, 0.5)
     lw, mean, var = late.law.predictive(a, NOISE ** 2)
-    law = math.log(np.exp(lw) @ (np.exp(-0.5 * (z - mean) ** 2 / var) / np.sqrt(var)))
-    v = 2.0 * NOISE ** 2
-    wear_model = -0.5 * math.log(v) - 0.5 * (z - 0.6 * ARCMIN) ** 2 / v
+    # Both means are scored under one variance, the mean of the two predictive variances.
+    w = np.exp(lw)
+    v_law = w @ (var + mean ** 2) - (w @ mean) ** 2
+    v = 0.5 * (2.0 * NOISE ** 2 + v_law)
+    # Each squared error counts up to the cap (this wear model is far off).
+    law = math.log(w @ np.exp(-0.5 * np.minimum((z - mean) ** 2 / v, FORECAST_ERROR_CAP)))
+    wear_model = -0.5 * min((z - 0.6 * ARCMIN) ** 2 / v, FORECAST_ERROR_CAP)
     assert seen['snap']['windows'] == late.law.windows
     assert score.score - before == pytest.approx(law - wear_model, rel=1e-9)
+
+
+def test_a_wider_wear_model_of_the_same_mean_loses_nothing_to_the_law():
+    # Both predict the windows' law; the wear model's variance is ten times the law's sd.
+    # Under their own variances the law would win by about ln 10 a window; the choice
+    # between two extrapolations is their means'.
+    def exact_but_wide(snap):
+        return _scored_lost_motion(snap), (10.0 * NOISE) ** 2
+
+    score = TrendScore()
+    _feed(score, SCORE_AFTER + SCORE_LAG + 20, exact_but_wide)
+    assert score.scored == SCORE_AFTER + 20
+    assert abs(score.score) < 0.05 * score.scored
+
+
+def test_a_window_far_from_both_means_moves_the_score_no_more_than_the_cap():
+    fed = SCORE_AFTER + SCORE_LAG
+    score = TrendScore()
+    model = lambda snap: (0.7 * ARCMIN, NOISE ** 2)     # noqa: E731
+    _feed(score, fed, model)
+    before = score.score
+    a = 1e-8 * (fed + 0.5)
+    # A window 10 arcmin off (a jump, a misread window): each squared error counts up to
+    # the cap: both are capped, and the window tells neither law.
+    score.add(a, _lost_motion(a) + 10.0 * ARCMIN, NOISE ** 2, NOISE ** 2, 1.0, model, 0.5)
+    assert score.score == pytest.approx(before, abs=1e-9)
 
 
 def test_lagged_predictions_that_hold_leave_the_forecast_scale_at_one():
