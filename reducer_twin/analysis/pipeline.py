@@ -691,8 +691,9 @@ class _Run:
              'high and its remaining life short by up to that share')
 
     def _inputs_said(self, joint, front):
-        """Say a velocity field that is not the link angle's rate, and a held effort."""
-        for said in (front.analyzer.velocity_fault, front.analyzer.effort_held):
+        """Say a velocity field that is not the link angle's rate, a held effort or encoder."""
+        for said in (front.analyzer.velocity_fault, front.analyzer.effort_held,
+                     front.extractor.held_reason):
             if said is not None:
                 warn(self.bag, f'{joint}: {said}')
 

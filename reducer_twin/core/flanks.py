@@ -299,6 +299,10 @@ class FlankPool:
             noise[k] = max(rss, 0.0) / free[k]
         return beta, ident, noise, groups
 
+    def restart(self):
+        """Start the pool afresh at the next window (its windows read a TE since found wrong)."""
+        self._te_ref = None
+
     def retime(self, delta_s):
         """
         Refer the pooled windows' TE to link stamps ``delta_s`` later.

@@ -373,6 +373,7 @@ class TwinFront:
         self.ratio = total_ratio(params.geometry)
         self.extractor = TEExtractor(self.ratio, max_gap_s=config.max_gap_s)
         self.calibration = TimeOffsetCalibration(self.extractor)
+        self._held_said = False
         self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
                                        aging_factor=config.aging_factor,
                                        friction=bool(config.friction_in_effort))
@@ -388,6 +389,12 @@ class TwinFront:
 
         Each window's fitted time offset feeds the calibration (applied once learnt).
         """
+        held = self.extractor.held
+        if held is not None and not self._held_said and any(held.held.values()):
+            # The TE fed before the held reading was found is stale: start again.
+            self._held_said = True
+            self.analyzer.discard_buffer()
+            self.calibration.estimates.clear()
         found = self.analyzer.update(stream, effort, velocity)
         for f in found:
             if self.calibration.observe(f):

@@ -8,12 +8,13 @@ samples arrive; the :mod:`.window_analysis` cuts the TE stream into windows
 and reads the lost motion, the wear estimator's observation.
 """
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
+from .held_encoders import HeldEncoders
 from .ingest import TickPairing
 
 
@@ -185,6 +186,15 @@ def _join(streams):
     return TEStream(*(np.concatenate([getattr(s, name) for s in streams])
                       for name in ('t', 'te', 'output_angle', 'valid')),
                     first.max_gap_s, **counts)
+
+
+def _shared(t_motor, t_link):
+    """Whether the motor and link samples share their stamps (one per row)."""
+    try:
+        tm, tl = np.asarray(t_motor, dtype=float), np.asarray(t_link, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return tm.shape == tl.shape and (tm is tl or np.array_equal(tm, tl))
 
 
 def stream_slice(stream, sl):
@@ -397,6 +407,9 @@ class TEExtractor:
     ----------
     ticks : TickPairing or None
         The pairing rule and its evidence (its ``reason()`` says which is in use).
+    held : HeldEncoders or None
+        Whether an encoder's reading is held between slower updates; its stale
+        samples are left out of the TE (:mod:`.held_encoders`, :attr:`held_reason`).
 
     """
 
@@ -405,10 +418,19 @@ class TEExtractor:
         self.max_gap_s = max_gap_s
         self.link_time_offset_s = link_time_offset_s
         self.last_te = None
+        self._period_s = None
         try:
             self.ticks = TickPairing(ratio) if math.isfinite(ratio) and ratio != 0 else None
+            self.held = HeldEncoders(ratio) if self.ticks is not None else None
         except (TypeError, ValueError):
-            self.ticks = None   # compute_te says what is wrong
+            self.ticks = self.held = None   # compute_te says what is wrong
+
+    @property
+    def held_reason(self):
+        """Say when an encoder's reading is held between slower updates, else None."""
+        if self.held is None or self._period_s is None:
+            return None
+        return self.held.reason(1.0 / self._period_s)
 
     def update(self, t_motor, motor_angle, t_link, link_angle):
         """
@@ -443,6 +465,16 @@ class TEExtractor:
             t_motor, motor_angle = self._by_tick(t_motor, motor_angle, t_link, link_angle)
         stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,
                             self.max_gap_s, self.link_time_offset_s, self.last_te)
+        if self.held is not None and stream.t.size and _shared(t_motor, t_link):
+            if self._period_s is None and stream.t.size > 16:
+                steps = np.diff(stream.t[:4096])
+                steps = steps[steps > 0.0]
+                self._period_s = float(np.median(steps)) if steps.size else None
+            stale = self.held.stale_mask(link_angle, motor_angle)
+            if stale is not None:
+                valid = stream.valid & ~stale
+                stream = replace(stream, valid=valid, te=np.where(valid, stream.te, np.nan),
+                                 output_angle=np.where(valid, stream.output_angle, np.nan))
         kept = np.flatnonzero(stream.valid)
         if kept.size:
             self.last_te = float(stream.te[kept[-1]])

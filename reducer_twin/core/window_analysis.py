@@ -549,6 +549,18 @@ class WindowAnalyzer:
         self.derived_velocity += int(np.count_nonzero(fill))
         return out
 
+    def discard_buffer(self):
+        """
+        Drop the samples of the partial window and start the flank pool afresh.
+
+        For a TE found wrong after it was fed: an encoder's reading held between slower
+        updates is judged from the first few hundred moving samples
+        (:mod:`.held_encoders`), before which the stale samples went in.
+        """
+        self._buf = {name: np.empty(0) for name in _BUFFER}
+        self._rate_held = None
+        self._flanks.restart()
+
     def retime(self, delta_s):
         """
         Take ``delta_s`` added to the link encoder's stamps (the learnt time offset).

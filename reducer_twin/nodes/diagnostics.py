@@ -145,13 +145,14 @@ def ingest_statuses(counts, rejected):
     return statuses
 
 
-def say_faults(logger, joint, analyzer, said):
+def say_faults(logger, joint, analyzer, said, encoders=None):
     """
     Log a joint's input faults on stderr, each kind once (``/diagnostics`` carry them on).
 
     An effort that is not the output torque is an error (the joint is not observed); a
     velocity field that is not the link angle's rate a warning (its rate is used), and
-    so is an effort held between slower updates.
+    so is an effort held between slower updates, and an encoder reading held so
+    (``encoders``: :attr:`.te_extraction.TEExtractor.held_reason`).
 
     Parameters
     ----------
@@ -163,20 +164,23 @@ def say_faults(logger, joint, analyzer, said):
         The joint's window analysis.
     said : set
         Kinds already said; updated.
+    encoders : str, optional
+        Why an encoder's reading is held between slower updates, if it is.
 
     """
     for kind, level, fault in (
             ('effort', 'error', analyzer.effort_fault and
              f'not observed: {analyzer.effort_fault}'),
             ('velocity', 'warning', analyzer.velocity_fault),
-            ('held', 'warning', analyzer.effort_held)):
+            ('held', 'warning', analyzer.effort_held),
+            ('encoders', 'warning', encoders)):
         if fault and kind not in said:
             said.add(kind)
             getattr(logger, level)(f'{joint}: {fault}')
 
 
 def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
-              silent_after_s):
+              silent_after_s, encoders=None):
     """
     Return ``te_monitor``'s level and message from its window analysis; fill ``values``.
 
@@ -202,6 +206,8 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         Wall time [s] since the latest encoder pairs (None: none yet).
     silent_after_s : float
         Wall time [s] without pairs from which the stream is said to have stopped.
+    encoders : str, optional
+        Why an encoder's reading is held between slower updates, if it is.
 
     Returns
     -------
@@ -223,7 +229,7 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
-    for said in (analyzer.velocity_fault, analyzer.effort_held):
+    for said in (analyzer.velocity_fault, analyzer.effort_held, encoders):
         if said is not None and reason is None:
             message = f'{message}; {said}'
             level = 'WARN' if level == 'OK' else level

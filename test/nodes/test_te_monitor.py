@@ -346,6 +346,21 @@ def test_an_effort_held_between_slower_updates_turns_the_diagnostics_to_warn(
     assert 'it changes at about 100 Hz on a 1000 Hz stream' in status.message
 
 
+def test_a_link_reading_held_between_slower_updates_turns_the_diagnostics_to_warn(
+        ros, simulated, capfd):
+    _, rows = simulated
+    held = rows.copy()
+    held[:, 2] = rows[(np.arange(len(rows)) // 4) * 4, 2]
+    monitor = Monitor(ros)
+    monitor.feed(held)
+    status = monitor.status(lambda s: 'repeats its reading' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    assert 'link encoder' in status.message and 'about 250 Hz on a 1000 Hz stream' in \
+        status.message
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'repeats its reading' in x]
+    assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
 def test_a_true_velocity_field_is_used_as_published(ros, simulated):
     _, rows = simulated
     monitor = Monitor(ros)
