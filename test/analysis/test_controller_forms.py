@@ -597,6 +597,26 @@ def test_a_link_encoder_too_coarse_for_the_lost_motion_is_said(original, tmp_pat
         _rewrite(js, tmp_path, 'fine'), tmp_path / 'f', capsys)[2].splitlines())
 
 
+@pytest.mark.parametrize('bits, said', [(17, True), (19, False)])
+def test_a_link_encoder_coarse_for_an_early_growth_is_said(original, tmp_path, capsys, bits,
+                                                          said):
+    # A 17-bit link encoder (0.165 arcmin steps) read a new unit's lost motion within 4 %
+    # but its growth as wear 29-43 % high, the remaining life short with the truth above
+    # P90, silently; 18 and 19 bits read as unquantised.
+    js = original[0]
+    position = js.position.copy()
+    k = js.names.index('joint_1')
+    quantum = 2.0 * np.pi / 2 ** bits
+    position[:, k] = np.round(position[:, k] / quantum) * quantum
+    _, _, err = _cli_json(_rewrite(js, tmp_path, f'q{bits}', position=position), tmp_path,
+                          capsys)
+    lines = [x for x in err.splitlines() if 'moves in steps' in x]
+    assert len(lines) == int(said)
+    if said:
+        assert lines[0].startswith('WARNING:') and 'link encoder of joint_1' in lines[0]
+        assert 'steps of 0.16 arcmin' in lines[0] and 'early in its life' in lines[0]
+
+
 def test_all_zero_header_stamps_are_declared_as_stamps_that_do_not_advance(
         original, tmp_path, capsys):
     js = original[0]
