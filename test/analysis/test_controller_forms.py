@@ -598,8 +598,8 @@ def test_a_link_encoder_too_coarse_for_the_lost_motion_is_said(original, tmp_pat
 
 
 @pytest.mark.parametrize('bits, said', [(17, True), (19, False)])
-def test_a_link_encoder_coarse_for_an_early_growth_is_said(original, tmp_path, capsys, bits,
-                                                          said):
+def test_a_link_encoder_coarse_for_an_early_growth_is_said(
+        original, tmp_path, capsys, bits, said):
     # A 17-bit link encoder (0.165 arcmin steps) read a new unit's lost motion within 4 %
     # but its growth as wear 29-43 % high, the remaining life short with the truth above
     # P90, silently; 18 and 19 bits read as unquantised.
