@@ -96,7 +96,46 @@ class TorqueSmoothing:
             ends - 2 * h) / math.sqrt(1.5)
         half = self.quiet_half(sigma, half, t, period, model, win, starts, ends, h)
         smooth, count = window_mean(torque, half, win, starts, ends)
-        return smooth, self.sign_sigmas * sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
+        noise = sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
+        if model is not None:
+            # Noise the average did not quiet (a current estimate's noise below the
+            # sample rate, a filtered effort): from the smoothed torque's own scatter
+            # about the load model, at the average's span.
+            left = self.left_noise(smooth - model, half, win, starts, ends)
+            noise = np.maximum(noise, left[win])
+        return smooth, self.sign_sigmas * noise
+
+    @staticmethod
+    def left_noise(residual, half, win, starts, ends):
+        """
+        Noise of the smoothed torque [N·m] per window, from its residual about the load model.
+
+        Second differences of the residual ``r`` at the average's own span ``L = 2·half + 1``
+        (``r[i] - (r[i - L] + r[i + L])/2``, samples of one window), whose noise parts are
+        independent for any noise the average leaves: their median absolute value by
+        ``1.4826/sqrt(1.5)``. What the load model misses slower than the span cancels
+        there; 0 for a window too short for it.
+        """
+        halves = np.broadcast_to(np.asarray(half), starts.shape)
+        span = (2 * halves + 1)[win]
+        index = np.arange(residual.size)
+        lo, hi = index - span, index + span
+        inside = (lo >= starts[win]) & (hi < ends[win])
+        out = np.zeros(starts.size)
+        if not inside.any():
+            return out
+        i = index[inside]
+        d = np.abs(residual[i] - 0.5 * (residual[lo[inside]] + residual[hi[inside]]))
+        w = win[inside]
+        ok = np.isfinite(d)
+        d, w = d[ok], w[ok]
+        order = np.lexsort((d, w))
+        d, w = d[order], w[order]
+        first = np.flatnonzero(np.r_[True, w[1:] != w[:-1]]) if w.size else w
+        count = np.diff(np.r_[first, w.size])
+        middle = 0.5 * (d[first + (count - 1) // 2] + d[first + count // 2])
+        out[w[first]] = 1.4826 * middle / math.sqrt(1.5)
+        return out
 
     def quiet_half(self, sigma, half, t, period, model, win, starts, ends, hold=1):
         """
