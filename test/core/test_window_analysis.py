@@ -82,8 +82,9 @@ def test_a_joint_standing_still_under_a_held_load_reads_no_lost_motion():
     effort[still] = 47.0 + np.random.default_rng(3).normal(0.0, 2.0, still.size)
     stream = compute_te(b.t, motor, b.t, link, RATIO)
     analyzer = WindowAnalyzer(PARAMS)
-    feats = analyzer.update(stream, effort, np.where(np.isin(np.arange(b.t.size), still), 0.0,
-                                                      b.link_velocity)) + analyzer.flush()
+    velocity = b.link_velocity.copy()
+    velocity[still] = 0.0
+    feats = analyzer.update(stream, effort, velocity) + analyzer.flush()
     inside = [f for f in feats if b.t[still[0]] <= f.t_start and f.t_end <= b.t[still[-1]]]
     assert len(inside) >= 3 and all(np.isnan(f.lost_motion) for f in inside)
     assert analyzer.windows_still >= len(inside)
