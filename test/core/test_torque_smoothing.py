@@ -68,3 +68,44 @@ def test_the_torque_goes_to_the_load_model_where_it_explains_the_effort():
     out, narrowed = SMOOTHING.toward_model(torque, band, model, win, starts)
     assert np.std(out[:n] - model[:n]) < 1.0 and np.all(narrowed[:n] < band[:n])
     assert np.std(out[n:] - torque[n:]) < 1.0 and np.allclose(narrowed[n:], band[n:], rtol=0.01)
+
+
+def _band_limited(n, rms, lo_hz, hi_hz, rate_hz, seed):
+    """Return noise of ``rms`` [N·m] in ``lo_hz``-``hi_hz`` (a current estimate's ripple)."""
+    spectrum = np.fft.rfft(np.random.default_rng(seed).normal(size=n))
+    f = np.fft.rfftfreq(n, 1.0 / rate_hz)
+    spectrum[(f < lo_hz) | (f > hi_hz)] = 0.0
+    noise = np.fft.irfft(spectrum, n)
+    return rms * noise / np.std(noise)
+
+
+def test_noise_below_the_sample_rate_widens_the_band_by_what_the_average_left():
+    # 2 % of rated in 5-50 Hz at 1 kHz: neighbouring samples see 2 N·m of its 15.7, and
+    # the 31-sample average leaves about half of it. With the load model, the band is the
+    # smoothed torque's scatter about it (within a third: that noise is not independent
+    # over the average's span, which the second differences take it to be).
+    n = 4000
+    win, starts, ends = _windows([n])
+    t = np.arange(n) * 1e-3
+    model = 200.0 * np.sin(2.0 * t)
+    noise = _band_limited(n, 0.02 * RATED, 5.0, 50.0, 1000.0, seed=4)
+    smooth, band = SMOOTHING.smooth(model + noise, 15, t, 1e-3, model, win, starts, ends)
+    left = np.std((smooth - model)[100:-100])
+    assert np.median(band) == pytest.approx(3.0 * left, rel=0.35)
+    # The same noise, white: the band is what neighbouring samples tell.
+    white = np.random.default_rng(4).normal(0.0, 0.02 * RATED, n)
+    _, band = SMOOTHING.smooth(model + white, 15, t, 1e-3, model, win, starts, ends)
+    assert np.median(band) == pytest.approx(3.0 * 0.02 * RATED / np.sqrt(31), rel=0.2)
+
+
+def test_over_a_short_average_the_band_is_what_neighbouring_samples_tell():
+    # At 125 Hz the 30 ms average spans 5 samples: the scatter about the load model is
+    # mostly what the model misses (a base loaded by its accelerations), not noise.
+    n = 1000
+    win, starts, ends = _windows([n])
+    t = np.arange(n) / 125.0
+    model = 200.0 * np.sin(2.0 * t)
+    missed = 20.0 * np.sin(40.0 * t)
+    effort = model + missed + np.random.default_rng(5).normal(0.0, 5.0, n)
+    _, band = SMOOTHING.smooth(effort, 2, t, 1.0 / 125.0, model, win, starts, ends)
+    np.testing.assert_allclose(band, 3.0 * 5.0 / np.sqrt(5.0), rtol=0.35)
