@@ -34,6 +34,9 @@ A fresh encoder repeats none of them; one updated every ``k`` samples repeats
 HELD_MIN_PAIRS = 200
 """Moving pairs of successive samples seen before the encoders are judged."""
 
+MIN_UPDATES = 0.02
+"""Share of the moving pairs that update a held reading: one in 50 samples or more."""
+
 MOVING_STEP_RAD = 2e-4
 """
 Motion of the other encoder over a pair [rad at the output] for the pair to be judged.
@@ -156,7 +159,10 @@ class HeldEncoders:
             self._moving[name] += int(np.count_nonzero(moving))
             self._repeats[name] += int(np.count_nonzero(moving & same[name]))
             if self._moving[name] >= HELD_MIN_PAIRS:
-                self.held[name] = self._repeats[name] >= HELD_SHARE * self._moving[name]
+                repeats, moving = self._repeats[name], self._moving[name]
+                # A reading that never updates is a frozen encoder, not a held one
+                # (:mod:`.observability` says so: the encoders do not measure one motion).
+                self.held[name] = HELD_SHARE * moving <= repeats <= (1.0 - MIN_UPDATES) * moving
         self.decided = min(self._moving.values()) >= HELD_MIN_PAIRS
 
     def _moved_over_run(self, same, other, name):
