@@ -33,7 +33,9 @@ low (the model's simulator, 300 h, 2 and 5 % of rated). Its scatter about the lo
 the average's span shows it (wear within 5 %). Over fewer samples (rates up to 500 Hz at
 the default 30 ms) that band lies near the rate, where neighbours see it, and the scatter
 is mostly what the load model misses: bases loaded by their accelerations at 125-500 Hz
-read 5-28 % low with it (independent generator).
+read 5-28 % low with it (independent generator). Nor is it read over an average lengthened
+for the noise neighbours show (:meth:`TorqueSmoothing.quiet_half`): over 0.15 s a base's
+load differs from the model by more than its noise, and one read 18 % low.
 """
 
 
@@ -91,7 +93,8 @@ class TorqueSmoothing:
         Where a load model is given and the average spans :data:`LEFT_NOISE_SPAN`
         samples or more, the smoothed torque's noise is at least its scatter about the
         model (:meth:`left_noise`): noise below the sample rate, which neighbouring
-        samples do not show. Samples whose smoothed torque is within ``sign_sigmas`` of
+        samples do not show (not where the average was lengthened for the noise they
+        do show). Samples whose smoothed torque is within ``sign_sigmas`` of
         that noise from zero (or from the torque with the viscous friction
         left in) are ambiguous: their flank is unknown. ``half`` is the
         average's half-width in samples (:meth:`half_width`), lengthened
@@ -111,16 +114,21 @@ class TorqueSmoothing:
         sigma = 1.4826 * window_medians(
             np.abs(torque[h:-h] - 0.5 * (torque[:-2 * h] + torque[2 * h:])), starts,
             ends - 2 * h) / math.sqrt(1.5)
+        base = half
         half = self.quiet_half(sigma, half, t, period, model, win, starts, ends, h)
+        halves = np.broadcast_to(np.asarray(half), starts.shape)
         smooth, count = window_mean(torque, half, win, starts, ends)
         noise = sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
         if model is not None:
             # Noise the average did not quiet (a current estimate's noise below the
             # sample rate, a filtered effort): from the smoothed torque's own scatter
             # about the load model, at the average's span (:data:`LEFT_NOISE_SPAN`).
-            left = self.left_noise(smooth - model, half, win, starts, ends)
-            span = 2 * np.broadcast_to(np.asarray(half), starts.shape) + 1
-            noise = np.maximum(noise, np.where(span >= LEFT_NOISE_SPAN, left, 0.0)[win])
+            left = self.left_noise(smooth - model, halves, win, starts, ends)
+            # An average lengthened for the noise its neighbours show spans more of what
+            # the model misses than of noise: its scatter is not read as noise there.
+            span = 2 * halves + 1
+            read = (span >= LEFT_NOISE_SPAN) & (halves == base)
+            noise = np.maximum(noise, np.where(read, left, 0.0)[win])
         return smooth, self.sign_sigmas * noise
 
     @staticmethod
