@@ -123,16 +123,16 @@ class TorqueSmoothing:
             # Noise the average did not quiet (a current estimate's noise below the
             # sample rate, a filtered effort): from the smoothed torque's own scatter
             # about the load model, at the average's span (:data:`LEFT_NOISE_SPAN`).
-            left = self.left_noise(smooth - model, halves, win, starts, ends)
             # An average lengthened for the noise its neighbours show spans more of what
             # the model misses than of noise: its scatter is not read as noise there.
-            span = 2 * halves + 1
-            read = (span >= LEFT_NOISE_SPAN) & (halves == base)
-            noise = np.maximum(noise, np.where(read, left, 0.0)[win])
+            read = (2 * halves + 1 >= LEFT_NOISE_SPAN) & (halves == base)
+            if read.any():
+                left = self.left_noise(smooth - model, halves, win, starts, ends, read)
+                noise = np.maximum(noise, left[win])
         return smooth, self.sign_sigmas * noise
 
     @staticmethod
-    def left_noise(residual, half, win, starts, ends):
+    def left_noise(residual, half, win, starts, ends, read=None):
         """
         Noise of the smoothed torque [N·m] per window, from its residual about the load model.
 
@@ -140,27 +140,25 @@ class TorqueSmoothing:
         (``r[i] - (r[i - L] + r[i + L])/2``, samples of one window), whose noise parts are
         independent for any noise the average leaves: their median absolute value by
         ``1.4826/sqrt(1.5)``. What the load model misses slower than the span cancels
-        there; 0 for a window too short for it.
+        there; 0 for a window too short for it, or not in ``read`` (a mask of windows).
         """
         halves = np.broadcast_to(np.asarray(half), starts.shape)
-        span = (2 * halves + 1)[win]
-        index = np.arange(residual.size)
-        lo, hi = index - span, index + span
-        inside = (lo >= starts[win]) & (hi < ends[win])
+        span = 2 * halves + 1
+        lo, hi = starts + span, ends - span
+        use = hi > lo
+        if read is not None:
+            use &= read
         out = np.zeros(starts.size)
-        if not inside.any():
+        if not use.any():
             return out
-        i = index[inside]
-        d = np.abs(residual[i] - 0.5 * (residual[lo[inside]] + residual[hi[inside]]))
-        w = win[inside]
-        ok = np.isfinite(d)
-        d, w = d[ok], w[ok]
-        order = np.lexsort((d, w))
-        d, w = d[order], w[order]
-        first = np.flatnonzero(np.r_[True, w[1:] != w[:-1]]) if w.size else w
-        count = np.diff(np.r_[first, w.size])
-        middle = 0.5 * (d[first + (count - 1) // 2] + d[first + count // 2])
-        out[w[first]] = 1.4826 * middle / math.sqrt(1.5)
+        for k in np.flatnonzero(use).tolist():
+            m = int(span[k])
+            r = residual[starts[k]:ends[k]]
+            d = np.abs(r[m:-m] - 0.5 * (r[:-2 * m] + r[2 * m:]))
+            if not np.isfinite(d).all():
+                d = d[np.isfinite(d)]
+            if d.size:
+                out[k] = 1.4826 * float(np.median(d)) / math.sqrt(1.5)
         return out
 
     def quiet_half(self, sigma, half, t, period, model, win, starts, ends, hold=1):
