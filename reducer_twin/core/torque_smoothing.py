@@ -22,22 +22,6 @@ SMOOTHING_NOISE = 0.1
 SMOOTHING_MAX_S = 0.15
 """Longest torque average [s] (five times the default ``torque_smoothing_s``)."""
 
-LEFT_NOISE_SPAN = 16
-"""
-Samples an average spans from which the noise it left is read about the load model.
-
-A motor-current estimate's noise below the sample rate (5-50 Hz at 1 kHz) hardly shows
-between neighbouring samples: read from them as 2.0 N·m where it was 15.7, it kept the
-smoothed torque, still 7.6 N·m noisy, off the load model, and a new unit's wear read 60-80 %
-low (the model's simulator, 300 h, 2 and 5 % of rated). Its scatter about the load model at
-the average's span shows it (wear within 5 %). Over fewer samples (rates up to 500 Hz at
-the default 30 ms) that band lies near the rate, where neighbours see it, and the scatter
-is mostly what the load model misses: bases loaded by their accelerations at 125-500 Hz
-read 5-28 % low with it (independent generator). Nor is it read over an average lengthened
-for the noise neighbours show (:meth:`TorqueSmoothing.quiet_half`): over 0.15 s a base's
-load differs from the model by more than its noise, and one read 18 % low.
-"""
-
 
 def nominal_step(t):
     """
@@ -90,12 +74,8 @@ class TorqueSmoothing:
         smoothed torque's noise is ``sigma/sqrt(m)`` for an average of ``m``
         samples; of an effort held over ``h`` samples (:mod:`.held_effort`),
         from second differences ``h`` samples apart, and ``sigma/sqrt(m/h)``.
-        Where a load model is given and the average spans :data:`LEFT_NOISE_SPAN`
-        samples or more, the smoothed torque's noise is at least its scatter about the
-        model (:meth:`left_noise`): noise below the sample rate, which neighbouring
-        samples do not show (not where the average was lengthened for the noise they
-        do show). Samples whose smoothed torque is within ``sign_sigmas`` of
-        that noise from zero (or from the torque with the viscous friction
+        Samples whose smoothed torque is within ``sign_sigmas`` of that noise
+        from zero (or from the torque with the viscous friction
         left in) are ambiguous: their flank is unknown. ``half`` is the
         average's half-width in samples (:meth:`half_width`), lengthened
         for a noisy effort by :meth:`quiet_half`; ``hold`` the samples per update of
@@ -114,52 +94,9 @@ class TorqueSmoothing:
         sigma = 1.4826 * window_medians(
             np.abs(torque[h:-h] - 0.5 * (torque[:-2 * h] + torque[2 * h:])), starts,
             ends - 2 * h) / math.sqrt(1.5)
-        base = half
         half = self.quiet_half(sigma, half, t, period, model, win, starts, ends, h)
-        halves = np.broadcast_to(np.asarray(half), starts.shape)
         smooth, count = window_mean(torque, half, win, starts, ends)
-        noise = sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
-        if model is not None:
-            # Noise the average did not quiet (a current estimate's noise below the
-            # sample rate, a filtered effort): from the smoothed torque's own scatter
-            # about the load model, at the average's span (:data:`LEFT_NOISE_SPAN`).
-            # An average lengthened for the noise its neighbours show spans more of what
-            # the model misses than of noise: its scatter is not read as noise there.
-            read = (2 * halves + 1 >= LEFT_NOISE_SPAN) & (halves == base)
-            if read.any():
-                left = self.left_noise(smooth - model, halves, win, starts, ends, read)
-                noise = np.maximum(noise, left[win])
-        return smooth, self.sign_sigmas * noise
-
-    @staticmethod
-    def left_noise(residual, half, win, starts, ends, read=None):
-        """
-        Noise of the smoothed torque [N·m] per window, from its residual about the load model.
-
-        Second differences of the residual ``r`` at the average's own span ``L = 2·half + 1``
-        (``r[i] - (r[i - L] + r[i + L])/2``, samples of one window), whose noise parts are
-        independent for any noise the average leaves: their median absolute value by
-        ``1.4826/sqrt(1.5)``. What the load model misses slower than the span cancels
-        there; 0 for a window too short for it, or not in ``read`` (a mask of windows).
-        """
-        halves = np.broadcast_to(np.asarray(half), starts.shape)
-        span = 2 * halves + 1
-        lo, hi = starts + span, ends - span
-        use = hi > lo
-        if read is not None:
-            use &= read
-        out = np.zeros(starts.size)
-        if not use.any():
-            return out
-        for k in np.flatnonzero(use).tolist():
-            m = int(span[k])
-            r = residual[starts[k]:ends[k]]
-            d = np.abs(r[m:-m] - 0.5 * (r[:-2 * m] + r[2 * m:]))
-            if not np.isfinite(d).all():
-                d = d[np.isfinite(d)]
-            if d.size:
-                out[k] = 1.4826 * float(np.median(d)) / math.sqrt(1.5)
-        return out
+        return smooth, self.sign_sigmas * sigma[win] / np.sqrt(np.maximum(count / h, 1.0))
 
     def quiet_half(self, sigma, half, t, period, model, win, starts, ends, hold=1):
         """
