@@ -296,14 +296,15 @@ def test_an_effort_held_between_slower_updates_is_read_like_a_fresh_one_and_said
         assert got['wear_um'] == pytest.approx(fresh['joints'][joint]['wear_um'], rel=0.05)
 
 
-@pytest.mark.parametrize('encoder', ['link', 'motor'])
+@pytest.mark.parametrize('encoder', ['link', 'motor', 'link and motor'])
 def test_an_encoder_held_between_slower_updates_is_read_at_its_updates_and_said(
         original_1khz, tmp_path, capsys, encoder):
     # A secondary encoder polled at 250 Hz on a 1 kHz bus: each reading repeated for 4
     # samples is up to 3 ms old, and its TE carried the motion since. Taken as fresh, a
     # used unit at 2.27 arcmin read 1.16, its remaining life 9-10 times the truth, unsaid.
     js = original_1khz
-    columns = _motor_columns(js) if encoder == 'motor' else _link_columns(js)
+    columns = {'motor': _motor_columns(js), 'link': _link_columns(js)}.get(
+        encoder, _motor_columns(js) + _link_columns(js))
     position = js.position.copy()
     stale = (np.arange(len(js)) // 4) * 4
     position[:, columns] = js.position[stale][:, columns]
@@ -311,9 +312,10 @@ def test_an_encoder_held_between_slower_updates_is_read_at_its_updates_and_said(
                                capsys)
     _, fresh, clean = _cli_json(_rewrite(js, tmp_path, 'fresh'), tmp_path, capsys, out='d2')
     assert code == 0 and 'repeats its reading' not in clean
+    said = (f'the {encoder} encoder repeats its reading' if ' ' not in encoder
+            else 'the link and motor encoders repeat their readings together')
     for joint, got in out['joints'].items():
-        (line,) = [x for x in err.splitlines()
-                   if f'{joint}: the {encoder} encoder repeats its reading' in x]
+        (line,) = [x for x in err.splitlines() if f'{joint}: {said}' in x]
         assert line.startswith('WARNING: ') and 'about 250 Hz on a 1000 Hz stream' in line
         assert got['observed']
         assert got['lost_motion_arcmin'] == pytest.approx(

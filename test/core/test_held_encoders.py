@@ -24,10 +24,12 @@ def _held(angle, k, phase=0):
 
 def test_fresh_encoders_are_not_held_nor_is_a_17_bit_link_quantised():
     link, motor = _motion()
-    for reading in (link, np.round(link / (2 * math.pi / 2 ** 17)) * (2 * math.pi / 2 ** 17)):
+    step = 2 * math.pi / 2 ** 17
+    for reading, motor_reading in ((link, motor), (np.round(link / step) * step, motor),
+                                   (np.round(link / step) * step, np.round(motor / 0.01) * 0.01)):
         held = HeldEncoders(RATIO)
-        assert held.stale_mask(reading, motor) is None
-        assert held.decided and held.held == {'link': False, 'motor': False}
+        assert held.stale_mask(reading, motor_reading) is None
+        assert held.decided and held.held == {'link': False, 'motor': False, 'both': False}
         assert held.reason(1000.0) is None
 
 
@@ -37,7 +39,7 @@ def test_a_link_reading_held_for_k_samples_is_found_and_its_repeats_left_out(k):
     reading = _held(link, k)
     held = HeldEncoders(RATIO)
     stale = held.stale_mask(reading, motor)
-    assert held.held == {'link': True, 'motor': False}
+    assert held.held == {'link': True, 'motor': False, 'both': False}
     assert held.update_share('link') == pytest.approx(1.0 / k, abs=0.02)
     # What is kept pairs an update with the motor at its own stamp, or a repeat over which
     # the joint hardly moved (at a turn): the TE errs there by less than STILL_RAD.
@@ -51,8 +53,23 @@ def test_a_held_motor_reading_is_found_as_well():
     link, motor = _motion()
     held = HeldEncoders(RATIO)
     stale = held.stale_mask(link, _held(motor, 4, phase=1))
-    assert held.held == {'link': False, 'motor': True}
+    assert held.held == {'link': False, 'motor': True, 'both': False}
     assert stale is not None and held.reason(1000.0).startswith('the motor encoder repeats')
+
+
+def test_both_readings_held_on_the_same_samples_are_found_and_left_out_while_moving():
+    # Neither encoder moves while the other repeats, so neither is held alone; their TE is
+    # right, but as old as the update beside an effort that is not. Their runs end in a
+    # step of several samples' motion: those runs' repeats are stale.
+    link, motor = _motion()
+    held = HeldEncoders(RATIO)
+    stale = held.stale_mask(_held(link, 4), _held(motor, 4))
+    assert held.held == {'link': False, 'motor': False, 'both': True}
+    assert held.update_share('both') == pytest.approx(0.25, abs=0.02)
+    assert stale.sum() == pytest.approx(0.75 * link.size, rel=0.03)
+    assert held.reason(1000.0).startswith('the link and motor encoders repeat their readings '
+                                          'together')
+    assert 'updated at about 250 Hz on a 1000 Hz stream' in held.reason(1000.0)
 
 
 def test_a_joint_at_rest_keeps_its_repeated_readings():

@@ -206,19 +206,20 @@ def test_windows_after_the_time_offset_is_learnt_read_as_if_it_had_been_known():
     np.testing.assert_allclose(lm[np.isfinite(lm)], lost_motion(8e-6, PARAMS), rtol=0.02)
 
 
-def _held_link_windows(judge=True):
-    """Return the front and lost motions of a link read every 4th sample at 1 kHz."""
-    sim = JointSimulator(PARAMS, SimConfig(initial_wear_m=8e-6, seed=4))
+def _held_link_windows(judge=True, motor_too=False, wear=8e-6):
+    """Return the front and lost motions of a link (and motor) read every 4th sample at 1 kHz."""
+    sim = JointSimulator(PARAMS, SimConfig(initial_wear_m=wear, seed=4))
     b = sim.step(60000)
     idx = np.arange(b.t.size)
     link = b.link_angle[idx - idx % 4]
+    motor = b.motor_angle[idx - idx % 4] if motor_too else b.motor_angle
     front = TwinFront(PARAMS)
     if not judge:
         front.extractor.held = None
     windows = []
     for k in range(0, b.t.size, 500):
         piece = slice(k, k + 500)
-        windows += front.update(b.t[piece], b.motor_angle[piece], link[piece],
+        windows += front.update(b.t[piece], motor[piece], link[piece],
                                 b.effort[piece], b.link_velocity[piece])
     lm = np.array([f.lost_motion for f in windows])
     return front, lm[np.isfinite(lm)]
@@ -235,3 +236,12 @@ def test_a_link_reading_held_between_slower_updates_is_read_at_its_updates_and_s
     assert 'about 250 Hz on a 1000 Hz stream' in front.extractor.held_reason
     _, as_fresh = _held_link_windows(judge=False)
     assert abs(np.median(as_fresh) / truth - 1.0) > 0.05
+
+
+def test_both_readings_held_together_are_read_at_their_updates_and_said():
+    # Their TE is right but as old as the update, beside a fresh effort (new units of the
+    # model's simulator read 6-9 % high in an outside-in sweep of bags); read at the updates.
+    front, lm = _held_link_windows(motor_too=True)
+    np.testing.assert_allclose(np.median(lm), lost_motion(8e-6, PARAMS), rtol=0.02)
+    assert 'link and motor encoders repeat their readings together' in \
+        front.extractor.held_reason
