@@ -197,6 +197,29 @@ def _shared(t_motor, t_link):
     return tm.shape == tl.shape and (tm is tl or np.array_equal(tm, tl))
 
 
+def _motor_at(t_motor, motor_angle, t_link):
+    """
+    Return the motor angle at the link stamps for :class:`.held_encoders.HeldEncoders`.
+
+    None where the motor has fewer than two usable samples.
+
+    Linear between the motor's own samples: a motor reading held on its own stamps stays held
+    between them, and a link reading is judged against the motor's motion.
+    """
+    try:
+        tm, am, tl = (np.asarray(a, dtype=float) for a in (t_motor, motor_angle, t_link))
+    except (TypeError, ValueError):
+        return None
+    ok = np.isfinite(tm) & np.isfinite(am)
+    if np.count_nonzero(ok) < 2 or tm.shape != am.shape:
+        return None
+    tm, am = tm[ok], am[ok]
+    if not (np.diff(tm) > 0.0).all():
+        order = np.argsort(tm, kind='stable')
+        tm, am = tm[order], am[order]
+    return np.interp(tl, tm, am)
+
+
 def stream_slice(stream, sl):
     """Return the samples ``sl`` of a TE stream (counts kept whole)."""
     return TEStream(stream.t[sl], stream.te[sl], stream.output_angle[sl], stream.valid[sl],
@@ -465,12 +488,15 @@ class TEExtractor:
             t_motor, motor_angle = self._by_tick(t_motor, motor_angle, t_link, link_angle)
         stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,
                             self.max_gap_s, self.link_time_offset_s, self.last_te)
-        if self.held is not None and stream.t.size and _shared(t_motor, t_link):
+        if self.held is not None and stream.t.size and self.held.watching:
             if self._period_s is None and stream.t.size > 16:
                 steps = np.diff(stream.t[:4096])
                 steps = steps[steps > 0.0]
                 self._period_s = float(np.median(steps)) if steps.size else None
-            stale = self.held.stale_mask(link_angle, motor_angle)
+            shared = _shared(t_motor, t_link)
+            motor_at = motor_angle if shared else _motor_at(t_motor, motor_angle, t_link)
+            stale = None if motor_at is None else self.held.stale_mask(link_angle, motor_at,
+                                                                       shared)
             if stale is not None:
                 valid = stream.valid & ~stale
                 stream = replace(stream, valid=valid, te=np.where(valid, stream.te, np.nan),
