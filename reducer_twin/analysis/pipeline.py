@@ -710,11 +710,9 @@ class _Run:
              'high and its remaining life short by up to that share')
 
     def _inputs_said(self, joint, front):
-        """Say a velocity field that is not the link angle's rate, a held effort or encoder."""
-        for said in (front.analyzer.velocity_fault, front.analyzer.effort_held,
-                     front.extractor.held_reason):
-            if said is not None:
-                warn(self.bag, f'{joint}: {said}')
+        """Say how the inputs are read otherwise than published (``TwinFront.input_warnings``)."""
+        for said in front.twin.input_warnings().values():
+            warn(self.bag, f'{joint}: {said}')
 
     def _rate_said(self, joint, res):
         """Say when an observed joint's remaining life is the model's wear rate, not its own."""

@@ -94,7 +94,7 @@ class HeldEncoders:
         self._repeats = {'link': 0, 'motor': 0, 'both': 0}
         self.interpolated = False  # the motor read between its own stamps (a topic of its own)
         self._last = None        # (link, motor at the output) of the latest sample
-        self._run_start = None   # the same at the start of the latest readings' runs
+        self._run_start = {}     # per encoder, the other one at the start of its latest run
 
     @property
     def watching(self):
@@ -172,10 +172,12 @@ class HeldEncoders:
         out_p = np.concatenate([[prev[1]], out])
         same = {'link': link_p[1:] == link_p[:-1], 'motor': out_p[1:] == out_p[:-1]}
         both = same['link'] & same['motor']
-        step, runs = _runs(link_p, both)
+        step = None
         if not self.decided:
-            self._judge(same, np.abs(np.diff(link_p)), np.abs(np.diff(out_p)))
-            self._judge_both(both, step, runs)
+            step, runs = _runs(link_p, both)
+            self._count('link', np.abs(np.diff(out_p)) > MOVING_STEP_RAD, same['link'])
+            self._count('motor', np.abs(np.diff(link_p)) > MOVING_STEP_RAD, same['motor'])
+            self._count('both', step / runs > MOVING_STEP_RAD, both)
             self.decided = min(self._moving.values()) >= HELD_MIN_PAIRS
         if not any(self.held.values()):
             return None
@@ -187,34 +189,26 @@ class HeldEncoders:
                 if shared or name == 'link':
                     stale |= moved
         if self.held['both']:
+            step = _runs(link_p, both)[0] if step is None else step
             stale |= both & (step > STILL_RAD)
         self.stale += int(np.count_nonzero(stale))
         return stale if stale.any() else None
 
-    def _judge(self, same, link_step, out_step):
-        """Count each encoder's moving pairs and repeats; judge it once enough are seen."""
-        for name, other_step in (('link', out_step), ('motor', link_step)):
-            if self._moving[name] >= HELD_MIN_PAIRS:
-                continue
-            moving = other_step > MOVING_STEP_RAD
-            self._moving[name] += int(np.count_nonzero(moving))
-            self._repeats[name] += int(np.count_nonzero(moving & same[name]))
-            if self._moving[name] >= HELD_MIN_PAIRS:
-                repeats, moving = self._repeats[name], self._moving[name]
-                # A reading that never updates is a frozen encoder, not a held one
-                # (:mod:`.observability` says so: the encoders do not measure one motion).
-                self.held[name] = HELD_SHARE * moving <= repeats <= (1.0 - MIN_UPDATES) * moving
+    def _count(self, name, moving, repeats):
+        """
+        Count a judgement's moving samples and those that repeat; judge once enough are seen.
 
-    def _judge_both(self, both, step, runs):
-        """Count the samples of moving runs and those repeating both readings; judge once."""
-        if self._moving['both'] >= HELD_MIN_PAIRS:
+        Held: at least :data:`HELD_SHARE` of the moving samples repeat, and at least
+        :data:`MIN_UPDATES` update (a reading that never updates is a frozen encoder, not a
+        held one: :mod:`.observability` says so, the encoders do not measure one motion).
+        """
+        if self._moving[name] >= HELD_MIN_PAIRS:
             return
-        moving = step / runs > MOVING_STEP_RAD
-        self._moving['both'] += int(np.count_nonzero(moving))
-        self._repeats['both'] += int(np.count_nonzero(moving & both))
-        if self._moving['both'] >= HELD_MIN_PAIRS:
-            repeats, moving = self._repeats['both'], self._moving['both']
-            self.held['both'] = HELD_SHARE * moving <= repeats <= (1.0 - MIN_UPDATES) * moving
+        self._moving[name] += int(np.count_nonzero(moving))
+        self._repeats[name] += int(np.count_nonzero(moving & repeats))
+        if self._moving[name] >= HELD_MIN_PAIRS:
+            seen, repeated = self._moving[name], self._repeats[name]
+            self.held[name] = HELD_SHARE * seen <= repeated <= (1.0 - MIN_UPDATES) * seen
 
     def _moved_over_run(self, same, other, name):
         """
@@ -230,12 +224,10 @@ class HeldEncoders:
                                if starts.size else np.nan, np.nan)
         carried = run < 0
         if carried.any():
-            kept = self._run_start if self._run_start is not None else {}
-            start_other[carried] = kept.get(name, other[0])
+            start_other[carried] = self._run_start.get(name, other[0])
         # The other encoder at the start of the latest run, for the next chunk.
-        last_start = other[1:][starts[-1]] if starts.size else (
-            self._run_start or {}).get(name, other[0])
-        self._run_start = {**(self._run_start or {}), name: float(last_start)}
+        self._run_start[name] = float(other[1:][starts[-1]] if starts.size else
+                                      self._run_start.get(name, other[0]))
         with np.errstate(invalid='ignore'):
             return np.abs(other[1:] - start_other) > STILL_RAD
 

@@ -373,7 +373,7 @@ class TwinFront:
         self.ratio = total_ratio(params.geometry)
         self.extractor = TEExtractor(self.ratio, max_gap_s=config.max_gap_s)
         self.calibration = TimeOffsetCalibration(self.extractor)
-        self._held_said = False
+        self._restarted_for_held = False
         self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
                                        aging_factor=config.aging_factor,
                                        friction=bool(config.friction_in_effort))
@@ -390,17 +390,28 @@ class TwinFront:
         Each window's fitted time offset feeds the calibration (applied once learnt).
         """
         held = self.extractor.held
-        if held is not None and not self._held_said and any(held.held.values()):
+        if held is not None and not self._restarted_for_held and any(held.held.values()):
             # The TE fed before the held reading was found is stale: start again.
-            self._held_said = True
+            self._restarted_for_held = True
             self.analyzer.discard_buffer()
-            self.calibration.estimates.clear()
+            self.calibration.restart()
         found = self.analyzer.update(stream, effort, velocity)
         for f in found:
             if self.calibration.observe(f):
                 self.analyzer.retime(self.calibration.applied)
         self.windows += len(found)
         return found
+
+    def input_warnings(self):
+        """
+        Return how the inputs are read otherwise than published, kind to line (only those found).
+
+        ``'velocity'``: a velocity field that is not the link angle's rate; ``'held'``: an
+        effort held between slower updates; ``'encoders'``: an encoder reading held so.
+        """
+        found = (('velocity', self.analyzer.velocity_fault),
+                 ('held', self.analyzer.effort_held), ('encoders', self.extractor.held_reason))
+        return {kind: line for kind, line in found if line is not None}
 
     def update(self, t_s, motor, link, effort, velocity):
         """TE and windows of paired samples; return the completed windows."""

@@ -136,6 +136,13 @@ class TimeOffsetCalibration:
         self.extractor.link_time_offset_s += self.applied
         return True
 
+    def restart(self):
+        """Learn again from the next windows, undoing an offset learnt from a TE found wrong."""
+        if self.applied is not None:
+            self.extractor.link_time_offset_s -= self.applied
+        self.applied = None
+        self.estimates = []
+
 
 def features_record(f, params):
     """

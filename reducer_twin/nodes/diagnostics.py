@@ -145,14 +145,14 @@ def ingest_statuses(counts, rejected):
     return statuses
 
 
-def say_faults(logger, joint, analyzer, said, encoders=None):
+def say_faults(logger, joint, twin, said):
     """
     Log a joint's input faults on stderr, each kind once (``/diagnostics`` carry them on).
 
-    An effort that is not the output torque is an error (the joint is not observed); a
-    velocity field that is not the link angle's rate a warning (its rate is used), and
-    so is an effort held between slower updates, and an encoder reading held so
-    (``encoders``: :attr:`.te_extraction.TEExtractor.held_reason`).
+    An effort that is not the output torque is an error (the joint is not observed); the
+    inputs read otherwise than published (:meth:`.joint_twin.TwinFront.input_warnings`: a
+    velocity field that is not the link angle's rate, an effort or an encoder reading held
+    between slower updates) are warnings.
 
     Parameters
     ----------
@@ -160,27 +160,23 @@ def say_faults(logger, joint, analyzer, said, encoders=None):
         The node's logger.
     joint : str
         The joint's name, for the line.
-    analyzer : WindowAnalyzer
-        The joint's window analysis.
+    twin : TwinFront
+        The joint's TE extraction and window analysis.
     said : set
         Kinds already said; updated.
-    encoders : str, optional
-        Why an encoder's reading is held between slower updates, if it is.
 
     """
-    for kind, level, fault in (
-            ('effort', 'error', analyzer.effort_fault and
-             f'not observed: {analyzer.effort_fault}'),
-            ('velocity', 'warning', analyzer.velocity_fault),
-            ('held', 'warning', analyzer.effort_held),
-            ('encoders', 'warning', encoders)):
-        if fault and kind not in said:
+    fault = twin.analyzer.effort_fault
+    faults = {'effort': ('error', fault and f'not observed: {fault}')}
+    faults.update((kind, ('warning', line)) for kind, line in twin.input_warnings().items())
+    for kind, (level, line) in faults.items():
+        if line and kind not in said:
             said.add(kind)
-            getattr(logger, level)(f'{joint}: {fault}')
+            getattr(logger, level)(f'{joint}: {line}')
 
 
 def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
-              silent_after_s, encoders=None):
+              silent_after_s, warnings=()):
     """
     Return ``te_monitor``'s level and message from its window analysis; fill ``values``.
 
@@ -206,8 +202,9 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         Wall time [s] since the latest encoder pairs (None: none yet).
     silent_after_s : float
         Wall time [s] without pairs from which the stream is said to have stopped.
-    encoders : str, optional
-        Why an encoder's reading is held between slower updates, if it is.
+    warnings : iterable of str
+        How the inputs are read otherwise than published
+        (:meth:`.joint_twin.TwinFront.input_warnings`): each turns OK to WARN.
 
     Returns
     -------
@@ -229,10 +226,9 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
-    for said in (analyzer.velocity_fault, analyzer.effort_held, encoders):
-        if said is not None and reason is None:
-            message = f'{message}; {said}'
-            level = 'WARN' if level == 'OK' else level
+    for said in warnings if reason is None else ():
+        message = f'{message}; {said}'
+        level = 'WARN' if level == 'OK' else level
     if quiet_s is not None:
         values['seconds_since_pairs'] = quiet_s
         if quiet_s >= silent_after_s and level in ('OK', 'WARN'):

@@ -158,8 +158,7 @@ class TEMonitor(Node):
         if learnt is None and self.twin.calibration.applied is not None:
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
-        say_faults(self.get_logger(), self.joint, self.twin.analyzer, self._said,
-                   self.twin.extractor.held_reason)
+        say_faults(self.get_logger(), self.joint, self.twin, self._said)
         for f in windows:
             self.last_features = f
             rec = self.twin.record(f)
@@ -185,7 +184,7 @@ class TEMonitor(Node):
             self.twin.analyzer, joint_topic(self.joint, 'encoder_pairs'),
             'OK' if self.rejects.total == 0 else 'WARN', f'{self.windows} windows analysed',
             values, STALE_WINDOWS * self.twin.config.window_s, quiet, self.silent_after_s,
-            self.twin.extractor.held_reason)
+            self.twin.input_warnings().values())
         return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
                  values)]
 

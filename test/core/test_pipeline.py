@@ -21,7 +21,7 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
-from reducer_twin.core.pipeline import rate_resolved, state_from_record
+from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -390,3 +390,18 @@ def test_life_config_error_above_warn_names_both_thresholds():
 def test_a_non_finite_wear_record_raises_invalid_input(worn_record):
     with pytest.raises(InvalidInput):
         LifeStage(PARAMS).process({**worn_record, 'wear_m': math.inf})
+
+
+def test_the_time_offset_is_learnt_once_from_the_first_windows_and_can_be_learnt_again():
+    # The median of the first windows' fits goes into the link stamps once. Learnt from a
+    # TE later found wrong (an encoder found held), it is taken back and learnt again.
+    extractor = SimpleNamespace(link_time_offset_s=10e-6)
+    calibration = TimeOffsetCalibration(extractor, windows=3)
+    fits = [SimpleNamespace(time_offset_s=v) for v in (40e-6, math.nan, 60e-6, 50e-6)]
+    assert [calibration.observe(f) for f in fits] == [False, False, False, True]
+    assert calibration.applied == pytest.approx(50e-6)
+    assert extractor.link_time_offset_s == pytest.approx(60e-6)
+    assert not calibration.observe(fits[0])        # once
+    calibration.restart()
+    assert calibration.applied is None and extractor.link_time_offset_s == pytest.approx(10e-6)
+    assert [calibration.observe(f) for f in fits] == [False, False, False, True]
