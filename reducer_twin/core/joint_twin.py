@@ -407,10 +407,13 @@ class TwinFront:
         Return how the inputs are read otherwise than published, kind to line (only those found).
 
         ``'velocity'``: a velocity field that is not the link angle's rate; ``'held'``: an
-        effort held between slower updates; ``'encoders'``: an encoder reading held so.
+        effort held between slower updates; ``'correlated'``: an effort whose noise is
+        correlated over samples; ``'encoders'``: an encoder reading held so.
         """
         found = (('velocity', self.analyzer.velocity_fault),
-                 ('held', self.analyzer.effort_held), ('encoders', self.extractor.held_reason))
+                 ('held', self.analyzer.effort_held),
+                 ('correlated', self.analyzer.effort_correlated),
+                 ('encoders', self.extractor.held_reason))
         return {kind: line for kind, line in found if line is not None}
 
     def update(self, t_s, motor, link, effort, velocity):

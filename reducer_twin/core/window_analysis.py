@@ -493,6 +493,22 @@ class WindowAnalyzer:
                 "stream's rate suggests")
 
     @property
+    def effort_correlated(self):
+        """
+        Say when the effort's noise is correlated over samples, else None.
+
+        See :meth:`.torque_smoothing.TorqueSmoothing.mean_noise`.
+        """
+        ratio = self._smoothing.correlated_ratio
+        if ratio is None:
+            return None
+        return (f"the effort's noise is correlated over successive samples (band-limited or "
+                f'filtered): its averages are {ratio:.1f} times as noisy as its sample-to-sample '
+                f'scatter implies (in {self._smoothing.correlated_windows} windows); the torque '
+                "bands are widened to the averages' own noise, and the lost motion rests on "
+                'fewer independent samples')
+
+    @property
     def velocity_scale(self):
         """Return the velocity field's median ratio to the link angle's rate (NaN: no motion)."""
         return self._velocity.scale

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from scipy.signal import butter, sosfiltfilt
 from reducer_twin.core.torque_smoothing import nominal_step, SMOOTHING_MAX_S, TorqueSmoothing
 
 RATED = 784.0
@@ -55,6 +56,44 @@ def test_the_noise_band_follows_the_efforts_noise_and_the_averages_length(hold):
     # The band is sign_sigmas times the average's noise: 10 N*m over its independent updates.
     expected = 3.0 * 10.0 / np.sqrt(max(31 / hold, 1.0))
     assert np.median(band[inside]) == pytest.approx(expected, rel=0.2)
+
+
+def _band_noise(n, rms, lo_hz, hi_hz, seed, fs=1000.0):
+    sos = butter(4, [lo_hz, hi_hz], btype='band', fs=fs, output='sos')
+    noise = sosfiltfilt(sos, np.random.default_rng(seed).normal(size=n))
+    return noise * rms / np.sqrt(np.mean(noise ** 2))
+
+
+def test_an_efforts_noise_correlated_over_samples_is_read_from_its_averages():
+    # 2 % of rated torque in 5-50 Hz at 1 kHz: neighbouring samples barely differ, but a
+    # 31-sample average keeps most of the noise; its band must say so, and the average be
+    # lengthened, and it is said.
+    n = 4000
+    win, starts, ends = _windows([n, n])
+    t = np.arange(2 * n) * 1e-3
+    smoothing = TorqueSmoothing(0.03, 3.0, TAKEUP, RATED)
+    effort = 300.0 + _band_noise(2 * n, 0.02 * RATED, 5.0, 50.0, 3)
+    mean = np.convolve(effort - 300.0, np.ones(31) / 31, mode='same')[100:-100]
+    _, band = smoothing.smooth(effort, 15, t, 1e-3, None, win, starts, ends)
+    inside = slice(200, n - 200)
+    # The band is sign_sigmas times the 31-sample average's own noise, within its scatter.
+    assert np.median(band[inside]) == pytest.approx(3.0 * np.std(mean), rel=0.35)
+    assert smoothing.correlated_windows == 2 and smoothing.correlated_ratio > 5.0
+
+
+def test_white_noise_and_quiet_correlated_noise_keep_the_neighbours_figure():
+    # White noise: its averages are as noisy as its scatter says. Correlated noise whose
+    # averages are already below a tenth of the test torque is left as it is.
+    n = 4000
+    win, starts, ends = _windows([n, n])
+    rng = np.random.default_rng(4)
+    white = rng.normal(0.0, 0.02 * RATED, 2 * n)
+    quiet = _band_noise(2 * n, 0.002 * RATED, 5.0, 50.0, 5)
+    for noise in (white, quiet):
+        smoothing = TorqueSmoothing(0.03, 3.0, TAKEUP, RATED)
+        sigma = np.full(2, 1.4826 * np.median(np.abs(np.diff(noise, 2))) / np.sqrt(6.0))
+        out = smoothing.mean_noise(300.0 + noise, sigma, 15, win, starts, ends)
+        assert np.array_equal(out, sigma) and smoothing.correlated_windows == 0
 
 
 def test_the_torque_goes_to_the_load_model_where_it_explains_the_effort():
