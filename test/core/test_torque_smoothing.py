@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
-from scipy.signal import butter, sosfiltfilt
 from reducer_twin.core.torque_smoothing import nominal_step, SMOOTHING_MAX_S, TorqueSmoothing
+from scipy.signal import butter, sosfiltfilt
 
 RATED = 784.0
 TAKEUP = 0.03 * RATED
