@@ -24,7 +24,10 @@ Usage::
 
     .venv/bin/python bench/bench_early_life.py [--seeds 5] [--seed0 3]
         [--rates 1000,2000,4000] [--hours 300] [--aging-factor 3600]
-        [--generators model,independent]
+        [--generators model,independent] [--effort-noise-band 5-50]
+
+``--effort-noise-band`` band-limits the independent generator's effort noise (same RMS):
+a current loop's ripple, which neighbouring samples do not show.
 """
 
 import argparse
@@ -79,10 +82,10 @@ def run_model(tmp, seed, rate, hours, aging):
     return _analysed(tmp, bag, truths)
 
 
-def run_independent(tmp, seed, rate, hours, aging):
+def run_independent(tmp, seed, rate, hours, aging, band_hz=None):
     """One independent-generator recording from new; return rows per joint."""
     spec = gen.Spec(seed=seed, kinds=KINDS, hours=hours, aging_factor=aging, rate_hz=rate,
-                    start_fraction=0.0)
+                    start_fraction=0.0, effort_noise_band_hz=band_hz)
     bag = tmp / f'independent-{seed}-{rate}'
     truth = gen.generate_bag(spec, bag)
     truths = {j: t['remaining_life_end_h'] for j, t in truth['joints'].items()}
@@ -130,8 +133,16 @@ def main(argv=None):
     ap.add_argument('--hours', type=float, default=300.0)
     ap.add_argument('--aging-factor', type=float, default=3600.0)
     ap.add_argument('--generators', default='model,independent')
+    ap.add_argument('--effort-noise-band', type=gen.band_hz, metavar='LOW-HIGH',
+                    help="the independent generator's effort noise band-limited to LOW-HIGH "
+                    "Hz (a current loop's ripple; default white)")
     args = ap.parse_args(argv)
-    runners = {'model': run_model, 'independent': run_independent}
+    band = args.effort_noise_band
+    if band is not None and 'model' in args.generators.split(','):
+        ap.error("--effort-noise-band: the model's simulator has no band-limited effort "
+                 'noise; give --generators independent')
+    runners = {'model': run_model,
+               'independent': lambda *a: run_independent(*a, band_hz=band)}
     start = time.time()
     with tempfile.TemporaryDirectory(prefix='bench-early-') as tmp:
         for name in args.generators.split(','):
@@ -140,7 +151,8 @@ def main(argv=None):
                 rows = []
                 for seed in range(args.seed0, args.seed0 + args.seeds):
                     rows += runners[name](Path(tmp), seed, rate, args.hours, args.aging_factor)
-                report(f'{name} at {rate:g} Hz, {args.hours:g} h from new', rows)
+                noise = '' if band is None else f', effort noise in {band[0]:g}-{band[1]:g} Hz'
+                report(f'{name} at {rate:g} Hz, {args.hours:g} h from new{noise}', rows)
                 every += rows
             report(f'{name}, every rate', every)
     print(f'({time.time() - start:.0f} s)')

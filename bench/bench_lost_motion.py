@@ -90,7 +90,7 @@ def window_lost_motion(derived, joints):
 
 
 def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen,
-            layout='split', rate_hz=None):
+            layout='split', rate_hz=None, band_hz=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -116,6 +116,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
         ``'split'`` (link and motor on two topics) or ``'combined'`` (one message).
     rate_hz : float, optional
         Sample rate [Hz]; drawn in 100-1000 Hz when None.
+    band_hz : tuple of float, optional
+        The independent generator's effort noise band-limited to it [Hz]; None: white.
 
     Returns
     -------
@@ -128,7 +130,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
     spec = source.Spec(seed=seed, kinds=kinds, hours=duration_s / gen.HOUR,
                        aging_factor=1.0, start_fraction=start_fraction,
                        effort_noise_pct=noise_pct, layout=layout, rate_hz=rate_hz,
-                       stamp_jitter_us=stamp_jitter_us)
+                       stamp_jitter_us=stamp_jitter_us,
+                       **({} if band_hz is None else {'effort_noise_band_hz': band_hz}))
     bag = tmp / f'bag-{seed}-{noise_pct}'
     derived = tmp / f'out-{seed}-{noise_pct}'
     truth = source.generate_bag(spec, bag)
@@ -249,8 +252,14 @@ def main(argv=None):
                         help='link and motor on two topics (split) or in one message')
     parser.add_argument('--rate-hz', type=float, default=None,
                         help='sample rate [Hz] (default drawn in 100-1000 Hz)')
+    parser.add_argument('--effort-noise-band', type=gen.band_hz, metavar='LOW-HIGH',
+                        help='effort noise band-limited to LOW-HIGH Hz (independent generator '
+                        'with --rate-hz above twice HIGH; default white)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
+    if args.effort_noise_band is not None and (args.generator != 'independent'
+                                               or args.rate_hz is None):
+        parser.error('--effort-noise-band: give --generator independent and --rate-hz')
     source = gen if args.generator == 'independent' else third_generator
     levels = [float(x) for x in args.noise.split(',')] if source is gen else [None]
     kinds = tuple(k.strip() for k in args.kinds.split(','))
@@ -262,7 +271,8 @@ def main(argv=None):
             seed = args.seed0 + i
             for level in levels:
                 run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
-                              args.stamp_jitter_us, source, args.layout, args.rate_hz)
+                              args.stamp_jitter_us, source, args.layout, args.rate_hz,
+                              args.effort_noise_band)
                 results[level].append(run)
                 if args.quiet:
                     continue

@@ -60,7 +60,7 @@ Usage::
 
     python bench/independent_generator.py --out BAG --seed 3 [--kinds base,shoulder,forearm]
         [--hours 0.05] [--aging-factor 1] [--start-fraction 0.4] [--rate-hz 125]
-        [--effort-noise 2] [--layout split|combined] [--json]
+        [--effort-noise 2] [--effort-noise-band 5-50] [--layout split|combined] [--json]
 """
 
 import argparse
@@ -420,6 +420,27 @@ def draw_robot(seed, kinds, law=None, effort_noise_fraction=None):
     return out, cycle
 
 
+def effort_noise(white, band_hz, rate_hz):
+    """
+    Unit-RMS effort noise from unit white noise: itself, or band-limited to ``band_hz``.
+
+    Raises
+    ------
+    GeneratorError
+        If the band does not lie below half the rate.
+
+    """
+    if band_hz is None:
+        return white
+    if not band_hz[1] < 0.5 * rate_hz:
+        raise GeneratorError(f'--effort-noise-band: {band_hz[0]:g}-{band_hz[1]:g} Hz, allowed '
+                             f'HIGH below half the rate ({rate_hz:g} Hz)')
+    from scipy.signal import butter, sosfiltfilt
+    sos = butter(4, list(band_hz), btype='band', fs=rate_hz, output='sos')
+    band = sosfiltfilt(sos, white)
+    return band / math.sqrt(float(np.mean(band ** 2)))
+
+
 def true_torque(joint, q, qd, qdd):
     """Return the torque the reducer output transmits [N*m] (gravity, inertia, link drag)."""
     return joint.gravity_nm * np.cos(q) + joint.inertia_kg_m2 * qdd + joint.drag_nm_s * qd
@@ -523,6 +544,10 @@ class Spec:
         Controller rate; None: drawn from :data:`RATES_HZ`.
     effort_noise_pct : float or None
         Effort noise [% of rated torque]; None: drawn per joint in 1-5 %.
+    effort_noise_band_hz : tuple of float or None
+        ``(low, high)``: the effort noise band-limited to it [Hz] (a current loop's ripple:
+        a fourth-order Butterworth band-pass run forwards and backwards, scaled to the
+        same RMS); None: white.
     law : str or None
         Force the growth law of every joint.
     layout : str
@@ -551,6 +576,7 @@ class Spec:
     start_fraction: float = None
     rate_hz: float = None
     effort_noise_pct: float = None
+    effort_noise_band_hz: tuple = None
     law: str = None
     layout: str = 'split'
     motor_angles: str = 'raw'
@@ -593,6 +619,11 @@ class Spec:
             bad('--rate-hz', self.rate_hz, 'in [1, 10000] Hz')
         if self.effort_noise_pct is not None and not (0.0 <= self.effort_noise_pct <= 50.0):
             bad('--effort-noise', self.effort_noise_pct, 'in [0, 50] % of rated torque')
+        band = self.effort_noise_band_hz
+        if band is not None and not (len(band) == 2 and 0.0 < band[0] < band[1]):
+            bad('--effort-noise-band', band, 'LOW-HIGH with 0 < LOW < HIGH [Hz]')
+        if band is not None and self.rate_hz is not None and not band[1] < 0.5 * self.rate_hz:
+            bad('--effort-noise-band', band, f'HIGH below half the rate ({self.rate_hz:g} Hz)')
         if self.stamp_jitter_us is not None and not (0.0 <= self.stamp_jitter_us <= 1000.0):
             bad('--stamp-jitter-us', self.stamp_jitter_us, 'in [0, 1000] us')
         for name, value, allowed in (('--law', self.law, LAWS + (None,)),
@@ -737,6 +768,8 @@ class Stream(Recording):
                 'stamp_jitter_us': self.jitter_s * 1e6, 'cycle_s': self.cycle.period_s,
                 'layout': self.spec.layout, 'motor_angles': self.spec.motor_angles,
                 'effort_on': self.spec.effort_on, 'velocity': self.spec.velocity,
+                'effort_noise_band_hz': (None if self.spec.effort_noise_band_hz is None
+                                         else list(self.spec.effort_noise_band_hz)),
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
@@ -868,7 +901,8 @@ def generate(spec):
         motor_step = 2.0 * math.pi / 2 ** j.motor_bits
         motor = np.round((RATIO * q + j.motor_offset_rad) / motor_step
                          + noise.normal(0.0, j.motor_noise_rad / motor_step, n)) * motor_step
-        effort = torque + friction(j, qd) + noise.normal(0.0, j.effort_noise_nm, n)
+        effort = torque + friction(j, qd) + j.effort_noise_nm * effort_noise(
+            noise.normal(0.0, 1.0, n), spec.effort_noise_band_hz, rate)
         velocity = qd + noise.normal(0.0, j.velocity_noise_rad_s, n)
         for name, value in (('q', q), ('qd', qd), ('torque', torque), ('effort', effort),
                             ('link', link), ('motor', motor), ('velocity', velocity),
@@ -1171,8 +1205,19 @@ def _parser():
                    'of the twin, and print its truth.')
     p.add_argument('--effort-noise', type=float,
                    help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
+    p.add_argument('--effort-noise-band', type=band_hz, metavar='LOW-HIGH',
+                   help='effort noise band-limited to LOW-HIGH Hz (default: white)')
     p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
+
+
+def band_hz(text):
+    """Parse ``LOW-HIGH`` [Hz] (an option's value)."""
+    try:
+        low, high = (float(v) for v in text.split('-'))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r}: want LOW-HIGH in Hz, e.g. 5-50') from None
+    return (low, high)
 
 
 def main(argv=None):
@@ -1191,7 +1236,8 @@ def main(argv=None):
 
     """
     args = _parser().parse_args(argv)
-    spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise, law=args.law)
+    spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise,
+                effort_noise_band_hz=args.effort_noise_band, law=args.law)
     return cli_run(args, spec)
 
 

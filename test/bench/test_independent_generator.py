@@ -174,6 +174,23 @@ def test_effort_noise_has_the_drawn_standard_deviation(split_bag, split_read):
         assert abs(np.mean(residual)) < 4.0 * j.effort_noise_nm / math.sqrt(residual.size)
 
 
+def test_band_limited_effort_noise_keeps_its_rms_and_its_band():
+    # A current loop's ripple: the same RMS, nearly nothing between neighbouring samples, and
+    # none of it outside the band.
+    spec = gen.Spec(**{**SHORT, 'rate_hz': 1000.0, 'hours': 10.0 / 3600.0},
+                    kinds=('shoulder',), effort_noise_pct=2.0, effort_noise_band_hz=(5.0, 50.0))
+    stream = gen.generate(spec)
+    j = stream.joints[0]
+    residual = stream.effort[:, 0] - stream.torque[:, 0] - gen.friction(j, stream.qd[:, 0])
+    np.testing.assert_allclose(np.std(residual), 0.02 * 784.0, rtol=0.03)
+    assert np.std(np.diff(residual, 2)) < 0.2 * np.std(residual)
+    spectrum = np.abs(np.fft.rfft(residual)) ** 2
+    hz = np.fft.rfftfreq(residual.size, 1.0 / stream.rate_hz)
+    assert spectrum[(hz > 2.0) & (hz < 70.0)].sum() > 0.99 * spectrum[hz > 0.0].sum()
+    with pytest.raises(gen.GeneratorError, match='--effort-noise-band'):
+        gen.Spec(**SHORT, effort_noise_band_hz=(5.0, 200.0)).check()
+
+
 def test_effort_carries_friction_the_reducer_does_not_transmit(split_bag):
     _, stream, _ = split_bag
     for i, j in enumerate(stream.joints):
