@@ -152,27 +152,6 @@ PARTIAL_SHARE = 0.2
 PARTIAL_WINDOWS = 3
 """Windows of stream after the last lost motion below which the estimate is taken as current."""
 
-COARSE_STEP_RAD = math.radians(0.5 / 60.0)
-"""
-Encoder step [rad at the output] beyond which a joint's lost motion is said to be uncertain.
-
-Half an arcminute: a reducer's lost motion is 0.4-3 arcmin. A 16-bit link encoder steps by
-0.33 arcmin, a 12-bit one by 5.3; motor encoders' steps are divided by the ratio.
-"""
-
-GROWTH_STEP_RAD = math.radians(0.1 / 60.0)
-"""
-Encoder step [rad at the output] beyond which a small growth of the lost motion is said to
-be read less surely than its interval says.
-
-A tenth of an arcminute. A 17-bit link encoder steps by 0.165 arcmin: each window's lost
-motion then wanders with where the joint meets the load, by a part of a step that no
-window's fit reports. Measured (the model's simulator, 300 h from new, three seeds): the
-lost motion read within 1-4 %, but its growth, 0.02 arcmin in the recording, read as wear
-29-43 % high on 6 of 6 joints, the remaining life 30-75 % short with the truth above P90;
-18 and 19 bits read as the stream unquantised, and so did 2^17 on units worn 2.6-13 µm.
-"""
-
 MIN_DETECT_TRAVEL_RAD = 0.05
 """Link travel [rad] a chunk must show before its motor angles are classified."""
 
@@ -461,31 +440,10 @@ class _Run:
                 warn(self.bag, f'the motor encoder of {joint} counts against '
                      'the link (a negative reduction): its angles are taken reversed')
             found = 'raw' if r > math.sqrt(ratio) else 'output'
-            self._note_resolution(joint, x_link, x_motor / (ratio if found == 'raw' else 1.0))
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
                                  f'{ratio:g} times, output angles about 1)')
             self._set_angles(joint, found, sense)
-
-    def _note_resolution(self, joint, link, motor):
-        """Say when an encoder's steps [rad at the output] are too coarse for the lost motion."""
-        for side, x in (('link', link), ('motor', motor)):
-            steps = np.abs(np.diff(x[np.isfinite(x)]))
-            steps = steps[steps > 0]
-            if steps.size < 100:
-                continue
-            step = float(np.percentile(steps, 0.1))     # the smallest move it reports
-            if step > COARSE_STEP_RAD:
-                warn(self.bag, f'the {side} encoder of {joint} moves in steps '
-                     f'of {math.degrees(step) * 60:.2g} arcmin at the output, coarser than the '
-                     f'{math.degrees(COARSE_STEP_RAD) * 60:g} arcmin the lost motion is read '
-                     'to: its lost motion and wear are uncertain by about that much')
-            elif step > GROWTH_STEP_RAD:
-                warn(self.bag, f'the {side} encoder of {joint} moves in steps '
-                     f'of {math.degrees(step) * 60:.2g} arcmin at the output: a lost motion '
-                     'that grows by less than a few steps in the recording (a unit early in '
-                     'its life) has its wear and remaining life read less surely than their '
-                     'intervals say')
 
     def _against_config(self, key, found, joint, seen):
         """Refuse a ``twin.<key>`` of ``--config`` that the data of ``joint`` contradict."""

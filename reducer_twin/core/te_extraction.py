@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from .encoder_steps import EncoderSteps
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_encoders import HeldEncoders
 from .ingest import TickPairing
@@ -433,6 +434,9 @@ class TEExtractor:
     held : HeldEncoders or None
         Whether an encoder's reading is held between slower updates; its stale
         samples are left out of the TE (:mod:`.held_encoders`, :attr:`held_reason`).
+    steps : EncoderSteps or None
+        The smallest move each encoder reports at the output (:mod:`.encoder_steps`,
+        :attr:`step_reason`).
 
     """
 
@@ -445,8 +449,9 @@ class TEExtractor:
         try:
             self.ticks = TickPairing(ratio) if math.isfinite(ratio) and ratio != 0 else None
             self.held = HeldEncoders(ratio) if self.ticks is not None else None
+            self.steps = EncoderSteps(ratio) if self.ticks is not None else None
         except (TypeError, ValueError):
-            self.ticks = self.held = None   # compute_te says what is wrong
+            self.ticks = self.held = self.steps = None   # compute_te says what is wrong
 
     @property
     def held_reason(self):
@@ -454,6 +459,11 @@ class TEExtractor:
         if self.held is None or self._period_s is None:
             return None
         return self.held.reason(1.0 / self._period_s)
+
+    @property
+    def step_reason(self):
+        """Say when an encoder reports the output angle too coarsely, else None."""
+        return None if self.steps is None else self.steps.reason()
 
     def update(self, t_motor, motor_angle, t_link, link_angle):
         """
@@ -484,6 +494,8 @@ class TEExtractor:
         return _join([self._compute(tm[m], am[m], tl[k], al[k]) for m, k in pieces])
 
     def _compute(self, t_motor, motor_angle, t_link, link_angle):
+        if self.steps is not None and not self.steps.decided:
+            self.steps.observe(link_angle, motor_angle)     # each encoder's own readings
         if self.ticks is not None:
             t_motor, motor_angle = self._by_tick(t_motor, motor_angle, t_link, link_angle)
         stream = compute_te(t_motor, motor_angle, t_link, link_angle, self.ratio,

@@ -616,7 +616,7 @@ def test_a_link_encoder_too_coarse_for_the_lost_motion_is_said(original, tmp_pat
     _, _, err = _cli_json(_rewrite(js, tmp_path, 'coarse', position=position), tmp_path,
                           capsys)
     (line,) = [x for x in err.splitlines() if 'moves in steps' in x]
-    assert line.startswith('WARNING:') and 'link encoder of joint_1' in line
+    assert line.startswith('WARNING:') and 'joint_1: the link encoder moves' in line
     assert 'steps of 5.3 arcmin' in line
     assert not any('moves in steps' in x for x in _cli_json(
         _rewrite(js, tmp_path, 'fine'), tmp_path / 'f', capsys)[2].splitlines())
@@ -638,7 +638,7 @@ def test_a_link_encoder_coarse_for_an_early_growth_is_said(
     lines = [x for x in err.splitlines() if 'moves in steps' in x]
     assert len(lines) == int(said)
     if said:
-        assert lines[0].startswith('WARNING:') and 'link encoder of joint_1' in lines[0]
+        assert lines[0].startswith('WARNING:') and 'joint_1: the link encoder moves' in lines[0]
         assert 'steps of 0.16 arcmin' in lines[0] and 'early in its life' in lines[0]
 
 

@@ -27,6 +27,7 @@ from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATU
 from reducer_twin.msg_adapters.ros import batch_array, from_multiarray, to_multiarray
 from reducer_twin.nodes.qos import encoder_qos
 from reducer_twin.nodes.te_monitor import TEMonitor
+from scipy.signal import butter, sosfiltfilt
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 pytestmark = pytest.mark.timeout(60, method='thread')
@@ -334,19 +335,46 @@ def test_a_velocity_field_in_degrees_is_replaced_by_the_angles_rate_and_said(
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
 
 
-@pytest.mark.parametrize('column, hold, said', [
-    (3, 10, 'the effort repeats itself on successive samples: it changes at about 100 Hz on a '
-            '1000 Hz stream'),
-    (2, 4, 'the link encoder repeats its reading on successive samples while the joint moves: '
-           'updated at about 250 Hz on a 1000 Hz stream'),
-], ids=['effort', 'link'])
-def test_a_value_held_between_slower_updates_turns_the_diagnostics_to_warn(
-        ros, simulated, capfd, column, hold, said):
+def _held(rows, column, hold):
+    out = rows.copy()
+    out[:, column] = rows[(np.arange(len(rows)) // hold) * hold, column]
+    return out
+
+
+def _link_bits(rows, bits):
+    out = rows.copy()
+    quantum = 2.0 * math.pi / 2 ** bits
+    out[:, 2] = np.round(rows[:, 2] / quantum) * quantum
+    return out
+
+
+def _ripple(rows, rms_nm):
+    sos = butter(4, [5.0, 50.0], btype='band', fs=1000.0, output='sos')
+    ripple = sosfiltfilt(sos, np.random.default_rng(8).normal(size=len(rows)))
+    out = rows.copy()
+    out[:, 3] += ripple * rms_nm / ripple.std()
+    return out
+
+
+@pytest.mark.parametrize('alter, said', [
+    (lambda rows: _held(rows, 3, 10),
+     'the effort repeats itself on successive samples: it changes at about 100 Hz on a '
+     '1000 Hz stream'),
+    (lambda rows: _held(rows, 2, 4),
+     'the link encoder repeats its reading on successive samples while the joint moves: '
+     'updated at about 250 Hz on a 1000 Hz stream'),
+    (lambda rows: _ripple(rows, 0.02 * 784.0),
+     "the effort's noise is correlated over successive samples (band-limited or filtered)"),
+    (lambda rows: _link_bits(rows, 17),
+     'the link encoder moves in steps of 0.16 arcmin at the output: a lost motion that grows'),
+], ids=['held effort', 'held link', 'effort ripple', '17-bit link'])
+def test_an_input_read_otherwise_than_published_turns_the_diagnostics_to_warn(
+        ros, simulated, capfd, alter, said):
+    # Held between slower updates, a ripple below the sample rate, a coarse link encoder:
+    # each is read as it is and said, on the node's log once and in /diagnostics (WARN).
     _, rows = simulated
-    held = rows.copy()
-    held[:, column] = rows[(np.arange(len(rows)) // hold) * hold, column]
     monitor = Monitor(ros)
-    monitor.feed(held)
+    monitor.feed(alter(rows))
     status = monitor.status(lambda s: said in s.message)
     assert status.level == DiagnosticStatus.WARN
     logged = [x for x in capfd.readouterr().err.splitlines() if said in x]
