@@ -348,6 +348,12 @@ def _link_bits(rows, bits):
     return out
 
 
+def _late(rows, samples):
+    out = rows.copy()
+    out[samples:, 4] = rows[:-samples, 4]
+    return out
+
+
 def _ripple(rows, rms_nm):
     sos = butter(4, [5.0, 50.0], btype='band', fs=1000.0, output='sos')
     ripple = sosfiltfilt(sos, np.random.default_rng(8).normal(size=len(rows)))
@@ -367,11 +373,14 @@ def _ripple(rows, rms_nm):
      "the effort's noise is correlated over successive samples (band-limited or filtered)"),
     (lambda rows: _link_bits(rows, 17),
      'the link encoder moves in steps of 0.16 arcmin at the output: a lost motion that grows'),
-], ids=['held effort', 'held link', 'effort ripple', '17-bit link'])
+    (lambda rows: _late(rows, 20),
+     'the velocity field lags the rate of the link angle by'),
+], ids=['held effort', 'held link', 'effort ripple', '17-bit link', 'velocity 20 ms late'])
 def test_an_input_read_otherwise_than_published_turns_the_diagnostics_to_warn(
         ros, simulated, capfd, alter, said):
-    # Held between slower updates, a ripple below the sample rate, a coarse link encoder:
-    # each is read as it is and said, on the node's log once and in /diagnostics (WARN).
+    # Held between slower updates, a ripple below the sample rate, a coarse link encoder, a
+    # velocity that lags: each is read as well as it can be and said, on the node's log once
+    # and in /diagnostics (WARN).
     _, rows = simulated
     monitor = Monitor(ros)
     monitor.feed(alter(rows))
