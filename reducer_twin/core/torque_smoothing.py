@@ -126,20 +126,20 @@ class TorqueSmoothing:
         Noise of the effort as white noise that gives its averages' noise, per window.
 
         A torque estimate's noise correlated over many samples (a current loop's
-        ripple of a few tens of Hz, an estimate filtered before it is published)
-        hides from differences between neighbours: 2 % of rated torque in 5-50 Hz
-        at 1 kHz read 2.0 N·m of its 15.7, the 30 ms average was not lengthened
-        and kept 7.6 N·m of noise against a band of 1 N·m, and a new unit's wear
-        read 67-80 % low, with nothing said. The noise ``s_m`` of the ``m =
-        2·half + 1``-sample averages is read from their fourth differences ``m``
-        samples apart (averages that share no sample; the load's own change
-        cancels up to its cubic term), robustly, over the samples whose averages
-        are whole; where ``s_m·sqrt(m/h)`` exceeds ``sigma`` by
-        :data:`CORRELATED_RATIO` and ``s_m`` is more than :data:`SMOOTHING_NOISE` of
-        the test torque (a noise the average must quiet), it replaces ``sigma``
-        (the averages are then taken to
-        fall as ``1/sqrt(length)`` beyond ``m``, as for noise correlated over
-        fewer samples than an average).
+        ripple of a few tens of Hz) hides from differences between neighbours: 2 %
+        of rated torque in 5-50 Hz at 1 kHz read 2.0 N·m of its 15.7, the 30 ms
+        average was not lengthened and kept 7.6 N·m of noise against a band of
+        1 N·m, and a new unit's wear read 67-80 % low, with nothing said.
+
+        The noise ``s_m`` of the ``m = 2·half + 1``-sample averages is read from
+        their fourth differences ``m`` samples apart (averages that share no
+        sample; the load's own change cancels up to its cubic term), robustly,
+        over the samples whose averages are whole. Where ``s_m·sqrt(m/h)``
+        exceeds ``sigma`` by :data:`CORRELATED_RATIO` and ``s_m`` is more than
+        :data:`SMOOTHING_NOISE` of the test torque (a noise the average must
+        quiet), it replaces ``sigma``: the averages are then taken to fall as
+        ``1/sqrt(length)`` beyond ``m``, as for noise correlated over fewer
+        samples than an average.
 
         Parameters
         ----------
@@ -147,12 +147,8 @@ class TorqueSmoothing:
             The effort [N·m].
         sigma : ndarray
             Its noise per window from neighbouring samples [N·m].
-        half : int
-            Half-width of the average [samples].
-        win, starts, ends : ndarray
-            Window of each sample; first and end sample of each window.
-        hold : int
-            Samples per update of a held effort (1: fresh on every sample).
+        half, win, starts, ends, hold
+            As for :meth:`quiet_half`.
 
         Returns
         -------
