@@ -24,10 +24,11 @@ Usage::
 
     .venv/bin/python bench/bench_early_life.py [--seeds 5] [--seed0 3]
         [--rates 1000,2000,4000] [--hours 300] [--aging-factor 3600]
-        [--generators model,independent] [--effort-noise-band 5-50]
+        [--generators model,independent] [--effort-noise-band 5-50] [--velocity-filter-ms 20]
 
 ``--effort-noise-band`` band-limits the independent generator's effort noise (same RMS):
-a current loop's ripple, which neighbouring samples do not show.
+a current loop's ripple, which neighbouring samples do not show. ``--velocity-filter-ms``
+passes its velocity field through a first-order filter (a drive's filtered velocity).
 """
 
 import argparse
@@ -82,10 +83,11 @@ def run_model(tmp, seed, rate, hours, aging):
     return _analysed(tmp, bag, truths)
 
 
-def run_independent(tmp, seed, rate, hours, aging, band_hz=None):
+def run_independent(tmp, seed, rate, hours, aging, band_hz=None, velocity_filter_s=None):
     """One independent-generator recording from new; return rows per joint."""
     spec = gen.Spec(seed=seed, kinds=KINDS, hours=hours, aging_factor=aging, rate_hz=rate,
-                    start_fraction=0.0, effort_noise_band_hz=band_hz)
+                    start_fraction=0.0, effort_noise_band_hz=band_hz,
+                    velocity_filter_s=velocity_filter_s)
     bag = tmp / f'independent-{seed}-{rate}'
     truth = gen.generate_bag(spec, bag)
     truths = {j: t['remaining_life_end_h'] for j, t in truth['joints'].items()}
@@ -136,13 +138,18 @@ def main(argv=None):
     ap.add_argument('--effort-noise-band', type=gen.band_hz, metavar='LOW-HIGH',
                     help="the independent generator's effort noise band-limited to LOW-HIGH "
                     "Hz (a current loop's ripple; default white)")
+    ap.add_argument('--velocity-filter-ms', type=float, metavar='MS',
+                    help="the independent generator's velocity field through a first-order "
+                    "filter of MS ms (a drive's filtered velocity; default unfiltered)")
     args = ap.parse_args(argv)
     band = args.effort_noise_band
-    if band is not None and 'model' in args.generators.split(','):
-        ap.error("--effort-noise-band: the model's simulator has no band-limited effort "
-                 'noise; give --generators independent')
+    tau = None if args.velocity_filter_ms is None else 1e-3 * args.velocity_filter_ms
+    if (band is not None or tau is not None) and 'model' in args.generators.split(','):
+        ap.error("--effort-noise-band, --velocity-filter-ms: the model's simulator has "
+                 'neither; give --generators independent')
     runners = {'model': run_model,
-               'independent': lambda *a: run_independent(*a, band_hz=band)}
+               'independent': lambda *a: run_independent(*a, band_hz=band,
+                                                         velocity_filter_s=tau)}
     start = time.time()
     with tempfile.TemporaryDirectory(prefix='bench-early-') as tmp:
         for name in args.generators.split(','):
@@ -152,6 +159,7 @@ def main(argv=None):
                 for seed in range(args.seed0, args.seed0 + args.seeds):
                     rows += runners[name](Path(tmp), seed, rate, args.hours, args.aging_factor)
                 noise = '' if band is None else f', effort noise in {band[0]:g}-{band[1]:g} Hz'
+                noise += '' if tau is None else f', velocity filtered at {1e3 * tau:g} ms'
                 report(f'{name} at {rate:g} Hz, {args.hours:g} h from new{noise}', rows)
                 every += rows
             report(f'{name}, every rate', every)

@@ -441,6 +441,15 @@ def effort_noise(white, band_hz, rate_hz):
     return band / math.sqrt(float(np.mean(band ** 2)))
 
 
+def filtered(x, tau_s, rate_hz):
+    """Return ``x`` through a first-order low-pass of time constant ``tau_s`` (None: as is)."""
+    if not tau_s:
+        return x
+    from scipy.signal import lfilter
+    a = 1.0 - math.exp(-1.0 / (tau_s * rate_hz))   # y[k] = y[k-1] + a·(x[k] - y[k-1])
+    return lfilter([a], [1.0, a - 1.0], x, zi=[(1.0 - a) * x[0]])[0]
+
+
 def true_torque(joint, q, qd, qdd):
     """Return the torque the reducer output transmits [N*m] (gravity, inertia, link drag)."""
     return joint.gravity_nm * np.cos(q) + joint.inertia_kg_m2 * qdd + joint.drag_nm_s * qd
@@ -548,6 +557,9 @@ class Spec:
         ``(low, high)``: the effort noise band-limited to it [Hz] (a current loop's ripple:
         a fourth-order Butterworth band-pass run forwards and backwards, scaled to the
         same RMS); None: white.
+    velocity_filter_s : float or None
+        Time constant of a first-order filter the velocity field passes through [s] (a
+        drive's filtered velocity, which lags the motion); None: unfiltered.
     law : str or None
         Force the growth law of every joint.
     layout : str
@@ -577,6 +589,7 @@ class Spec:
     rate_hz: float = None
     effort_noise_pct: float = None
     effort_noise_band_hz: tuple = None
+    velocity_filter_s: float = None
     law: str = None
     layout: str = 'split'
     motor_angles: str = 'raw'
@@ -624,6 +637,8 @@ class Spec:
             bad('--effort-noise-band', band, 'LOW-HIGH with 0 < LOW < HIGH [Hz]')
         if band is not None and self.rate_hz is not None and not band[1] < 0.5 * self.rate_hz:
             bad('--effort-noise-band', band, f'HIGH below half the rate ({self.rate_hz:g} Hz)')
+        if self.velocity_filter_s is not None and not (0.0 <= self.velocity_filter_s <= 1.0):
+            bad('--velocity-filter-ms', 1e3 * self.velocity_filter_s, 'in [0, 1000] ms')
         if self.stamp_jitter_us is not None and not (0.0 <= self.stamp_jitter_us <= 1000.0):
             bad('--stamp-jitter-us', self.stamp_jitter_us, 'in [0, 1000] us')
         for name, value, allowed in (('--law', self.law, LAWS + (None,)),
@@ -770,6 +785,7 @@ class Stream(Recording):
                 'effort_on': self.spec.effort_on, 'velocity': self.spec.velocity,
                 'effort_noise_band_hz': (None if self.spec.effort_noise_band_hz is None
                                          else list(self.spec.effort_noise_band_hz)),
+                'velocity_filter_s': self.spec.velocity_filter_s,
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
@@ -903,7 +919,8 @@ def generate(spec):
                          + noise.normal(0.0, j.motor_noise_rad / motor_step, n)) * motor_step
         effort = torque + friction(j, qd) + j.effort_noise_nm * effort_noise(
             noise.normal(0.0, 1.0, n), spec.effort_noise_band_hz, rate)
-        velocity = qd + noise.normal(0.0, j.velocity_noise_rad_s, n)
+        velocity = filtered(qd + noise.normal(0.0, j.velocity_noise_rad_s, n),
+                            spec.velocity_filter_s, rate)
         for name, value in (('q', q), ('qd', qd), ('torque', torque), ('effort', effort),
                             ('link', link), ('motor', motor), ('velocity', velocity),
                             ('lost_motion', lm), ('exposure', exposure)):
@@ -1207,6 +1224,9 @@ def _parser():
                    help='effort noise, %% of rated torque (default: drawn per joint, 1-5)')
     p.add_argument('--effort-noise-band', type=band_hz, metavar='LOW-HIGH',
                    help='effort noise band-limited to LOW-HIGH Hz (default: white)')
+    p.add_argument('--velocity-filter-ms', type=float, metavar='MS',
+                   help="velocity field through a first-order filter of MS ms (a drive's "
+                   'filtered velocity; default unfiltered)')
     p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
@@ -1237,7 +1257,9 @@ def main(argv=None):
     """
     args = _parser().parse_args(argv)
     spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise,
-                effort_noise_band_hz=args.effort_noise_band, law=args.law)
+                effort_noise_band_hz=args.effort_noise_band,
+                velocity_filter_s=(None if args.velocity_filter_ms is None
+                                   else 1e-3 * args.velocity_filter_ms), law=args.law)
     return cli_run(args, spec)
 
 

@@ -191,6 +191,21 @@ def test_band_limited_effort_noise_keeps_its_rms_and_its_band():
         gen.Spec(**SHORT, effort_noise_band_hz=(5.0, 200.0)).check()
 
 
+def test_a_filtered_velocity_field_lags_the_motion_by_its_time_constant():
+    # A drive's filtered velocity: the same motion, late by about the filter's time constant.
+    spec = gen.Spec(**{**SHORT, 'rate_hz': 1000.0, 'hours': 10.0 / 3600.0},
+                    kinds=('shoulder',), velocity_filter_s=0.02)
+    stream = gen.generate(spec)
+    fresh = gen.generate(gen.Spec(**{**SHORT, 'rate_hz': 1000.0, 'hours': 10.0 / 3600.0},
+                                  kinds=('shoulder',)))
+    lags = np.arange(0, 60)
+    misfit = [np.mean((stream.velocity[100 + k:, 0] - fresh.velocity[100:-k or None, 0]) ** 2)
+              for k in lags]
+    assert 15 <= lags[int(np.argmin(misfit))] <= 21
+    with pytest.raises(gen.GeneratorError, match='--velocity-filter-ms'):
+        gen.Spec(**SHORT, velocity_filter_s=2.0).check()
+
+
 def test_effort_carries_friction_the_reducer_does_not_transmit(split_bag):
     _, stream, _ = split_bag
     for i, j in enumerate(stream.joints):
