@@ -330,12 +330,16 @@ class EffortCheck:
                     f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin): positions in '
                     'degrees (57.3 times radians) or in counts, or a wrong reduction ratio')
         if level < 0.0:
+            # A ratio off the configured one reads so too (the model's simulator, a used
+            # unit's motor angles scaled by 1.001 or 1.01: 0.87 and 19 arcmin "below").
             return (f'the effort has the opposite sign of the torque the reducer carries: '
                     f'in {windows} windows the transmission error under positive effort '
                     f'beyond {beyond} lies {math.degrees(-level) * 60:.3g} arcmin below the '
                     'one under negative effort, where a twist follows its torque (a drive '
                     'that reports its effort with the other sign): set effort_scale '
-                    '(twin.effort_scale in --config) to -1')
+                    '(twin.effort_scale in --config) to -1; if its sign is right, check the '
+                    'reduction ratio: one 0.1 % off the configured ratio grows the '
+                    'transmission error with the angle and reads so')
         lo, hi = EFFORT_SLOPE_RANGE
         if not math.isfinite(slope) or lo <= slope <= hi:
             return None     # (NaN: too few windows measure the slope)
