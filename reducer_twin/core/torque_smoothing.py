@@ -23,7 +23,8 @@ SMOOTHING_MAX_S = 0.15
 """Longest torque average [s] (five times the default ``torque_smoothing_s``)."""
 
 CORRELATED_RATIO = 2.0
-"""Noise of the averages, over what white noise of the effort's scatter gives, that is read.
+"""
+Noise of the averages, over what white noise of the effort's scatter gives, that is read.
 
 Below it the averages' own figure is not taken: over a 2 s window the fourth
 differences of 30 ms means are some 60 independent values, whose median absolute

@@ -79,7 +79,8 @@ not show), read a 20 ms delay as 0.1 ms with a standard error below this.
 """
 
 VELOCITY_LAG_GIVE_UP = 20 * VELOCITY_LAG_SAMPLES
-"""Turning samples after which a field of plausible scale is trusted though its lag is unknown.
+"""
+Turning samples after which a field of plausible scale is trusted though its lag is unknown.
 
 A joint that turns only at constant speed does not tell a lag from a gain.
 """
