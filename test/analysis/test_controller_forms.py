@@ -256,6 +256,7 @@ def _cli_json(bag, tmp_path, capsys, *extra, out='d'):
     ("the motor's speed", "the motor's speed: the ratio is 81"),
     ('the other sense', 'the other sense'),
     ('20 ms late', 'lags the rate of the link angle by 19.'),
+    ('noisy', 'is noisier than the rate of the link angle: 0.05'),
 ])
 def test_a_velocity_field_in_another_form_reads_as_no_field_and_is_said(
         form, said, original, tmp_path, capsys):
@@ -266,7 +267,9 @@ def test_a_velocity_field_in_another_form_reads_as_no_field_and_is_said(
                 'degrees per second': np.degrees(js.velocity),
                 "the motor's speed": js.velocity * RATIO,
                 'the other sense': -js.velocity,
-                '20 ms late': np.concatenate([js.velocity[:5], js.velocity[:-5]])}[form]
+                '20 ms late': np.concatenate([js.velocity[:5], js.velocity[:-5]]),
+                'noisy': js.velocity + np.random.default_rng(9).normal(0.0, 0.05,
+                                                                       js.velocity.shape)}[form]
     none = _rewrite(js, tmp_path, 'none', velocity=np.full_like(js.velocity, np.nan))
     code, expected, err = _cli_json(none, tmp_path, capsys, out='d0')
     assert code == 0 and 'velocity field' not in err

@@ -42,7 +42,7 @@ def test_a_field_in_another_form_is_replaced_and_its_form_named(field, form):
 
 @pytest.mark.parametrize('field', [
     MOVE,
-    MOVE + RNG.normal(0.0, 0.05, MOVE.size),            # a noisy drive estimate
+    MOVE + RNG.normal(0.0, 0.005, MOVE.size),           # a drive estimate's noise
     np.concatenate([[0.0] * 2, MOVE[:-2]]) * 0.9,      # 2 ms late and filtered
 ], ids=['the rate', 'noisy', '2 ms late'])
 def test_the_link_angles_rate_in_any_honest_form_is_trusted(field):
@@ -62,6 +62,19 @@ def test_a_field_that_lags_the_angles_rate_is_replaced_and_its_lag_said(late):
     assert replace and check.replaced and check.lag_s == pytest.approx(late * 1e-3, rel=0.2)
     assert f'lags the rate of the link angle by {1e3 * check.lag_s:.1f} ms' in check.fault
     assert check.fault.endswith('the rate of the link angle is used instead')
+
+
+def test_a_field_far_noisier_than_the_angles_rate_is_replaced_and_said():
+    # 0.05 rad/s of noise flips the friction taken out of the effort near each reversal
+    # (it switches within 0.01 rad/s): the growth law took a new unit's remaining life.
+    check, replace = _verdict(MOVE + RNG.normal(0.0, 0.05, MOVE.size))
+    assert replace and check.replaced
+    assert check.fault.startswith('the velocity field is noisier than the rate of the link '
+                                  'angle: 0.05 rad/s between samples against')
+    # Beside an angle whose rate is noisier still (stamps taken on arrival), it is kept.
+    t = np.sort(T + RNG.normal(0.0, 0.3e-3, T.size))
+    check, replace = _verdict(MOVE + RNG.normal(0.0, 0.05, MOVE.size), t=t)
+    assert not replace and check.trusted
 
 
 def test_a_controllers_backward_difference_at_100_hz_is_trusted():
