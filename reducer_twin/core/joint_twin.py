@@ -409,13 +409,16 @@ class TwinFront:
         ``'velocity'``: a velocity field that is not the link angle's rate; ``'held'``: an
         effort held between slower updates; ``'correlated'``: an effort whose noise is
         correlated over samples; ``'encoders'``: an encoder reading held so; ``'steps'``:
-        an encoder that reports the output angle coarsely (:mod:`.encoder_steps`).
+        an encoder that reports the output angle coarsely (:mod:`.encoder_steps`);
+        ``'ratio'``: a motor that turns another number of times than the configured
+        ratio (:mod:`.travel_ratio`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('held', self.analyzer.effort_held),
                  ('correlated', self.analyzer.effort_correlated),
                  ('encoders', self.extractor.held_reason),
-                 ('steps', self.extractor.step_reason))
+                 ('steps', self.extractor.step_reason),
+                 ('ratio', self.extractor.ratio_reason))
         return {kind: line for kind, line in found if line is not None}
 
     def update(self, t_s, motor, link, effort, velocity):

@@ -17,6 +17,7 @@ from .encoder_steps import EncoderSteps
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_encoders import HeldEncoders
 from .ingest import TickPairing
+from .travel_ratio import TravelRatio
 
 
 TWO_PI = 2.0 * math.pi
@@ -437,6 +438,9 @@ class TEExtractor:
     steps : EncoderSteps or None
         The smallest move each encoder reports at the output (:mod:`.encoder_steps`,
         :attr:`step_reason`).
+    travel : TravelRatio or None
+        The ratio of the motor's moves to the link's, against ``ratio``
+        (:mod:`.travel_ratio`, :attr:`ratio_reason`).
 
     """
 
@@ -450,8 +454,9 @@ class TEExtractor:
             self.ticks = TickPairing(ratio) if math.isfinite(ratio) and ratio != 0 else None
             self.held = HeldEncoders(ratio) if self.ticks is not None else None
             self.steps = EncoderSteps(ratio) if self.ticks is not None else None
+            self.travel = TravelRatio(ratio) if self.ticks is not None else None
         except (TypeError, ValueError):
-            self.ticks = self.held = self.steps = None   # compute_te says what is wrong
+            self.ticks = self.held = self.steps = self.travel = None   # compute_te says why
 
     @property
     def held_reason(self):
@@ -464,6 +469,11 @@ class TEExtractor:
     def step_reason(self):
         """Say when an encoder reports the output angle too coarsely, else None."""
         return None if self.steps is None else self.steps.reason()
+
+    @property
+    def ratio_reason(self):
+        """Say when the motor turns another number of times than ``ratio``, else None."""
+        return None if self.travel is None else self.travel.reason()
 
     def update(self, t_motor, motor_angle, t_link, link_angle):
         """
@@ -513,6 +523,8 @@ class TEExtractor:
                 valid = stream.valid & ~stale
                 stream = replace(stream, valid=valid, te=np.where(valid, stream.te, np.nan),
                                  output_angle=np.where(valid, stream.output_angle, np.nan))
+        if self.travel is not None and self.travel.measured is None:
+            self.travel.observe(stream.t, stream.output_angle, stream.te)
         kept = np.flatnonzero(stream.valid)
         if kept.size:
             self.last_te = float(stream.te[kept[-1]])

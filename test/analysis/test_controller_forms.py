@@ -152,6 +152,25 @@ def test_a_frozen_encoder_is_declared_not_observed_never_read_as_wear(
     assert out['joints']['joint_2']['observed'] is True
 
 
+@pytest.mark.parametrize('scale, said', [(1.01, 'turns 81.'), (101.0 / 81.0, 'turns 100.')],
+                         ids=['1 % off', 'another ratio of the frame'])
+def test_a_motor_that_turns_another_number_of_times_than_the_ratio_is_said_with_it(
+        original, tmp_path, capsys, scale, said):
+    # Read against 81, a motor 1 % off was refused as "the effort has the opposite sign",
+    # one of ratio 101 as encoders that "do not measure the same motion": neither named it.
+    js = original[0]
+    position = js.position.copy()
+    position[:, _motor_columns(js)] *= scale
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'ratio', position=position), tmp_path,
+                               capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False
+        (line,) = [x for x in err.splitlines() if f'{joint}: the motor encoder turns' in x]
+        assert line.startswith('WARNING: ') and said in line
+        assert 'where the configured reduction ratio is 81' in line, line
+
+
 def test_a_config_that_contradicts_the_motor_angles_is_an_error_naming_both(
         original, tmp_path, capsys):
     js = original[0]
