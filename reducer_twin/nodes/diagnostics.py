@@ -152,7 +152,9 @@ def say_faults(logger, joint, twin, said):
     An effort that is not the output torque is an error (the joint is not observed); the
     inputs read otherwise than published (:meth:`.joint_twin.TwinFront.input_warnings`: a
     velocity field that is not the link angle's rate, an effort or an encoder reading held
-    between slower updates) are warnings.
+    between slower updates, an effort whose noise is correlated over samples, an encoder
+    that reports the angle coarsely, a motor that turns another number of times than the
+    configured ratio) are warnings.
 
     Parameters
     ----------
@@ -204,7 +206,9 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         Wall time [s] without pairs from which the stream is said to have stopped.
     warnings : iterable of str
         How the inputs are read otherwise than published
-        (:meth:`.joint_twin.TwinFront.input_warnings`): each turns OK to WARN.
+        (:meth:`.joint_twin.TwinFront.input_warnings`): each turns OK to WARN, and
+        follows the message of a joint not observed too (a motor that turns another
+        number of times than the ratio is refused for what its TE then shows).
 
     Returns
     -------
@@ -226,7 +230,7 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
-    for said in warnings if reason is None else ():
+    for said in warnings:      # a refused joint's too: one may be why it is refused
         message = f'{message}; {said}'
         level = 'WARN' if level == 'OK' else level
     if quiet_s is not None:

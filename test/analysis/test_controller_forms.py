@@ -165,7 +165,8 @@ def test_a_motor_that_turns_another_number_of_times_than_the_ratio_is_said_with_
                                capsys)
     assert code == 3
     for joint, got in out['joints'].items():
-        assert got['observed'] is False
+        # Refused for what the TE then shows, the reason names the ratio too.
+        assert got['observed'] is False and 'the motor encoder turns' in got['reason']
         (line,) = [x for x in err.splitlines() if f'{joint}: the motor encoder turns' in x]
         assert line.startswith('WARNING: ') and said in line
         assert 'where the configured reduction ratio is 81' in line, line

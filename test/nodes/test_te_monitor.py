@@ -390,6 +390,22 @@ def test_an_input_read_otherwise_than_published_turns_the_diagnostics_to_warn(
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
 
 
+def test_a_motor_that_turns_another_number_of_times_than_the_ratio_is_logged_once(
+        ros, simulated, capfd):
+    # Refused for what its TE then shows; the line, in the log and after the refusal in
+    # /diagnostics, names the ratio the encoders show.
+    _, rows = simulated
+    other = rows.copy()
+    other[:, 1] *= 101.0 / 81.0
+    monitor = Monitor(ros)
+    monitor.feed(other)
+    status = monitor.status(lambda s: 'the motor encoder turns' in s.message)
+    assert status.level != DiagnosticStatus.OK and status.message.startswith('not observed')
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'the motor encoder turns' in x]
+    assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+    assert 'where the configured reduction ratio is 81' in logged[0]
+
+
 def test_a_true_velocity_field_is_used_as_published(ros, simulated):
     _, rows = simulated
     monitor = Monitor(ros)
