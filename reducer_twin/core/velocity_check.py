@@ -16,7 +16,9 @@ velocity) is found by regressing the rate on the field and the field's own rate
 (``rate ≈ h·(field + tau·d(field)/dt)``: a stamp that glitches then disturbs only the
 regressed side) and replaced when ``tau`` exceeds
 :data:`VELOCITY_LAG_S`: the drive friction taken out of the effort switches sign with
-the speed at each reversal, and a field 20 ms late switched it 20 ms late.
+the speed at each reversal, and a field 20 ms late switched it 20 ms late. A field far
+noisier between samples than the angle's rate (:data:`VELOCITY_NOISE_RAD_S`) is replaced
+for the same reason.
 
 The comparison is the median of the ratio field / rate, not a regression: stamps that
 scatter about their period (a driver that stamps a message on arrival, 0.3 ms sd at
