@@ -808,11 +808,8 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            reason = self._not_observed(joint, front, counts, sides)
-            ratio = front.twin.input_warnings().get('ratio')
-            if reason is not None and ratio is not None:    # what the refusal reads alike
-                reason = f'{reason}; {ratio}'
-            res.reason = self._effort_said(reason)
+            res.reason = self._effort_said(
+                front.twin.refusal(self._not_observed(joint, front, counts, sides)))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
             self._inputs_said(joint, front)

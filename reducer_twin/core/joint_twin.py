@@ -421,6 +421,19 @@ class TwinFront:
                  ('ratio', self.extractor.ratio_reason))
         return {kind: line for kind, line in found if line is not None}
 
+    def refusal(self, reason):
+        """
+        Return why the joint is not observed, with the ratio the encoders show when it is off.
+
+        A motor that turns another number of times than the configured ratio is refused
+        for what its TE then shows (an effort of the other sign, encoders that do not
+        measure one motion); the line naming the ratio (:mod:`.travel_ratio`) follows.
+        ``None`` (observed) stays ``None``. The nodes' ``/diagnostics`` and the analysis
+        of recordings both give this reason.
+        """
+        ratio = self.extractor.ratio_reason
+        return reason if reason is None or ratio is None else f'{reason}; {ratio}'
+
     def update(self, t_s, motor, link, effort, velocity):
         """TE and windows of paired samples; return the completed windows."""
         return self.analyze(self.te(t_s, motor, link), effort, velocity)

@@ -177,8 +177,7 @@ def say_faults(logger, joint, twin, said):
             getattr(logger, level)(f'{joint}: {line}')
 
 
-def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
-              silent_after_s, warnings=()):
+def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silent_after_s):
     """
     Return ``te_monitor``'s level and message from its window analysis; fill ``values``.
 
@@ -190,8 +189,10 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
 
     Parameters
     ----------
-    analyzer : WindowAnalyzer
-        The joint's window analysis.
+    twin : TwinFront
+        The joint's TE extraction and window analysis: its reason not to observe
+        (:meth:`.joint_twin.TwinFront.refusal`), else the inputs it reads otherwise than
+        published (:meth:`.joint_twin.TwinFront.input_warnings`), each turning OK to WARN.
     topic : str
         Where its samples come from, for the messages.
     level, message : str
@@ -204,11 +205,6 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         Wall time [s] since the latest encoder pairs (None: none yet).
     silent_after_s : float
         Wall time [s] without pairs from which the stream is said to have stopped.
-    warnings : iterable of str
-        How the inputs are read otherwise than published
-        (:meth:`.joint_twin.TwinFront.input_warnings`): each turns OK to WARN, and
-        follows the message of a joint not observed too (a motor that turns another
-        number of times than the ratio is refused for what its TE then shows).
 
     Returns
     -------
@@ -216,7 +212,8 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         Level and message.
 
     """
-    reason = analyzer.not_observed_reason(topic)
+    analyzer = twin.analyzer
+    reason = twin.refusal(analyzer.not_observed_reason(topic))
     values['observed_windows'] = analyzer.windows_observed
     values['seconds_in_gaps'] = analyzer.gap_time_s
     if math.isfinite(analyzer.velocity_scale):
@@ -230,7 +227,7 @@ def te_status(analyzer, topic, level, message, values, stale_after_s, quiet_s,
         values['seconds_since_lost_motion'] = gap
         message = f'{message}; no lost motion for {gap:.0f} s: {why}'
         level = 'WARN' if faulty else level
-    for said in warnings:      # a refused joint's too: one may be why it is refused
+    for said in twin.input_warnings().values() if reason is None else ():
         message = f'{message}; {said}'
         level = 'WARN' if level == 'OK' else level
     if quiet_s is not None:

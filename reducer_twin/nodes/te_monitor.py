@@ -181,10 +181,9 @@ class TEMonitor(Node):
                            'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
         quiet = None if self._last_pairs_at is None else time.monotonic() - self._last_pairs_at
         level, message = te_status(
-            self.twin.analyzer, joint_topic(self.joint, 'encoder_pairs'),
+            self.twin, joint_topic(self.joint, 'encoder_pairs'),
             'OK' if self.rejects.total == 0 else 'WARN', f'{self.windows} windows analysed',
-            values, STALE_WINDOWS * self.twin.config.window_s, quiet, self.silent_after_s,
-            self.twin.input_warnings().values())
+            values, STALE_WINDOWS * self.twin.config.window_s, quiet, self.silent_after_s)
         return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
                  values)]
 
