@@ -18,7 +18,9 @@ through ``python -m reducer_twin.cli analyze BAG --json`` as a user would. Print
 generator and rate: joints, P10-P90 coverage of the true remaining life at the
 recording's end (below P10 / above P90), median P50 / true, P50 within 30 %, and the
 joints whose remaining life follows the observed growth law (its probability above 0.5
-in the derived bag's last ``wear`` record, read back with the ``rosbags`` library).
+in the derived bag's last ``wear`` record, read back with the ``rosbags`` library); for the
+independent generator also split by the truth's own law (lost motion linear or concave in
+its exposure), which the twin's two models err on in opposite directions.
 
 Usage::
 
@@ -91,10 +93,11 @@ def run_independent(tmp, seed, rate, hours, aging, band_hz=None, velocity_filter
     bag = tmp / f'independent-{seed}-{rate}'
     truth = gen.generate_bag(spec, bag)
     truths = {j: t['remaining_life_end_h'] for j, t in truth['joints'].items()}
-    return _analysed(tmp, bag, truths)
+    laws = {j: t['law'] for j, t in truth['joints'].items()}
+    return _analysed(tmp, bag, truths, laws)
 
 
-def _analysed(tmp, bag, truths):
+def _analysed(tmp, bag, truths, laws=None):
     out = tmp / (bag.name + '-derived')
     result, _ = cli('analyze', bag, '--out', out, '--json')
     law = law_probability(out) if out.exists() else {}
@@ -103,7 +106,8 @@ def _analysed(tmp, bag, truths):
         r = result.get('joints', {}).get(joint, {})
         row = {k: math.nan if r.get(f'rul_{k}_h') is None else r[f'rul_{k}_h']
                for k in ('p10', 'p50', 'p90')}
-        row.update(truth=life, law=law.get(joint, math.nan), observed=bool(r.get('observed')))
+        row.update(truth=life, law=law.get(joint, math.nan), observed=bool(r.get('observed')),
+                   truth_law=(laws or {}).get(joint))
         rows.append(row)
     shutil.rmtree(bag, ignore_errors=True)
     shutil.rmtree(out, ignore_errors=True)
@@ -163,6 +167,9 @@ def main(argv=None):
                 report(f'{name} at {rate:g} Hz, {args.hours:g} h from new{noise}', rows)
                 every += rows
             report(f'{name}, every rate', every)
+            for law in sorted({r['truth_law'] for r in every} - {None}):
+                report(f'  {name}, every rate, units whose lost motion grows {law} in their '
+                       'exposure', [r for r in every if r['truth_law'] == law])
     print(f'({time.time() - start:.0f} s)')
 
 
