@@ -37,6 +37,16 @@ earliest windows (weighed with ``ρ = 1``) outweighed the later ones by the
 bent the law (measured: a unit whose windows scatter 3x their reported sd
 had its P50 at 60 % of life +68 % long; with ``ρ`` applied to all, +22 %).
 
+The law takes its windows with ``max(ρ, ρ_law)``, ``ρ_law`` its own residual
+scatter (:meth:`GrowthTrend.residual_scale`). ``ρ`` is learnt from the
+differences of successive innovations, which see only the noise that changes
+from one window to the next; a slow error of the window readings (the load of
+a duty's phase, a fit settling over a recording) is invisible to it, but not
+to a law fitted over the whole history. Measured on 300-h recordings from new
+of the independent generator (seeds 3-16): ``ρ`` 0.055 on a forearm whose
+windows scatter about the best law at 0.6 of their reported variance, its
+exponent read 0.75 ± 0.04 where the truth is 0.56.
+
 :meth:`GrowthTrend.predictive` gives the one-step-ahead predictive density
 of a window, which the estimator compares with its own (prequential log
 score, Dawid 1984) to weigh the two models.
@@ -95,6 +105,9 @@ TRUNCATE_BELOW = 0.05
 
 While the windows hardly place ``k`` the cut would only move the prior's half-normal mean
 (2.4 arcmin) into the law."""
+
+RESIDUAL_PRIOR_WINDOWS = 3.0
+"""Weight, in windows, of the learnt ``ρ`` in the law's own residual scale (as ``ρ``'s prior)."""
 
 _MASS_NEGLIGIBLE_BEYOND = 8.3
 """Sds of ``k`` above zero beyond which the truncation's lost mass is taken as none."""
@@ -232,7 +245,7 @@ class GrowthTrend:
         """
         a_ref = (exposure if exposure is not None else self.exposure) / EXPOSURE_UNIT
         scale = a_ref ** -EXPONENTS if a_ref > 0.0 else np.ones_like(EXPONENTS)
-        inv_rho = 1.0 / self.noise_scale
+        inv_rho = 1.0 / max(self.noise_scale, self.residual_scale())
         s0, s1, s2 = self.sxx.T * inv_rho
         z0, z1 = self.sxz.T * inv_rho
         parts = []
@@ -273,6 +286,39 @@ class GrowthTrend:
         lw -= lw.max()
         lw -= math.log(np.exp(lw).sum())
         return lw, mean, cov, a_ref
+
+    def residual_scale(self):
+        """
+        Return the law's own residual scatter, as a scale on the windows' noise.
+
+        The smallest weighted residual sum of squares over the exponent grid, with
+        ``β`` and ``k`` fitted freely (no prior), per degree of freedom, shrunk towards
+        the learnt ``ρ`` with :data:`RESIDUAL_PRIOR_WINDOWS` windows of weight::
+
+            ρ_law = (n0·ρ + min_g RSS_g) / (n0 + n - 2)
+
+        The posterior takes ``max(ρ, ρ_law)`` (see the module). 0 with fewer than three
+        windows.
+
+        Returns
+        -------
+        float
+            ``ρ_law``.
+
+        """
+        n = self.windows
+        if n < 3:
+            return 0.0
+        s0, s1, s2 = self.sxx.T
+        z0, z1 = self.sxz.T
+        det = s0 * s2 - s1 * s1
+        fit = det > 1e-12 * s0 * s2
+        if not fit.any():
+            return 0.0
+        rss = self.szz - (s2 * z0 * z0 - 2.0 * s1 * z0 * z1 + s0 * z1 * z1)[fit] / det[fit]
+        best = max(float(rss.min()), 0.0)
+        n0 = RESIDUAL_PRIOR_WINDOWS
+        return (n0 * self.noise_scale + best) / (n0 + n - 2)
 
     def _exponents(self, rows):
         """Return the ``g`` of each row of the posterior (one or both origins)."""

@@ -82,6 +82,30 @@ def test_the_latest_noise_scale_weighs_every_window_alike():
     np.testing.assert_allclose(v, v2, rtol=1e-9)
 
 
+def test_windows_that_scatter_beyond_their_noise_scale_are_taken_at_their_scatter():
+    # The noise scale is learnt from successive windows' differences: a slow error of
+    # the readings escapes it. The law, fitted over the whole history, is then no surer
+    # of its exponent than the windows' own scatter about it allows.
+    rng = np.random.default_rng(11)
+    exposure = 3e-9 * (np.arange(80) + 0.5)
+    z = 0.6 * ARCMIN + 0.3 * ARCMIN * (exposure / exposure[-1]) ** 0.6 \
+        + rng.normal(0.0, NOISE, 80)
+    told_right, told_small = GrowthTrend(), GrowthTrend()
+    for a, zk in zip(exposure, z):
+        told_right.add(a, zk, NOISE ** 2)
+        told_small.add(a, zk, (0.2 * NOISE) ** 2)
+    for trend in (told_right, told_small):
+        trend.advance(exposure[-1])
+    # The same residuals in 25 times smaller variances (less the prior's share).
+    assert told_small.residual_scale() == pytest.approx(25.0 * told_right.residual_scale(),
+                                                        rel=0.05)
+    assert told_right.residual_scale() < 1.0 < told_small.residual_scale()
+    sd_right = math.sqrt(told_right.summary()[1][2, 2])
+    sd_small = math.sqrt(told_small.summary()[1][2, 2])
+    assert sd_small == pytest.approx(sd_right, rel=0.5)
+    assert sd_small > 2.0 * 0.2 * sd_right
+
+
 def test_a_state_without_a_noise_scale_is_restored_as_it_was():
     # Sums written before rho was kept out of them carry the rho of their time; restored
     # with the estimator's rho now, the law is the one it was.
