@@ -58,6 +58,7 @@ import math
 
 import numpy as np
 
+from .noise_scale import NOISE_PRIOR_WINDOWS
 from .normal_cdf import log_ndtr
 from .units import ARCMIN, UM
 
@@ -107,9 +108,6 @@ TRUNCATE_BELOW = 0.05
 
 While the windows hardly place ``k`` the cut would only move the prior's half-normal mean
 (2.4 arcmin) into the law."""
-
-RESIDUAL_PRIOR_WINDOWS = 3.0
-"""Weight, in windows, of the learnt ``ρ`` in the law's own residual scale (as ``ρ``'s prior)."""
 
 _MASS_NEGLIGIBLE_BEYOND = 8.3
 """Sds of ``k`` above zero beyond which the truncation's lost mass is taken as none."""
@@ -295,7 +293,8 @@ class GrowthTrend:
 
         The smallest weighted residual sum of squares over the exponent grid, with
         ``β`` and ``k`` fitted freely (no prior), per degree of freedom, shrunk towards
-        the learnt ``ρ`` with :data:`RESIDUAL_PRIOR_WINDOWS` windows of weight::
+        the learnt ``ρ`` with the weight its own prior has in it
+        (:data:`.noise_scale.NOISE_PRIOR_WINDOWS` windows)::
 
             ρ_law = (n0·ρ + min_g RSS_g) / (n0 + n - 2)
 
@@ -319,7 +318,7 @@ class GrowthTrend:
             return 0.0
         rss = self.szz - (s2 * z0 * z0 - 2.0 * s1 * z0 * z1 + s0 * z1 * z1)[fit] / det[fit]
         best = max(float(rss.min()), 0.0)
-        n0 = RESIDUAL_PRIOR_WINDOWS
+        n0 = NOISE_PRIOR_WINDOWS
         return (n0 * self.noise_scale + best) / (n0 + n - 2)
 
     def _exponents(self, rows):
