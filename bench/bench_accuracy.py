@@ -40,9 +40,11 @@ independent generator), NEES [0.5, 2], NIS, alpha-lambda (alpha 0.2) at lambda
 tails [80 +- 5 %, 10 +- 5 % each], the calibration histogram (where the true RUL
 falls among the predicted deciles, 10 % each when calibrated), RUL P50 within
 30 % at 60 % of life [>= 90 % of runs]; for the independent generator also per
-joint kind. Each generator is run a second time with every usable window's lost
-motion replaced by the truth plus 0.02 arcmin ("read right"): it tells the
-estimator's share of an error from the window analysis's.
+joint kind and per growth law of the truth (lost motion linear or concave in the
+exposure: the total can hide two one-sided tails of opposite sign). Each
+generator is run a second time with every usable window's lost motion replaced
+by the truth plus 0.02 arcmin ("read right"): it tells the estimator's share of
+an error from the window analysis's.
 
 A run whose windows give a lost motion fewer than ``MIN_OBSERVED`` times is one
 the twin reports as not observed (a wrist whose load hardly ever passes the
@@ -384,6 +386,12 @@ def simulate_third(truth, params):
     nan = np.full(len(rows), np.nan)
     return Run(truth, np.array(rows), s.t[k] * aging, eol_h * HOUR, nan, s.lost_motion[k, 0],
                nan)
+
+
+def truth_law(truth):
+    """Return the growth law (``indep.LAWS``) an independent generator's truth was drawn with."""
+    joints, _ = indep.draw_robot(truth.seed, (truth.kind,))
+    return joints[0].law
 
 
 def generate(truth, params, cache=None):
@@ -858,6 +866,16 @@ def main(argv=None):
                     print(f'    {kind}: {len(pick)} truths, alpha-lambda 0.5 '
                           f'{_pct(np.mean([r["al50"] for r in pick]))}, RUL P50 within 30 % '
                           f'at 60 % {_pct(np.mean([abs(r["p50_60"]) <= 0.3 for r in pick]))}')
+            laws = [truth_law(t) for t in truths]
+            for law in indep.LAWS:
+                pick = [r for r, t_law in zip(results, laws) if t_law == law]
+                if pick:
+                    below = np.concatenate([r['below'] for r in pick]).mean()
+                    above = np.concatenate([r['above'] for r in pick]).mean()
+                    print(f'    lost motion {law} in the exposure: {len(pick)} truths, P10-P90 '
+                          f'coverage {_pct(1.0 - below - above)} (below {_pct(below)}, above '
+                          f'{_pct(above)}), alpha-lambda 0.5 '
+                          f'{_pct(np.mean([r["al50"] for r in pick]))}')
         if args.oracle:
             figures[gen + ' (true lost motion)'] = report_case(
                 f'{gen} generator, windows read right (true lost motion + 0.02 arcmin)',

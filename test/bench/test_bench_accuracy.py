@@ -70,3 +70,14 @@ def test_a_base_joint_moving_between_two_points_reads_no_harmonic_as_lost_motion
     (truth,) = [t for t in acc.draw_independent_truths(32, 1, 120) if t.seed == 1022]
     run = acc.simulate_independent(truth, params)
     assert abs(acc.window_bias(run, params)) < 0.05 * ARCMIN
+
+
+def test_the_independent_truths_are_split_by_the_growth_law_they_were_drawn_with():
+    # The per-law figures are only as good as the law they group by: the generator's own.
+    truths = acc.draw_independent_truths(32, 1, 120)
+    laws = [acc.truth_law(t) for t in truths]
+    for truth, law in zip(truths[:4], laws):
+        (joint,), _ = acc.indep.draw_robot(truth.seed, (truth.kind,))
+        assert law == joint.law
+        assert (joint.law_exponent == 1.0) == (law == 'linear')
+    assert set(laws) == set(acc.indep.LAWS)
