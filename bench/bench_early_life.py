@@ -20,7 +20,10 @@ recording's end (below P10 / above P90), median P50 / true, P50 within 30 %, and
 joints whose remaining life follows the observed growth law (its probability above 0.5
 in the derived bag's last ``wear`` record, read back with the ``rosbags`` library); for the
 independent generator also split by the truth's own law (lost motion linear or concave in
-its exposure), which the twin's two models err on in opposite directions.
+its exposure), which the twin's two models err on in opposite directions; and for each
+generator split by whether the analysis says its remaining life follows the wear model's
+curve beyond the span the curve's shape was compared over (``curve_extrapolation`` in
+``--json``): how much that warning tells.
 
 Usage::
 
@@ -107,7 +110,8 @@ def _analysed(tmp, bag, truths, laws=None):
         row = {k: math.nan if r.get(f'rul_{k}_h') is None else r[f'rul_{k}_h']
                for k in ('p10', 'p50', 'p90')}
         row.update(truth=life, law=law.get(joint, math.nan), observed=bool(r.get('observed')),
-                   truth_law=(laws or {}).get(joint))
+                   truth_law=(laws or {}).get(joint),
+                   curve_far=r.get('curve_extrapolation') is not None)
         rows.append(row)
     shutil.rmtree(bag, ignore_errors=True)
     shutil.rmtree(out, ignore_errors=True)
@@ -170,6 +174,11 @@ def main(argv=None):
             for law in sorted({r['truth_law'] for r in every} - {None}):
                 report(f'  {name}, every rate, units whose lost motion grows {law} in their '
                        'exposure', [r for r in every if r['truth_law'] == law])
+            for far, said in ((True, 'says'), (False, 'does not say')):
+                pick = [r for r in every if r['curve_far'] == far]
+                if pick:
+                    report(f'  {name}, every rate, joints whose life {said} it follows the '
+                           "wear model's curve beyond its scored span", pick)
     print(f'({time.time() - start:.0f} s)')
 
 

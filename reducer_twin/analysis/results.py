@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import growth_law, rate_resolved
+from reducer_twin.core.pipeline import curve_extrapolation, growth_law, rate_resolved
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -82,8 +82,11 @@ class JointResult:
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
             law rather than the wear model's curve: its ``probability``, its ``weight`` in
             the remaining life, ``exponent`` and ``extrapolation``, the times the exposure
-            seen it is extrapolated to, :func:`.pipeline.growth_law`; else None)
-            and ``service`` (how the service time of a reducer met without state was
+            seen it is extrapolated to, :func:`.pipeline.growth_law`; else None),
+            ``curve_extrapolation`` (where the remaining life follows the wear model's curve
+            beyond the span its shape was compared with the observed growth over: the times
+            the exposure seen its P50 reaches, :func:`.pipeline.curve_extrapolation`; else
+            None) and ``service`` (how the service time of a reducer met without state was
             taken: ``hours``, ``taken``, ``rate_scale``; ``taken`` None while too few
             windows have judged it; None without one).
 
@@ -104,6 +107,8 @@ class JointResult:
         out['velocity'] = self.velocity
         out['rate_resolved'] = rate_resolved(wear) if observed and wear else None
         out['growth_law'] = growth_law(wear, life.get('lost_motion_limit_rad')) \
+            if observed and wear else None
+        out['curve_extrapolation'] = curve_extrapolation(wear, life) \
             if observed and wear else None
         out['service'] = self.service
         return out
@@ -164,7 +169,8 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            'rate_resolved': None, 'growth_law': None, 'service': None}
+                            'rate_resolved': None, 'growth_law': None,
+                            'curve_extrapolation': None, 'service': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

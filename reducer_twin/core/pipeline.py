@@ -595,7 +595,8 @@ class LifeStage:
         if pred.limit_reached:
             message = 'lost motion beyond the accuracy limit: reducer worn out'
         else:
-            message += growth_note(wear_record, self.limit) + rate_note(wear_record)
+            message += (growth_note(wear_record, self.limit) + rate_note(wear_record)
+                        + curve_note(wear_record, record))
         if level == 'OK' and int(wear_record.get('updates', 0)) == 0:
             # A prediction from the duty alone is no assessment: never 'OK' without evidence.
             level = 'STALE'
@@ -706,9 +707,13 @@ def _weighed(wear_record, reach):
     p = float(wear_record.get('trend_probability', 0.0))
     if reach is None or reach <= 1.0:
         return p
-    span = math.log(max(float(wear_record.get('updates', 0.0)), SCORED_FROM) / SCORED_FROM)
-    share = min(1.0, span / math.log(reach))
+    share = min(1.0, math.log(_scored_span(wear_record)) / math.log(reach))
     return TREND_PRIOR + (p - TREND_PRIOR) * share
+
+
+def _scored_span(wear_record):
+    """Return the ratio of exposures the two models were scored over, ``n/16`` (at least 1)."""
+    return max(float(wear_record.get('updates', 0.0)), SCORED_FROM) / SCORED_FROM
 
 
 def _law_reach(wear_record, limit):
@@ -751,6 +756,70 @@ def growth_law(wear_record, limit=None):
     reach = _law_reach(wear_record, limit)    # None without a limit: the weight is p
     return {'probability': p, 'weight': _weighed(wear_record, reach),
             'exponent': float(wear_record['trend_exponent']), 'extrapolation': reach}
+
+
+def curve_extrapolation(wear_record, life_record):
+    """
+    Return how far the wear model's curve carries a remaining life beyond its tested span.
+
+    Where the remaining life follows the wear model's curve on the unit's own rate (the
+    observed growth law not the likelier, :func:`growth_law`; the rate resolved,
+    :func:`rate_resolved`), its P50 lies at the Archard exposure ``A_now + P50·ȧ``: the
+    curve is extrapolated to ``1 + P50·ȧ/A_now`` times the exposure seen. The curve's
+    shape was compared with the observed growth over the span the two models were scored
+    on (``n/16`` for ``n`` usable windows of a steady duty, as in
+    :func:`life_trend_probability`); beyond it nothing in the windows tested it. Early in a
+    life a few tenths of an arcminute of growth cannot tell the curve from a straight law
+    (``bench_early_life.py``): the curve then extrapolates 10-100 times, and its interval
+    holds only if the lost motion keeps to it.
+
+    Parameters
+    ----------
+    wear_record : mapping
+        A ``wear`` record.
+    life_record : mapping
+        Its ``remaining_life`` record (``p50_s``; the horizon where censored).
+
+    Returns
+    -------
+    float or None
+        The times the exposure seen the P50 reaches, where that is beyond the scored span;
+        else None (the law is the likelier, the rate is the model's, or within the span).
+
+    """
+    if growth_law(wear_record) is not None or not rate_resolved(wear_record):
+        return None
+    exposure = float(wear_record.get('archard_exposure_m', math.nan))
+    rate = float(wear_record.get('duty_rate_m_per_s', math.nan))
+    p50 = float(life_record.get('p50_s', math.nan))
+    if not (exposure > 0.0 and rate > 0.0 and p50 > 0.0 and math.isfinite(exposure * rate * p50)):
+        return None
+    reach = 1.0 + p50 * rate / exposure
+    return reach if reach > _scored_span(wear_record) else None
+
+
+def curve_note(wear_record, life_record):
+    """
+    Say when the remaining life extrapolates the wear model's curve beyond its tested span.
+
+    Parameters
+    ----------
+    wear_record, life_record : mapping
+        A ``wear`` record and its ``remaining_life`` record.
+
+    Returns
+    -------
+    str
+        ``''`` unless :func:`curve_extrapolation` gives a reach, else a clause for the
+        life message.
+
+    """
+    reach = curve_extrapolation(wear_record, life_record)
+    if reach is None:
+        return ''
+    return (f"; the prediction follows the wear model's curve, extrapolated to {reach:.0f}x "
+            f'the exposure it was learnt on (its shape compared with the observed growth over '
+            f'{_scored_span(wear_record):.0f}x)')
 
 
 def growth_note(wear_record, limit=None):

@@ -113,7 +113,9 @@ def fleet_row(reducer, params):
         ``bags`` counts recorded bags only), ``rate_resolved`` (False while the
         remaining life is the model's wear rate, not the unit's own; None unknown),
         ``growth_law`` (the observed growth law the remaining life follows, as
-        ``analyze --json`` gives it; None otherwise or unknown) and
+        ``analyze --json`` gives it; None otherwise or unknown), ``curve_extrapolation``
+        (how far the wear model's curve carries the remaining life beyond the span its
+        shape was compared over, as ``analyze --json`` gives it; None otherwise) and
         ``service_hours`` (the operating time it had before the twin first saw it, where
         the configuration gave one and it was taken; else None).
 
@@ -132,6 +134,7 @@ def fleet_row(reducer, params):
     summary = r.summary or {}
     row['rate_resolved'] = summary.get('rate_resolved')
     row['growth_law'] = summary.get('growth_law')
+    row['curve_extrapolation'] = summary.get('curve_extrapolation')
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
         if verdict is not None and verdict[0] else None
@@ -209,6 +212,12 @@ def _judge(row, r, state, params):
                           f"(as exposure^{law['exponent']:.2f}), extrapolated to "
                           f"{law['extrapolation']:,.0f}x the exposure it was learnt on: "
                           'its interval holds only if that law does')
+    reach = row['curve_extrapolation']
+    if reach:
+        # The curve's shape, too, was compared with the growth only over the span seen.
+        row['reason'] += ("; the remaining life follows the wear model's curve, extrapolated "
+                          f'to {reach:,.0f}x the exposure it was learnt on: its interval holds '
+                          'only if the lost motion keeps to that curve')
 
 
 def rank(rows):

@@ -18,7 +18,8 @@ from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record, EstimatorStage
+from reducer_twin.core.pipeline import CLOCK_RESET_S, curve_extrapolation, duty_to_record
+from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
@@ -312,6 +313,33 @@ def test_the_remaining_life_takes_the_law_at_its_weight_beyond_the_scored_span(w
     assert (early.p10, early.p50, early.p90) == (prior.p10, prior.p50, prior.p90)
     late = stage.prediction({**law, 'trend_probability': 0.99, 'updates': 5000})
     assert late.p50 != early.p50
+
+
+def test_the_life_message_says_how_far_the_wear_models_curve_is_extrapolated(worn_record):
+    # 300 h of a new unit whose lost motion grows linearly: a tenth of an arcminute of
+    # growth does not tell that from the model's curve, which then carries the life 30-100
+    # times the exposure seen, its P50 twice the truth (bench_early_life.py): said.
+    stage = LifeStage(PARAMS)
+    curve = {**worn_record, 'trend_probability': 0.1, 'var_log_rate': 0.1 ** 2,
+             'updates': 96}
+    life, _, noted = stage.process(curve)
+    reach = 1.0 + life['p50_s'] * curve['duty_rate_m_per_s'] / curve['archard_exposure_m']
+    assert reach > 96 / 16, 'the fixture is a unit early in its life'
+    assert curve_extrapolation(curve, life) == pytest.approx(reach, rel=1e-12)
+    assert noted.endswith("; the prediction follows the wear model's curve, extrapolated to "
+                          f'{reach:.0f}x the exposure it was learnt on (its shape compared '
+                          'with the observed growth over 6x)')
+    # Scored over a span as long as the extrapolation (a unit watched since new up to
+    # mid-life): nothing to add.
+    long = {**curve, 'updates': int(16 * reach) + 16}
+    assert curve_extrapolation(long, stage.process(long)[0]) is None
+    assert 'curve' not in stage.process(long)[2]
+    # The law the likelier, or the rate still the model's: their own clauses say it.
+    for other in ({'trend_probability': 0.9, 'trend_exponent': 1.0},
+                  {'var_log_rate': 1.83 ** 2}):
+        record = {**curve, **other}
+        assert curve_extrapolation(record, stage.process(record)[0]) is None
+        assert "wear model's curve, extrapolated" not in stage.process(record)[2]
 
 
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):

@@ -123,6 +123,19 @@ def test_a_life_that_follows_the_observed_growth_says_how_far_it_is_extrapolated
     assert 'observed growth' not in fleet_row(reducer, PARAMS)['reason']
 
 
+def test_a_life_that_follows_the_models_curve_far_says_how_far_it_is_extrapolated():
+    # The same recording of a unit whose lost motion grows linearly: the model's curve,
+    # never told from a straight law on 300 h, carries its life 98 times further.
+    reducer = _reducer(24000.0)
+    reducer.summary['curve_extrapolation'] = 98.4
+    row = fleet_row(reducer, PARAMS)
+    assert row['reason'].endswith("the remaining life follows the wear model's curve, "
+                                  'extrapolated to 98x the exposure it was learnt on: its '
+                                  'interval holds only if the lost motion keeps to that curve')
+    reducer.summary['curve_extrapolation'] = None
+    assert "model's curve" not in fleet_row(reducer, PARAMS)['reason']
+
+
 def test_a_unit_known_since_new_is_only_told_to_be_watched_longer():
     # Fitted by a recorded replacement: its service time is known (none), so the hour
     # meter is no remedy.
