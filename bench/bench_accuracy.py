@@ -63,7 +63,10 @@ is built).
 
 Usage: ``python bench/bench_accuracy.py [--truths 24] [--independent-truths 32]
 [--windows 120] [--cache DIR]
-[--estimator key=value,...] [--no-oracle] [--skip-fixed] [--json FILE]``
+[--estimator key=value,...] [--no-oracle] [--skip-fixed] [--branches] [--json FILE]``
+
+``--branches`` adds each model's remaining life alone (the growth law's weight forced to 0
+and to 1): where the interval's misses come from.
 """
 
 import argparse
@@ -500,10 +503,12 @@ def unknown_history_config():
     return make() if make is not None else EstimatorConfig()
 
 
-def _prediction(life, record):
-    """Return the LifePrediction of a wear record, with its samples."""
+def _prediction(life, record, law_weight=None):
+    """Return the LifePrediction of a wear record, with its samples (the law at a weight)."""
     predict = getattr(life, 'prediction', None)
     if predict is not None:
+        if law_weight is not None:
+            return predict(record, keep_samples=True, law_weight=law_weight)
         return predict(record, keep_samples=True)
     x, P = state_from_record(record)  # the estimator before per-unit states
     return remaining_life((x, P), float(record['duty_rate_m_per_s']), life.params,
@@ -512,9 +517,12 @@ def _prediction(life, record):
                           duty_rate_rel_std=life.duty_rate_rel_std, keep_samples=True)
 
 
-def estimate(run, params, config=None):
+def estimate(run, params, config=None, law_weight=None):
     """
     Step the estimator and the life stage through a run's windows.
+
+    ``law_weight`` (0 to 1) forces the observed growth law's weight in the remaining life
+    (``LifeStage.prediction``'s what-if): 0 the wear model's curve alone, 1 the law alone.
 
     Returns
     -------
@@ -538,7 +546,7 @@ def estimate(run, params, config=None):
         result = stage.estimator.step(f)
         record = stage.record(f.t_end)
         life.observe_duty(f.duty)
-        pred = _prediction(life, record)
+        pred = _prediction(life, record, law_weight)
         out['wear'].append(record['wear_m'])
         out['wear_std'].append(record['wear_std_m'])
         lm = record['lost_motion_rad']
@@ -793,6 +801,20 @@ def used_unit(params, seeds, cache, usable=20):
     return np.array(errors)
 
 
+def _by_law(results, truths):
+    """Print coverage and alpha-lambda of independent-generator results per truth law."""
+    laws = [truth_law(t) for t in truths]
+    for law in indep.LAWS:
+        pick = [r for r, t_law in zip(results, laws) if t_law == law]
+        if pick:
+            below = np.concatenate([r['below'] for r in pick]).mean()
+            above = np.concatenate([r['above'] for r in pick]).mean()
+            print(f'    lost motion {law} in the exposure: {len(pick)} truths, P10-P90 '
+                  f'coverage {_pct(1.0 - below - above)} (below {_pct(below)}, above '
+                  f'{_pct(above)}), alpha-lambda 0.5 '
+                  f'{_pct(np.mean([r["al50"] for r in pick]))}')
+
+
 def main(argv=None):
     """Run every case and print the figures."""
     ap = argparse.ArgumentParser(description='accuracy of wear and remaining-life estimates')
@@ -809,6 +831,9 @@ def main(argv=None):
     ap.add_argument('--no-oracle', dest='oracle', action='store_false',
                     help='skip the pass with the true lost motion in place of the window fits')
     ap.add_argument('--estimator', default='', help='estimator settings, key=value,... (SI)')
+    ap.add_argument('--branches', action='store_true',
+                    help="also each model's remaining life alone: the growth law weighed 0 "
+                    "(the wear model's curve) and 1 (the observed law)")
     args = ap.parse_args(argv)
     config = EstimatorConfig(**{k: float(v) for k, v in (
         item.split('=') for item in args.estimator.split(',') if item)})
@@ -866,16 +891,16 @@ def main(argv=None):
                     print(f'    {kind}: {len(pick)} truths, alpha-lambda 0.5 '
                           f'{_pct(np.mean([r["al50"] for r in pick]))}, RUL P50 within 30 % '
                           f'at 60 % {_pct(np.mean([abs(r["p50_60"]) <= 0.3 for r in pick]))}')
-            laws = [truth_law(t) for t in truths]
-            for law in indep.LAWS:
-                pick = [r for r, t_law in zip(results, laws) if t_law == law]
-                if pick:
-                    below = np.concatenate([r['below'] for r in pick]).mean()
-                    above = np.concatenate([r['above'] for r in pick]).mean()
-                    print(f'    lost motion {law} in the exposure: {len(pick)} truths, P10-P90 '
-                          f'coverage {_pct(1.0 - below - above)} (below {_pct(below)}, above '
-                          f'{_pct(above)}), alpha-lambda 0.5 '
-                          f'{_pct(np.mean([r["al50"] for r in pick]))}')
+            _by_law(results, truths)
+        if args.branches:
+            for weight, label in ((0.0, "the wear model's curve alone"),
+                                  (1.0, 'the observed growth law alone')):
+                alone = [evaluate(run, estimate(run, params, config, weight))
+                         for run in watched]
+                figures[f'{gen} ({label})'] = report_case(
+                    f'{gen} generator, remaining life from {label}', alone, unit)
+                if gen == 'independent':
+                    _by_law(alone, truths)
         if args.oracle:
             figures[gen + ' (true lost motion)'] = report_case(
                 f'{gen} generator, windows read right (true lost motion + 0.02 arcmin)',

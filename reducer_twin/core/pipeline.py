@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from .errors import InvalidInput, InvalidParameter
+from .errors import InvalidInput, InvalidParameter, out_of_range
 from .estimator import EstimatorConfig, lognormal_sd
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
@@ -462,7 +462,7 @@ class LifeStage:
             return
         self.duty = duty
 
-    def prediction(self, wear_record, keep_samples=False):
+    def prediction(self, wear_record, keep_samples=False, law_weight=None):
         """
         Sample the remaining life of a ``wear`` record.
 
@@ -477,6 +477,10 @@ class LifeStage:
             Output of :meth:`EstimatorStage.record`.
         keep_samples : bool
             Keep the sampled times in the result.
+        law_weight : float, optional
+            A what-if: the observed growth law's weight in the remaining life instead of
+            :func:`life_trend_probability` (0: the wear model's curve alone, 1: the law
+            alone, where the record has one), in [0, 1].
 
         Returns
         -------
@@ -484,9 +488,9 @@ class LifeStage:
             The prediction (common random numbers: the same record gives the same answer).
 
         """
-        return self.predictions([wear_record], keep_samples)[0]
+        return self.predictions([wear_record], keep_samples, law_weight)[0]
 
-    def predictions(self, wear_records, keep_samples=False):
+    def predictions(self, wear_records, keep_samples=False, law_weight=None):
         """
         Sample the remaining life of several ``wear`` records at once.
 
@@ -499,21 +503,30 @@ class LifeStage:
             Outputs of :meth:`EstimatorStage.record`.
         keep_samples : bool
             Keep the sampled times in the results.
+        law_weight : float, optional
+            As for :meth:`prediction`.
 
         Returns
         -------
         list of LifePrediction
             One per record, in order.
 
+        Raises
+        ------
+        InvalidParameter
+            If ``law_weight`` lies outside [0, 1].
+
         """
-        queries = [self._query(r) for r in wear_records]
+        if law_weight is not None and not 0.0 <= law_weight <= 1.0:
+            raise InvalidParameter(out_of_range('law_weight', law_weight, '', 'in [0, 1]'))
+        queries = [self._query(r, law_weight) for r in wear_records]
         if self._draws is None:
             self._draws = LifeDraws.draw(self.n_samples, np.random.default_rng(0))
         return remaining_lives(queries, self.params, limit=self.limit, horizon_s=self.horizon_s,
                                n_samples=self.n_samples, draws=self._draws,
                                keep_samples=keep_samples)
 
-    def _query(self, wear_record):
+    def _query(self, wear_record, law_weight=None):
         """Return the :class:`~reducer_twin.core.life.LifeQuery` of a ``wear`` record."""
         x, P = state_from_record(wear_record)
         rate = float(wear_record['duty_rate_m_per_s'])
@@ -525,7 +538,9 @@ class LifeStage:
                                f'log_rate_drift_per_s ({drift!r}): both must be finite and >= 0')
         trend = trend_from_record(wear_record)
         if trend is not None:
-            trend = replace(trend, probability=life_trend_probability(wear_record, self.limit))
+            weight = life_trend_probability(wear_record, self.limit) if law_weight is None \
+                else float(law_weight)
+            trend = replace(trend, probability=weight)
         return LifeQuery((x, P), rate, float(np.hypot(measured, self.duty_rate_rel_std)), drift,
                          trend)
 

@@ -342,6 +342,24 @@ def test_the_life_message_says_how_far_the_wear_models_curve_is_extrapolated(wor
         assert "wear model's curve, extrapolated" not in stage.process(record)[2]
 
 
+def test_the_law_weight_what_if_gives_each_models_remaining_life_alone(worn_record):
+    # Where a miss comes from (bench_accuracy.py --branches): the wear model's curve alone,
+    # the observed law alone, and the mixture between them.
+    stage = LifeStage(PARAMS)
+    law = {**worn_record, 'trend_probability': 0.7, 'trend_exponent': 1.0,
+           'trend_new_rad': 0.44 * ARCMIN, 'trend_growth_rad': 0.07 * ARCMIN, 'updates': 5000}
+    curve = stage.prediction(law, law_weight=0.0)
+    observed = stage.prediction(law, law_weight=1.0)
+    # Scored over a span longer than the law's reach, the weight is the probability.
+    assert curve == stage.prediction({**law, 'trend_probability': 0.0})
+    assert observed == stage.prediction({**law, 'trend_probability': 1.0})
+    assert curve.p50 != observed.p50
+    mixed = stage.prediction(law)
+    assert min(curve.p50, observed.p50) < mixed.p50 < max(curve.p50, observed.p50)
+    with pytest.raises(InvalidParameter, match=r'law_weight .*1\.5'):
+        stage.prediction(law, law_weight=1.5)
+
+
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):
     # A twin started on a used unit with a short recording: its rate is the prior's
     # (ln s sd near 2) and its remaining life the model's at this duty (P10 24 000 h on a
