@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import curve_extrapolation, growth_law, rate_resolved
+from reducer_twin.core.pipeline import life_basis
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -105,11 +105,7 @@ class JointResult:
         out['partial'] = self.partial if observed else None
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
-        out['rate_resolved'] = rate_resolved(wear) if observed and wear else None
-        out['growth_law'] = growth_law(wear, life.get('lost_motion_limit_rad')) \
-            if observed and wear else None
-        out['curve_extrapolation'] = curve_extrapolation(wear, life) \
-            if observed and wear else None
+        out.update(life_basis(wear, life, observed))
         out['service'] = self.service
         return out
 
@@ -169,8 +165,7 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            'rate_resolved': None, 'growth_law': None,
-                            'curve_extrapolation': None, 'service': None}
+                            **life_basis({}, {}, False), 'service': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

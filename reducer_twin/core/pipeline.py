@@ -813,6 +813,35 @@ def curve_extrapolation(wear_record, life_record):
     return reach if reach > _scored_span(wear_record) else None
 
 
+def life_basis(wear_record, life_record, observed):
+    """
+    Return what a reducer's remaining life rests on, as ``analyze --json`` and ``fleet`` say it.
+
+    One place for a bag's summary and a live segment's, so that the fleet's verdict reads
+    the same clauses for a reducer whichever path saw it last.
+
+    Parameters
+    ----------
+    wear_record, life_record : mapping
+        The last ``wear`` record and its ``remaining_life`` record (empty: none yet).
+    observed : bool
+        Whether the estimate rests on a lost motion.
+
+    Returns
+    -------
+    dict
+        ``rate_resolved`` (:func:`rate_resolved`), ``growth_law`` (:func:`growth_law` at
+        the record's lost-motion limit) and ``curve_extrapolation``
+        (:func:`curve_extrapolation`); each None when not observed or without a record.
+
+    """
+    if not (observed and wear_record):
+        return {'rate_resolved': None, 'growth_law': None, 'curve_extrapolation': None}
+    return {'rate_resolved': rate_resolved(wear_record),
+            'growth_law': growth_law(wear_record, life_record.get('lost_motion_limit_rad')),
+            'curve_extrapolation': curve_extrapolation(wear_record, life_record)}
+
+
 def curve_note(wear_record, life_record):
     """
     Say when the remaining life extrapolates the wear model's curve beyond its tested span.

@@ -35,8 +35,7 @@ import uuid
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import curve_extrapolation, features_from_record
-from reducer_twin.core.pipeline import growth_law, LifeStage
+from reducer_twin.core.pipeline import features_from_record, life_basis, LifeStage
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
@@ -469,9 +468,7 @@ class LiveHistory:
             'watched live'
 
         out['rul_censored'] = bool(len(life) and life[-1][_CENSORED] > 0)
-        out['growth_law'] = growth_law(w, lf.get('lost_motion_limit_rad')) \
-            if observed else None
-        out['curve_extrapolation'] = curve_extrapolation(w, lf) if observed else None
+        out.update(life_basis(w, lf, observed))
         return out
 
     def _requeue(self, chunks):

@@ -7,6 +7,7 @@ Live segments: where a live estimator starts, and what it writes when the store 
 the node over DDS is tested in ``test/nodes/test_wear_estimator_store.py``.
 """
 
+import json
 import math
 
 import pytest
@@ -139,3 +140,30 @@ def test_a_live_reducer_that_never_reversed_is_not_observed_with_its_reason(
                              'with a lost motion the estimator could use: the joint never '
                              'reversed under load while watched live')
     assert '+L: also watched live (a wear_estimator writes this store)' in lines
+
+
+def test_a_live_reducer_says_what_its_remaining_life_rests_on_as_a_bag_s_would(
+        tmp_path, records, capsys):
+    # Three windows of a unit met without its service time: the rate is the model's.
+    early = _fleet_row(tmp_path / 'f.db', records[:3], capsys)
+    assert early['rate_resolved'] is False and early['curve_extrapolation'] is None
+    assert "the remaining life is the model's wear rate at this duty" in early['reason']
+    assert 'give its service time' in early['reason']
+    # Twelve windows: the unit's own rate, the remaining life on the model's curve beyond
+    # the span it was compared with the growth over.
+    late = _fleet_row(tmp_path / 'g.db', records, capsys)
+    assert late['rate_resolved'] is True and late['growth_law'] is None
+    assert late['curve_extrapolation'] > 1.0
+    assert f"extrapolated to {late['curve_extrapolation']:,.0f}x" in late['reason']
+    assert 'wear rate' not in late['reason']
+
+
+def _fleet_row(store, recs, capsys):
+    """Feed ``recs`` live into ``store`` and return the reducer's ``fleet --json`` row."""
+    live = Live(store)
+    live.feed(recs)
+    assert live.history.flush() == 1
+    capsys.readouterr()
+    assert main(['fleet', '--store', str(store), '--json']) == 0
+    (row,) = json.loads(capsys.readouterr().out)['reducers']
+    return row
