@@ -201,10 +201,49 @@ def _plan_joints(bag, settings, every):
     hint = (f'; a DynamicJointState joint gives <joint>{suffix} from its interface '
             f'{settings.interfaces.motor_position!r} (twin.interfaces.motor_position)'
             if dynamic else '')
+    guess = suffix_guess([names_of(t) for t in states])
+    if guess is not None:
+        hint += (f'; its entries pair as <joint> and <joint>{guess[0]} ({guess[1]}): if those '
+                 f'are the motor encoders, set twin.motor_suffix: {guess[0]!r} in --config')
     raise BagError(f'{bag.path}: no motor/link encoder pairs: expected <joint> and '
                    f'<joint>{suffix} in one JointState message, or a motor JointState topic '
                    f'(twin.motor_topic in --config){hint}; JointState topics and names: '
                    f'{found}')
+
+
+def suffix_guess(name_lists):
+    """
+    Return the suffix that pairs a topic's entries as ``<joint>`` and ``<joint><suffix>``.
+
+    Said, never used: a second link encoder named so would pair as well, and only the
+    user knows which entries are the motors'. A suffix must not continue the joint's
+    name (a digit or a lower-case letter first: ``joint_1``/``joint_10``, ``arm``/``arms``).
+
+    Parameters
+    ----------
+    name_lists : iterable of iterable of str
+        The entry names of each JointState topic.
+
+    Returns
+    -------
+    tuple or None
+        ``(suffix, example)``: the suffix that pairs the most entries (ties: the shorter,
+        then the first in order) and up to three pairs as text; None when none pairs.
+
+    """
+    pairs = {}
+    for names in name_lists:
+        have = sorted(set(names))
+        for joint in have:
+            for entry in have:
+                tail = entry[len(joint):]
+                continues = tail[:1].isdigit() or tail[:1].islower()
+                if tail and entry.startswith(joint) and not continues:
+                    pairs.setdefault(tail, []).append(f'{joint} with {entry}')
+    if not pairs:
+        return None
+    best = min(pairs, key=lambda tail: (-len(pairs[tail]), len(tail), tail))
+    return best, ', '.join(pairs[best][:3])
 
 
 def late_joints(plan, seen, settings):

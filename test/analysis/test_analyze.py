@@ -579,6 +579,24 @@ def test_a_bag_whose_joint_states_have_no_motor_entries_says_which_names_it_foun
         analyze_bag(tmp_path / 'arm', tmp_path / 'd')
 
 
+def test_motor_entries_under_another_suffix_are_named_with_the_setting_that_reads_them(
+        tmp_path):
+    names = ('shoulder', 'elbow', 'shoulder_enc', 'elbow_enc', 'elbow_10')
+    batch = JointStateBatch(np.arange(50, dtype=np.int64) * 1_000_000, names,
+                            np.zeros((50, 5)), np.zeros((50, 5)), np.zeros((50, 5)))
+    write_bag_dir(tmp_path / 'arm', {'/arm/joint_states': batch})
+    with pytest.raises(BagError) as refused:
+        analyze_bag(tmp_path / 'arm', tmp_path / 'd')
+    assert ('its entries pair as <joint> and <joint>_enc (elbow with elbow_enc, '
+            'shoulder with shoulder_enc): if those are the motor encoders, set '
+            "twin.motor_suffix: '_enc' in --config") in str(refused.value)
+    # Said, not used: with the setting the pairs are found (and judged by their data:
+    # encoders that never move are not observed).
+    res = analyze_bag(tmp_path / 'arm', tmp_path / 'e', AnalysisSettings(motor_suffix='_enc'))
+    assert sorted(res.joints) == ['elbow', 'shoulder']
+    assert not any(j.summary()['observed'] for j in res.joints.values())
+
+
 def test_a_truncated_bag_is_analysed_up_to_the_damage_and_exits_1(sim, tmp_path, capsys):
     damaged = tmp_path / 'cut'
     shutil.copytree(sim[0], damaged)
