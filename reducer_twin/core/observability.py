@@ -12,7 +12,20 @@ These read a :class:`.window_analysis.WindowAnalyzer`'s counts; its
 import math
 
 from .effort_check import PLAUSIBLE_LOST_MOTION_RAD
+from .units import ARCMIN, ARCSEC
 from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ, PLAUSIBLE_TE_SPAN_RAD
+
+DERIVED_LINK_SPAN_RAD = 0.1 * ARCMIN
+"""
+Transmission-error span [rad] below which a link angle is the motor's divided by the ratio.
+
+A window gives a lost motion only across a torque reversal under load, and there the
+output moves against the motor by the reducer's play (0.3-0.5 arcmin new, more worn) and
+its windup: every window's TE spans at least that. A link position that a controller
+computes from the motor encoder (most robots have no encoder at the reducer's output)
+spans nothing but rounding. 0.1 arcmin is a quarter of a new unit's play and above the
+rounding of a position published to 0.001 deg (3.6 arcsec).
+"""
 
 
 def not_observed_reason(analyzer, effort_source='the joint states'):
@@ -39,6 +52,15 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
     fault = analyzer.effort_fault
     if fault is None and analyzer.windows_read:
         return None
+    if link_from_motor(analyzer):
+        # Before the effort's checks: without a TE they read nothing of the effort.
+        span = analyzer.largest_reversed_te_span
+        return (f'the link angle follows the motor angle divided by the reduction ratio to '
+                f'within {span / ARCSEC:.2g} arcsec in all {analyzer.windows_reversed} '
+                "windows with a torque reversal under load, where a reducer's play alone "
+                'moves it by tenths of an arcminute: the link position is computed from the '
+                "motor encoder, not read by an encoder at the reducer's output; the lost "
+                'motion needs one (a secondary, output-side encoder)')
     if fault is not None and not analyzer.windows_implausible:
         return fault
     seen = analyzer.samples_seen
@@ -100,6 +122,18 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 'friction: set twin.friction_in_effort to 0)')
     return (f'no torque reversal at equal |T| above the effort noise in '
             f'{analyzer.windows_emitted} windows (the joint did not reverse under load)')
+
+
+def link_from_motor(analyzer):
+    """
+    Return whether a joint's link angle is its motor angle over the ratio (no output encoder).
+
+    True once windows with a torque reversal under load were analysed and none had a
+    transmission error spanning :data:`DERIVED_LINK_SPAN_RAD`; such a joint is never
+    observed (:func:`not_observed_reason` says so).
+    """
+    return bool(analyzer.windows_reversed) and \
+        analyzer.largest_reversed_te_span < DERIVED_LINK_SPAN_RAD
 
 
 def stale_reason(analyzer, after_s, effort_source='the joint states'):

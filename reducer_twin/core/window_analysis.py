@@ -319,6 +319,8 @@ class WindowAnalyzer:
         self.windows_implausible = 0
         self.windows_still = 0          # the joint stood still: no lost motion (STILL_SPAN_RAD)
         self.largest_te_span = 0.0
+        self.windows_reversed = 0       # with bins enough for a lost motion
+        self.largest_reversed_te_span = 0.0  # of those [rad]
         self.gaps = 0                   # holes longer than max_gap_s between samples
         self.gap_time_s = 0.0           # the stream time they span [s]
         self.windows_effort_fault = 0
@@ -740,6 +742,13 @@ class WindowAnalyzer:
         te_min = np.minimum.reduceat(y, starts)
         implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
         usable &= ~(implausible | still)[:, None]
+        # Windows with bins enough for a lost motion crossed a torque reversal under load:
+        # their TE spans at least the play (:data:`.observability.DERIVED_LINK_SPAN_RAD`).
+        reversed_ = usable.sum(axis=1) >= self.min_bins
+        if reversed_.any():
+            self.windows_reversed += int(reversed_.sum())
+            self.largest_reversed_te_span = max(self.largest_reversed_te_span,
+                                                float(np.max((te_max - te_min)[reversed_])))
         # From the window where the effort is found not to be the torque, none is read.
         faulty = self._effort.check(torque_h, width, std, usable,
                                     odd * ~self._flanks.first_order(ident)[:, None, :])

@@ -4,6 +4,7 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
+from reducer_twin.core.observability import link_from_motor
 from reducer_twin.core.service_time import service_note
 from reducer_twin.core.units import HOUR, m_to_um
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
@@ -149,7 +150,8 @@ def say_faults(logger, joint, twin, said):
     """
     Log a joint's input faults on stderr, each kind once (``/diagnostics`` carry them on).
 
-    An effort that is not the output torque is an error (the joint is not observed); the
+    An effort that is not the output torque, or a link angle computed from the motor's
+    (:func:`.observability.link_from_motor`), is an error (the joint is not observed); the
     inputs read otherwise than published (:meth:`.joint_twin.TwinFront.input_warnings`: a
     velocity field that is not the link angle's rate, an effort or an encoder reading held
     between slower updates, an effort whose noise is correlated over samples, an encoder
@@ -168,8 +170,13 @@ def say_faults(logger, joint, twin, said):
         Kinds already said; updated.
 
     """
-    fault = twin.analyzer.effort_fault
-    faults = {'effort': ('error', fault and f'not observed: {fault}')}
+    analyzer = twin.analyzer
+    if link_from_motor(analyzer):
+        # No TE to read: the effort's checks, which read it, say nothing then.
+        faults = {'link': ('error', f'not observed: {analyzer.not_observed_reason()}')}
+    else:
+        fault = analyzer.effort_fault
+        faults = {'effort': ('error', fault and f'not observed: {fault}')}
     faults.update((kind, ('warning', line)) for kind, line in twin.input_warnings().items())
     for kind, (level, line) in faults.items():
         if line and kind not in said:
@@ -182,7 +189,8 @@ def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silen
     Return ``te_monitor``'s level and message from its window analysis; fill ``values``.
 
     Never OK without a lost motion (``STALE`` with the reason; ``ERROR`` for an effort
-    or encoders in other units, a configuration to fix); seen before but not for
+    or encoders in other units, a configuration to fix, or a link angle computed from the
+    motor's, an encoder missing); seen before but not for
     ``stale_after_s`` of stream, the message says since when and why (``WARN`` for a
     faulty stream); no encoder pairs for ``silent_after_s`` [s of wall time] is a
     stopped stream (``WARN``): the analysis stands where it was.
@@ -220,7 +228,8 @@ def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silen
         values['velocity_scale'] = analyzer.velocity_scale
     stale = analyzer.stale_reason(stale_after_s, topic)
     if reason is not None:
-        level = 'ERROR' if analyzer.effort_fault is not None else 'STALE'
+        fixed = analyzer.effort_fault is not None or link_from_motor(analyzer)
+        level = 'ERROR' if fixed else 'STALE'
         message = f'not observed: {reason}'
     elif stale is not None:
         gap, why, faulty = stale

@@ -510,6 +510,28 @@ def test_a_recording_without_effort_is_declared_not_observed_with_exit_3(
         assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
 
 
+@pytest.mark.parametrize('rounding_deg', [0.0, 0.001], ids=['exact', 'to 0.001 deg'])
+def test_a_link_angle_computed_from_the_motor_is_said_to_need_an_output_encoder(
+        original, tmp_path, capsys, rounding_deg):
+    # Most robots publish the joint angle as the motor's over the ratio: no TE to read.
+    js = original[0]
+    position = js.position.copy()
+    for k in _motor_columns(js):
+        link = position[:, k] / RATIO
+        if rounding_deg:
+            link = np.round(link / np.radians(rounding_deg)) * np.radians(rounding_deg)
+        position[:, js.names.index(js.names[k][:-len('_motor')])] = link
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'derived', position=position),
+                               tmp_path, capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert got['reason'].startswith('the link angle follows the motor angle divided by '
+                                        'the reduction ratio to within ')
+        assert "not read by an encoder at the reducer's output" in got['reason']
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
+
+
 def _link_columns(js):
     return [k for k, n in enumerate(js.names) if not n.endswith('_motor')]
 

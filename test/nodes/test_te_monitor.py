@@ -261,6 +261,24 @@ def test_without_effort_the_diagnostics_are_stale_with_the_reason_never_ok(ros, 
     assert ros.key_values(status)['observed_windows'] == '0'
 
 
+def test_a_link_angle_computed_from_the_motor_is_an_error_naming_the_missing_encoder(
+        ros, simulated, capfd):
+    # A robot without an encoder at the reducer's output publishes the motor's angle over
+    # the ratio as the joint's: read as a reducer, a new unit tighter than nominal.
+    _, rows = simulated
+    derived = rows.copy()
+    derived[:, 2] = derived[:, 1] / RATIO
+    monitor = Monitor(ros)
+    monitor.feed(derived)
+    status = monitor.status(lambda s: 'link angle follows' in s.message)
+    assert status.level == DiagnosticStatus.ERROR
+    assert status.message.startswith('not observed: the link angle follows the motor angle '
+                                     'divided by the reduction ratio')
+    assert "not read by an encoder at the reducer's output" in status.message
+    err = capfd.readouterr().err
+    assert 'not observed: the link angle follows' in err and 'opposite sign' not in err
+
+
 def test_with_effort_the_diagnostics_say_ok_once_a_window_gave_a_lost_motion(ros, simulated):
     _, rows = simulated
     monitor = Monitor(ros)
