@@ -394,6 +394,7 @@ class _Run:
         self.started = False
         self.messages_read = 0
         self.angles = {}     # joint -> 'raw' / 'output', as the data show them
+        self.swapped = {}    # joint -> the link entry's travel over the motor entry's, >> 1
         self.span = {}       # joint -> [first, last] stamp of its paired samples [ns]
         self.entries = _EntryCounts(plan)
         for joint, front in self.fronts.items():
@@ -439,6 +440,10 @@ class _Run:
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
                 warn(self.bag, f'the motor encoder of {joint} counts against '
                      'the link (a negative reduction): its angles are taken reversed')
+            if r < 1.0 / math.sqrt(ratio):
+                # The link entry moves about the ratio times the motor's: a swap, said as
+                # the joint's reason (never read as encoders that jump, or a ratio off).
+                self.swapped[joint] = 1.0 / r
             found = 'raw' if r > math.sqrt(ratio) else 'output'
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
@@ -595,6 +600,19 @@ class _Run:
                     continue
         for joint, values in rows.items():
             self.results[joint].truth = np.array(values) if values else None
+
+    def _swap_reason(self, joint):
+        """Say that a joint's link and motor entries are swapped (None when they are not)."""
+        if joint not in self.swapped:
+            return None
+        plan = self.plan
+        motor = plan.motor_names[plan.joints.index(joint)]
+        where = f'{plan.motor_topic} ' if plan.motor_topic else ''
+        return (f'its link entry {joint} moves {self.swapped[joint]:.3g} times its motor '
+                f'entry {where}{motor}, where a motor moves about '
+                f'{self.fronts[joint].ratio:g} times its link: the two are swapped (the '
+                "motor encoder published under the joint's name); the twin reads the link "
+                'from the joint entry and the motor from the motor entry')
 
     def _not_observed(self, joint, front, counts, sides):
         """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
@@ -808,7 +826,7 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._effort_said(
+            res.reason = self._swap_reason(joint) or self._effort_said(
                 front.twin.refusal(self._not_observed(joint, front, counts, sides)))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)

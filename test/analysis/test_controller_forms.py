@@ -532,6 +532,24 @@ def test_a_link_angle_computed_from_the_motor_is_said_to_need_an_output_encoder(
         assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
 
 
+def test_link_and_motor_entries_swapped_are_said_to_be(original, tmp_path, capsys):
+    # Before: "dropped as spikes ... the motor encoder turns 80.3 times the link where the
+    # configured reduction ratio is 81", sending the engineer to the reducer's geometry.
+    js = original[0]
+    position = js.position.copy()
+    motor = _motor_columns(js)
+    link = [js.names.index(js.names[k][:-len('_motor')]) for k in motor]
+    position[:, motor], position[:, link] = js.position[:, link], js.position[:, motor]
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'swapped', position=position),
+                               tmp_path, capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert got['reason'].startswith(f'its link entry {joint} moves 8')
+        assert f'times its motor entry {joint}_motor, where a motor moves about 81 times its ' \
+            'link: the two are swapped' in got['reason']
+
+
 def _link_columns(js):
     return [k for k, n in enumerate(js.names) if not n.endswith('_motor')]
 
