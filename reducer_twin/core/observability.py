@@ -12,6 +12,7 @@ These read a :class:`.window_analysis.WindowAnalyzer`'s counts; its
 import math
 
 from .effort_check import PLAUSIBLE_LOST_MOTION_RAD
+from .kinematics import total_ratio
 from .units import ARCMIN, ARCSEC
 from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ, PLAUSIBLE_TE_SPAN_RAD
 
@@ -100,7 +101,9 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 f'{analyzer.edges[0]:.3g} N*m '
                 f'({100.0 * analyzer.edges[0] / analyzer.rated_torque:.0f} % of the rated torque) '
                 'from which the lost motion is read: a joint without load, or an effort '
-                'in other units (a motor torque: set motor_effort_units to motor)')
+                'in other units (a motor torque: on the motor entry, set motor_effort_units '
+                'to motor; on the joint entry, set effort_scale (twin.effort_scale in '
+                f'--config) to the ratio, {total_ratio(analyzer.params.geometry):g})')
     rate = analyzer.rate_hz
     if math.isfinite(rate) and rate < LOW_RATE_HZ:
         return (f'{rate:.0f} Hz: too few samples per torque reversal in '

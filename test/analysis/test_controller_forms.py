@@ -559,7 +559,11 @@ def _link_columns(js):
     # Beyond the torque bins, ten times the torque is named by its size.
     (10.0, 'times the rated torque', 0.1),
     (0.1, 'the effort reads about', 10.0),        # a motor current in A
-], ids=['sign reversed', 'ten times the torque', 'a tenth of the torque'])
+    # The motor's torque on the joint entry: below every torque bin.
+    (1.0 / RATIO, 'on the joint entry, set effort_scale (twin.effort_scale in --config) to '
+     'the ratio, 81', RATIO),
+], ids=['sign reversed', 'ten times the torque', 'a tenth of the torque',
+        "the motor's torque"])
 def test_an_effort_that_is_not_the_output_torque_is_refused_and_the_config_reads_it(
         original, tmp_path, capsys, factor, said, scale):
     js = original[0]
