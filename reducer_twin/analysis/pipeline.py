@@ -442,8 +442,11 @@ class _Run:
                      'the link (a negative reduction): its angles are taken reversed')
             if r < 1.0 / math.sqrt(ratio):
                 # The link entry moves about the ratio times the motor's: a swap, said as
-                # the joint's reason (never read as encoders that jump, or a ratio off).
+                # the joint's reason (never read as encoders that jump, a ratio off, or
+                # motor angles other than configured).
                 self.swapped[joint] = 1.0 / r
+                self._set_angles(joint, 'raw', sense)
+                continue
             found = 'raw' if r > math.sqrt(ratio) else 'output'
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
@@ -633,7 +636,7 @@ class _Run:
             return (f'{spikes} of {spikes + front.samples} motor/link sample pairs were '
                     'dropped as spikes of the transmission error: the encoders jump against '
                     'each other (positions in degrees or counts, a wrong reduction ratio or '
-                    'motor_angles, or faulty encoders)')
+                    'motor_angles, link and motor entries swapped, or faulty encoders)')
         if front.samples == 0:
             return (f'no motor/link sample pairs on {plan.link_topic}'
                     + (f' and {plan.motor_topic}' if plan.motor_topic else '')

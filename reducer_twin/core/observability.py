@@ -79,8 +79,8 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 f"(a reducer's moves by arcminutes; at most "
                 f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
                 f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
-                'frozen encoder, a motor encoder that counts against the link, or a '
-                'wrong reduction ratio or motor_angles')
+                'frozen encoder, a motor encoder that counts against the link, link and '
+                'motor entries swapped, or a wrong reduction ratio or motor_angles')
     if fault is not None:
         return fault
     if analyzer.windows_observed:       # every one censored

@@ -548,6 +548,13 @@ def test_link_and_motor_entries_swapped_are_said_to_be(original, tmp_path, capsy
         assert got['reason'].startswith(f'its link entry {joint} moves 8')
         assert f'times its motor entry {joint}_motor, where a motor moves about 81 times its ' \
             'link: the two are swapped' in got['reason']
+    # Configured raw motor angles are not contradicted by a swap (it is not 'output').
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_angles: raw\n')
+    code, out, err = _cli_json(tmp_path / 'swapped', tmp_path, capsys, '--config', config,
+                               out='d_raw')
+    assert code == 3 and 'ERROR' not in err
+    assert all('the two are swapped' in got['reason'] for got in out['joints'].values())
 
 
 def _link_columns(js):
