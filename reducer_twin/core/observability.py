@@ -88,7 +88,9 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 "play beyond a new nominal unit's (their wear fits lie on the table's "
                 "lower bound, and the estimate would be the prior's alone): a unit built "
                 'tighter than nominal, read once its play has grown past that, or an '
-                'effort whose zero lies beyond the loads (an offset from the torque)')
+                'effort whose zero lies beyond the loads (an offset from the torque), or an '
+                'effort with the load taken out of it (an external-torque estimate: the '
+                'gravity and the motion model subtracted)')
     if analyzer.largest_effort == 0.0:
         return (f'the effort on {effort_source} is zero in every sample that carries '
                 f'one ({seen - analyzer.samples_without_effort}): a controller that fills '

@@ -639,6 +639,25 @@ def test_an_effort_offset_beyond_the_loads_is_not_taken_for_an_estimate(
         assert "read a play beyond a new nominal unit's" in reason
 
 
+def test_an_effort_with_the_gravity_load_taken_out_is_not_taken_for_an_estimate(
+        original, tmp_path, capsys):
+    # An external-torque estimate (the drive's torque less its gravity model) changes sign
+    # where the reducer's load does not; it is refused, the estimate never made of it.
+    js = original[0]
+    effort = js.effort.copy()
+    for k in _link_columns(js):
+        angle = js.position[:, k]
+        gravity = np.c_[np.cos(angle), np.sin(angle), np.ones_like(angle)]
+        coef = np.linalg.lstsq(gravity, effort[:, k], rcond=None)[0]
+        effort[:, k] -= gravity @ coef
+    code, out, err = _cli_json(_rewrite(js, tmp_path, 'external', effort=effort), tmp_path,
+                               capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert 'an external-torque estimate' in got['reason']
+
+
 def test_positions_in_degrees_are_refused_naming_the_units(
         original, tmp_path):
     js = original[0]
