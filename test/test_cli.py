@@ -165,6 +165,19 @@ def test_a_params_file_with_a_non_mapping_reducer_key_is_an_invalid_value(capsys
     assert code == 1 and _error_lines(err)
 
 
+def test_the_demo_piped_prints_its_final_table_once_within_80_columns(tmp_path):
+    plot = tmp_path / 'demo.png'
+    result = _run_script('demo', '--joints', '2', '--hours', '1000', '--duration-s', '6',
+                         '--plot', str(plot))
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()    # a line of text, the table, the plot's path
+    assert max(len(line) for line in lines[1:-1]) <= 80, result.stdout
+    assert [line.strip() for line in lines].count('reducer_twin demo: final state') == 1
+    assert lines[-2].startswith('arcmin: TE p-p, LM (lost motion); um: wear; h: RUL; ')
+    assert lines[-2].rstrip().endswith(' dropped')
+    assert lines[-1] == f'wear history plot: {plot}'
+
+
 def test_the_demo_stops_its_simulator_at_the_hours_asked_and_reads_the_wear_of_those(tmp_path):
     # Real DDS in the command's own process (the README's main job, a third as long). The
     # simulator stops when its stream is complete, so the final truth is that of the hours

@@ -119,7 +119,7 @@ def run(args):
         out = console()
         out.print(_table(summary, 'reducer_twin demo: final state'))
         if plot:
-            out.print(f'wear history plot: {plot}')
+            out.print(f'wear history plot: {plot}', soft_wrap=True)
     return 0
 
 
@@ -128,7 +128,9 @@ def _spin(executor, nodes, joints, args, history):
     from reducer_twin.nodes.runtime import WORKER
     sim = nodes['simulator']
     live = None
-    if not args.json:
+    if not args.json and console().is_terminal:
+        # Piped or logged, only the final table is printed: a live view redrawn into a file
+        # left its last frame unterminated before it.
         from rich.live import Live
         live = Live(console=console(), refresh_per_second=4)
         live.start()
@@ -238,8 +240,8 @@ def _table(summary, title):
     dropped = sum(int(r['dropped']) for r in summary.values())
     t = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), pad_edge=False,
               show_edge=False, collapse_padding=True, caption=(
-        f'arcmin: TE p-p, LM (lost motion); um: wear; h: RUL (remaining life); '
-        f'{dropped} dropped'), caption_justify='left')
+        f'arcmin: TE p-p, LM (lost motion); um: wear; h: RUL; {dropped} dropped'),
+        caption_justify='left')
     t.add_column('joint', no_wrap=True, min_width=7)
     for col in ('TE p-p', 'LM', 'wear', 'true', 'RUL P10/P50/P90', 'true RUL', 'health'):
         t.add_column(col, justify='right', no_wrap=True)
