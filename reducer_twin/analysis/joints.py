@@ -9,6 +9,7 @@ joint is not analysed (:class:`JointPlan`).
 
 from dataclasses import dataclass, replace
 
+from reducer_twin.analysis.reading import warn
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.bag import JOINT_STATE_TYPES
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
@@ -182,6 +183,8 @@ def _plan_joints(bag, settings, every):
     if found:
         (link, motor), (pairs, motor_names) = found[0]
         plan = _pick(bag, settings, link, motor, pairs, motor_names)
+        if settings.joints is None:
+            _say_unpaired(bag, plan, names_of(link), suffix)
         if settings.configured_topics:     # the configuration chose the topic
             return plan
         # Never silent: another robot (or arm) in the same recording is named.
@@ -244,6 +247,36 @@ def suffix_guess(name_lists):
         return None
     best = min(pairs, key=lambda tail: (-len(pairs[tail]), len(tail), tail))
     return best, ', '.join(pairs[best][:3])
+
+
+def _say_unpaired(bag, plan, names, suffix):
+    """
+    Warn of entries of the link topic that pair with nothing, so are not analysed.
+
+    A joint whose motor encoder is not published (or named otherwise) would otherwise
+    vanish without a word; a gripper's fingers are named too, in one line that changes
+    no exit status (``twin.joints`` in ``--config`` chooses the joints and silences it).
+    """
+    paired = set(plan.joints) | set(plan.motor_names)
+    lone = [n for n in names if n not in paired]
+    links = [n for n in lone if not (suffix and n.endswith(suffix))]
+    motors = [n for n in lone if suffix and n.endswith(suffix)]
+    parts = []
+    if links:
+        where = f' on {plan.motor_topic}' if plan.motor_topic else ''
+        parts.append(f'{_listed(links)} without a motor entry (<joint>{suffix}{where})')
+    if motors:
+        parts.append(f'{_listed(motors)} without a link entry')
+    if parts:
+        warn(bag, f'{plan.link_topic} also carries {" and ".join(parts)}: not analysed; a '
+             "reducer among them needs both its encoders published under the twin's names "
+             '(twin.motor_suffix, twin.motor_topic; twin.joints chooses the joints)')
+
+
+def _listed(names, most=8):
+    """Return up to ``most`` names, comma-separated, and how many more."""
+    more = f' and {len(names) - most} more' if len(names) > most else ''
+    return ', '.join(names[:most]) + more
 
 
 def late_joints(plan, seen, settings):

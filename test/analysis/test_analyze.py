@@ -597,6 +597,25 @@ def test_motor_entries_under_another_suffix_are_named_with_the_setting_that_read
     assert not any(j.summary()['observed'] for j in res.joints.values())
 
 
+def test_entries_that_pair_with_nothing_are_said_not_analysed(tmp_path):
+    # A joint whose motor encoder is not published vanished from the results without a word.
+    names = ('shoulder', 'shoulder_motor', 'elbow', 'gripper', 'wrist_motor')
+    batch = JointStateBatch(np.arange(50, dtype=np.int64) * 1_000_000, names,
+                            np.zeros((50, 5)), np.zeros((50, 5)), np.zeros((50, 5)))
+    write_bag_dir(tmp_path / 'arm', {'/joint_states': batch})
+    res = analyze_bag(tmp_path / 'arm', tmp_path / 'd')
+    assert list(res.joints) == ['shoulder']
+    said = [w.message for w in res.warnings if 'not analysed' in w.message]
+    assert said == ['/joint_states also carries elbow, gripper without a motor entry '
+                    '(<joint>_motor) and wrist_motor without a link entry: not analysed; a '
+                    "reducer among them needs both its encoders published under the twin's "
+                    'names (twin.motor_suffix, twin.motor_topic; twin.joints chooses the '
+                    'joints)']
+    # Joints chosen in the configuration: the others are not said.
+    res = analyze_bag(tmp_path / 'arm', tmp_path / 'e', AnalysisSettings(joints=('shoulder',)))
+    assert not [w for w in res.warnings if 'not analysed' in w.message]
+
+
 def test_a_truncated_bag_is_analysed_up_to_the_damage_and_exits_1(sim, tmp_path, capsys):
     damaged = tmp_path / 'cut'
     shutil.copytree(sim[0], damaged)
