@@ -29,7 +29,8 @@ DEFAULTS = {
              'aging_factor': _TWIN.aging_factor,
              'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s,
              'friction_in_effort': _TWIN.friction_in_effort, 'state_dir': '',
-             'simulate': False, 'intra_process': True, 'robot': '', 'store': '',
+             'simulate': False, 'intra_process': True, 'reliable': True, 'robot': '',
+             'store': '',
              'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
     'life': {}, 'simulator': {'profile': 'robot', 'wear_rate_scales': []}, 'reducer': {},
     'reducers': {}, 'service_time_s': {},
@@ -168,7 +169,7 @@ def yaml_error_line(path, err):
     return f'{path}: YAML syntax error{where}: {" ".join(problem.split())}'
 
 
-_BOOLEANS = ('simulate', 'intra_process')
+_BOOLEANS = ('simulate', 'intra_process', 'reliable')
 _STRINGS = ('link_topic', 'motor_topic', 'motor_suffix', 'motor_angles', 'state_dir')
 _NUMBERS = ('aging_factor', 'window_s', 'max_gap_s')
 _WHOLE_NUMBERS = ('friction_in_effort',)

@@ -116,7 +116,7 @@ def estimator_status(stage, rejected, live=None):
     return level, message, values
 
 
-def ingest_statuses(counts, rejected):
+def ingest_statuses(counts, rejected, mismatch=None):
     """
     Return the ``encoder_ingest`` statuses, one per joint, from its rule counts.
 
@@ -126,23 +126,29 @@ def ingest_statuses(counts, rejected):
         Per joint, the count of every ingestion rule and ``published``.
     rejected : int
         Malformed messages dropped.
+    mismatch : QoSMismatch, optional
+        Publishers the subscriptions cannot match (:class:`.qos.QoSMismatch`).
 
     Returns
     -------
     list of tuple
         ``(name, hardware_id, level, message, values)`` per joint: WARN once a sample
-        was dropped or repaired (unwrapping and steps are no fault).
+        was dropped or repaired (unwrapping and steps are no fault); ERROR while a
+        publisher of the joint states is not heard for its QoS.
 
     """
+    unheard = [mismatch.reason(t) for t in mismatch.topics] if mismatch is not None else []
     statuses = []
     for joint, c in counts.items():
         bad = sum(v for k, v in c.items()
                   if k not in ('published', 'step', *PAIRING_FACTS) and not k.endswith('_wrap'))
         c['rejected_messages'] = rejected
-        statuses.append((f'reducer_twin: {joint} encoder ingest', joint,
-                         'OK' if bad == 0 else 'WARN',
-                         'streams clean' if bad == 0 else f'{bad} samples dropped or repaired',
-                         c))
+        level, message = ('OK', 'streams clean') if bad == 0 else \
+            ('WARN', f'{bad} samples dropped or repaired')
+        if unheard:
+            level, message = 'ERROR', '; '.join([*unheard, message])
+            c['qos_mismatched_topics'] = ', '.join(mismatch.topics)
+        statuses.append((f'reducer_twin: {joint} encoder ingest', joint, level, message, c))
     return statuses
 
 

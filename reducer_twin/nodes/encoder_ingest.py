@@ -35,7 +35,7 @@ from reducer_twin.msg_adapters.ros import JointStatePicker
 from reducer_twin.nodes.diagnostics import ingest_statuses, publish_diagnostics
 from reducer_twin.nodes.intra_process import SharedOutput
 from reducer_twin.nodes.parameters import check_choice, declare_plain, SpecParameters
-from reducer_twin.nodes.qos import encoder_qos
+from reducer_twin.nodes.qos import encoder_qos, QoSMismatch
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes
 from reducer_twin.nodes.settings import IngestSettings
@@ -78,6 +78,7 @@ class EncoderIngest(Node):
         self._retimed_said = False
         self._link_topic = p['link_topic']
         qos = encoder_qos(p['reliable'])
+        self.mismatch = QoSMismatch(self, p['reliable'])
         # The controller streams are taken as their serialised bytes and read by a
         # JointStateReader: no JointState object (names, arrays) is built per message.
         if self.split:
@@ -85,12 +86,14 @@ class EncoderIngest(Node):
             self._motor_pick = JointStatePicker(self.joints)
             self._motor_reader = JointStateReader()
             self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos,
-                                     raw=True)
+                                     raw=True,
+                                     event_callbacks=self.mismatch.callbacks(p['motor_topic']))
         else:
             self._link_pick = JointStatePicker(
                 [x for joint in self.joints for x in (joint, joint + p['motor_suffix'])])
         self._link_reader = JointStateReader()
-        self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True)
+        self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True,
+                                 event_callbacks=self.mismatch.callbacks(p['link_topic']))
         publish_diagnostics(self, self._statuses)
         if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
             self.create_timer(max(s.batch_period_s * 5, 0.01), self._flush_stale)
@@ -181,7 +184,7 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        return ingest_statuses(self.counts(), self.rejects.total)
+        return ingest_statuses(self.counts(), self.rejects.total, self.mismatch)
 
 
 def main(args=None):

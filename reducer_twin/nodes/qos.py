@@ -1,6 +1,10 @@
 """QoS profiles of the twin's topics: encoder and derived streams, estimates, diagnostics."""
 
+from functools import partial
+
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_policy_name_from_kind
 
 ENCODER_DEPTH = 200
 """History depth of 1 kHz encoder streams (>= 100: a stalled reader loses old samples)."""
@@ -64,3 +68,45 @@ def diagnostics_qos():
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+
+class QoSMismatch:
+    """
+    Publishers whose QoS a node's subscriptions cannot match, by topic.
+
+    Such a publisher's messages never arrive, and the stream looks merely quiet: a
+    controller that publishes its joint states BEST_EFFORT (sensor-data QoS) to a RELIABLE
+    subscription. Each topic is said once in the node's log (an error) and kept for
+    ``/diagnostics``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The subscribing node (its logger).
+    reliable : bool
+        Whether the subscriptions are RELIABLE (the remedy then named).
+
+    """
+
+    def __init__(self, node, reliable):
+        self._node = node
+        self._reliable = reliable
+        self.topics = {}
+
+    def callbacks(self, topic):
+        """Return the event callbacks of a subscription to ``topic``."""
+        return SubscriptionEventCallbacks(incompatible_qos=partial(self._on_event, topic))
+
+    def _on_event(self, topic, event):
+        first = topic not in self.topics
+        self.topics[topic] = qos_policy_name_from_kind(event.last_policy_kind)
+        if first:
+            self._node.get_logger().error(self.reason(topic))
+
+    def reason(self, topic):
+        """Say why ``topic``'s publisher is not heard, and what to set."""
+        policy = self.topics[topic]
+        hint = ('; it publishes BEST_EFFORT: set reliable to false (twin.reliable in the '
+                'bringup YAML)' if policy == 'RELIABILITY' and self._reliable else '')
+        return (f'a publisher of {topic} offers a QoS this subscription cannot match '
+                f'({policy}): none of its messages are received{hint}')

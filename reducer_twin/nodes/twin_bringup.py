@@ -81,7 +81,8 @@ def build_nodes(config, sim_overrides=None):
         Parameter('motor_direction', value=twin['motor_direction']),
         Parameter('effort_scale', value=float(twin['effort_scale'])),
         Parameter('effort_source', value=twin['effort_source']),
-        Parameter('motor_effort_units', value=twin['motor_effort_units'])])
+        Parameter('motor_effort_units', value=twin['motor_effort_units']),
+        Parameter('reliable', value=twin['reliable'])])
     life_params = [Parameter(f'life.{k}', value=float(v)) for k, v in life.items()]
     spec = twin_config(config)
     for joint in joints:

@@ -392,6 +392,37 @@ def test_a_silent_motor_topic_shows_as_unpaired_samples_and_a_warning(ros):
     assert robot.rows(joint).shape[0] == 0
 
 
+BEST_EFFORT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=200,
+                         reliability=ReliabilityPolicy.BEST_EFFORT)
+
+
+def test_a_best_effort_controller_is_an_error_naming_the_setting_not_a_quiet_stream(
+        ros, capfd):
+    # Its messages never reach a RELIABLE subscription: the stream only looked quiet.
+    robot = Robot(ros)
+    robot.probe.publisher(robot.link_topic, JointState, BEST_EFFORT)
+    status = robot.status(robot.joints[0], lambda s: 'cannot match' in s.message)
+    assert status.level == DiagnosticStatus.ERROR
+    assert status.message.startswith(f'a publisher of {robot.link_topic} offers a QoS this '
+                                     'subscription cannot match (RELIABILITY): none of its '
+                                     'messages are received; it publishes BEST_EFFORT: set '
+                                     'reliable to false')
+    assert ros.key_values(status)['qos_mismatched_topics'] == robot.link_topic
+    assert 'cannot match (RELIABILITY)' in capfd.readouterr().err
+
+
+def test_with_reliable_false_a_best_effort_controller_is_heard(ros):
+    robot = Robot(ros, extra=[Parameter('reliable', value=False)])
+    best_effort = robot.probe.publisher(robot.link_topic, JointState, BEST_EFFORT)
+    ros.wait_matched(best_effort)
+    for k in range(100):           # best effort: a few may be lost, so no echo is awaited
+        best_effort.publish(robot.combined(k))
+        if k % 20 == 19:
+            ros.spin_for(0.05)
+    assert robot.wait_rows(robot.joints[0], 50).shape[0] >= 50
+    assert not robot.node.mismatch.topics
+
+
 # -- composed in one process: pairs handed over directly ---------------------------------------
 
 

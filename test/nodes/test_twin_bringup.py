@@ -26,7 +26,7 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
     config_file = tmp_path / 'twin.yaml'
     config_file.write_text(
         'twin:\n  joints: [base, elbow, wrist]\n  simulate: true\n  window_s: 3.0\n'
-        '  friction_in_effort: 0\n'
+        '  friction_in_effort: 0\n  reliable: false\n'
         f'  state_dir: {tmp_path}\n'
         'reducer: {rating: {rated_life: 3.6e7}}\n'
         f'reducers:\n  base: {{file: {RV80E}, rating: {{rated_torque: 1568.0}}}}\n'
@@ -50,6 +50,8 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
         assert te.get_parameter('window_s').value == 3.0
         assert te.twin.analyzer.friction is False
         assert te.get_parameter('max_gap_s').value == TwinConfig().max_gap_s
+    # A controller that publishes BEST_EFFORT is subscribed to so.
+    assert nodes['ingest'].get_parameter('reliable').value is False
     # The elbow's reducer ran 12 000 h before the twin started; the others' time is unknown.
     service = {joint: node.stage.estimator.config.service_time_s
                for joint, node in nodes['estimator'].items()}
