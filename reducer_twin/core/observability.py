@@ -60,8 +60,9 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 f'within {span / ARCSEC:.2g} arcsec in all {analyzer.windows_reversed} '
                 "windows with a torque reversal under load, where a reducer's play alone "
                 'moves it by tenths of an arcminute: the link position is computed from the '
-                "motor encoder, not read by an encoder at the reducer's output; the lost "
-                'motion needs one (a secondary, output-side encoder)')
+                "motor encoder, not read by an encoder at the reducer's output (or the motor "
+                "position from the link's); the lost motion needs both encoders (a "
+                'secondary, output-side one)')
     if fault is not None and not analyzer.windows_implausible:
         return fault
     seen = analyzer.samples_seen
