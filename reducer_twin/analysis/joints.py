@@ -38,6 +38,9 @@ class JointPlan:
     prefix : str
         Put before the topic's entry names (``<namespace>/``) when a recording holds
         several robots; ``joints`` and ``motor_names`` carry it.
+    unpaired : tuple of str
+        Entries of ``link_topic``'s first messages that pair with nothing (found
+        without ``twin.joints``; :func:`say_unpaired`).
 
     """
 
@@ -47,6 +50,7 @@ class JointPlan:
     motor_names: tuple
     others: tuple = ()
     prefix: str = ''
+    unpaired: tuple = ()
 
     def not_analysed(self):
         """
@@ -184,7 +188,8 @@ def _plan_joints(bag, settings, every):
         (link, motor), (pairs, motor_names) = found[0]
         plan = _pick(bag, settings, link, motor, pairs, motor_names)
         if settings.joints is None:
-            _say_unpaired(bag, plan, names_of(link), suffix)
+            paired = set(plan.joints) | set(plan.motor_names)
+            plan = replace(plan, unpaired=tuple(n for n in names_of(link) if n not in paired))
         if settings.configured_topics:     # the configuration chose the topic
             return plan
         # Never silent: another robot (or arm) in the same recording is named.
@@ -249,16 +254,27 @@ def suffix_guess(name_lists):
     return best, ', '.join(pairs[best][:3])
 
 
-def _say_unpaired(bag, plan, names, suffix):
+def say_unpaired(bag, plan, analysed, suffix):
     """
-    Warn of entries of the link topic that pair with nothing, so are not analysed.
+    Warn of entries of the link topic that paired with nothing, so were not analysed.
 
     A joint whose motor encoder is not published (or named otherwise) would otherwise
     vanish without a word; a gripper's fingers are named too, in one line that changes
     no exit status (``twin.joints`` in ``--config`` chooses the joints and silences it).
+
+    Parameters
+    ----------
+    bag : Bag
+        The bag (the warning is added to it).
+    plan : JointPlan
+        The plan from the first messages (:attr:`JointPlan.unpaired`).
+    analysed : collection of str
+        Entry names analysed in the end (joints found late included), without prefix.
+    suffix : str
+        The motor entries' suffix.
+
     """
-    paired = set(plan.joints) | set(plan.motor_names)
-    lone = [n for n in names if n not in paired]
+    lone = [n for n in plan.unpaired if n not in analysed]
     links = [n for n in lone if not (suffix and n.endswith(suffix))]
     motors = [n for n in lone if suffix and n.endswith(suffix)]
     parts = []

@@ -52,7 +52,7 @@ import time
 
 import numpy as np
 from reducer_twin.analysis.joints import check_configured_topics, late_joints, plan_joints
-from reducer_twin.analysis.joints import robot_plans
+from reducer_twin.analysis.joints import robot_plans, say_unpaired
 from reducer_twin.analysis.reading import BagChunks, ForkedBagChunks, joint_columns
 from reducer_twin.analysis.reading import stamp_scatter, warn
 from reducer_twin.analysis.results import BagResult, is_damage, JointResult
@@ -903,7 +903,8 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         with open_bag(path, interfaces=settings.interfaces,
                       motor_suffix=settings.motor_suffix) as bag:
             check_configured_topics(bag, settings)
-            plans = robot_plans(bag, plan_joints(bag, settings), settings)
+            first = plan_joints(bag, settings)
+            plans = robot_plans(bag, first, settings)
             if len(plans) > 1:      # every robot of the recording is analysed, one by one
                 plans[0] = replace(plans[0], others=())
             plan = plans[0]
@@ -953,6 +954,10 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                     # What the second read says of the topics again is said once.
                     bag.warnings[len(said):] = [w for w in bag.warnings[len(said):]
                                                 if w not in said]
+                analysed = {n[len(p.prefix):] for p in (*plans, *late)
+                            if p.link_topic == first.link_topic
+                            for n in (*p.joints, *p.motor_names)}
+                say_unpaired(bag, first, analysed, settings.motor_suffix)
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):

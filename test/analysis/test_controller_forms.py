@@ -880,6 +880,17 @@ def test_a_joint_whose_broadcaster_starts_late_is_analysed_as_if_planned_from_th
         assert derived.metadata['reducer_twin.joints'] == 'joint_1,joint_2'
 
 
+def test_a_motor_entry_that_appears_late_is_not_said_to_be_missing(original, tmp_path, capsys):
+    # joint_2's link entry is there from the start, its motor entry from message LATE on:
+    # unpaired in the first messages, analysed in the end, so not said to be left out.
+    js = original[0]
+    late = _write_with_rosbags(tmp_path / 'late', js, lambda i: js.names if i >= LATE
+                               else ('joint_1', 'joint_1_motor', 'joint_2'))
+    code, out, err = _cli_json(late, tmp_path, capsys)
+    assert code == 0 and out['joints']['joint_2']['observed'] is True
+    assert 'also carries' not in err
+
+
 def test_a_late_joint_the_fleet_store_cannot_take_is_said_not_dropped(
         original, tmp_path, capsys):
     # The store plans each reducer's chain from the bag's first messages: the late joint
