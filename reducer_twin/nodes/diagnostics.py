@@ -116,7 +116,7 @@ def estimator_status(stage, rejected, live=None):
     return level, message, values
 
 
-def ingest_statuses(counts, rejected, mismatch=None):
+def ingest_statuses(counts, rejects, mismatch=None):
     """
     Return the ``encoder_ingest`` statuses, one per joint, from its rule counts.
 
@@ -124,8 +124,8 @@ def ingest_statuses(counts, rejected, mismatch=None):
     ----------
     counts : dict
         Per joint, the count of every ingestion rule and ``published``.
-    rejected : int
-        Malformed messages dropped.
+    rejects : RejectCounter
+        Malformed messages dropped (:class:`.rejects.RejectCounter`).
     mismatch : QoSMismatch, optional
         Publishers the subscriptions cannot match (:class:`.qos.QoSMismatch`).
 
@@ -133,8 +133,10 @@ def ingest_statuses(counts, rejected, mismatch=None):
     -------
     list of tuple
         ``(name, hardware_id, level, message, values)`` per joint: WARN once a sample
-        was dropped or repaired (unwrapping and steps are no fault); ERROR while a
-        publisher of the joint states is not heard for its QoS.
+        was dropped or repaired (unwrapping and steps are no fault) or a message dropped
+        (the latest one's fault said: a message that lacks the joint's entries never
+        counts as a sample); ERROR while a publisher of the joint states is not heard
+        for its QoS.
 
     """
     unheard = [mismatch.reason(t) for t in mismatch.topics] if mismatch is not None else []
@@ -142,9 +144,12 @@ def ingest_statuses(counts, rejected, mismatch=None):
     for joint, c in counts.items():
         bad = sum(v for k, v in c.items()
                   if k not in ('published', 'step', *PAIRING_FACTS) and not k.endswith('_wrap'))
-        c['rejected_messages'] = rejected
+        c['rejected_messages'] = rejects.total
         level, message = ('OK', 'streams clean') if bad == 0 else \
             ('WARN', f'{bad} samples dropped or repaired')
+        if rejects.total:
+            said = f'{rejects.total} messages dropped, the latest: {rejects.last}'
+            level, message = 'WARN', said if bad == 0 else f'{message}; {said}'
         if unheard:
             level, message = 'ERROR', '; '.join([*unheard, message])
             c['qos_mismatched_topics'] = ', '.join(mismatch.topics)

@@ -184,7 +184,7 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        return ingest_statuses(self.counts(), self.rejects.total, self.mismatch)
+        return ingest_statuses(self.counts(), self.rejects, self.mismatch)
 
 
 def main(args=None):

@@ -22,6 +22,7 @@ class RejectCounter:
         self.node = node
         self.period_s = period_s
         self.counts = {}
+        self.last = None        # what was wrong with the latest one
         self._last_warn = -1e18
 
     @property
@@ -42,6 +43,7 @@ class RejectCounter:
 
         """
         self.counts[reason] = self.counts.get(reason, 0) + 1
+        self.last = detail
         now = time.monotonic()
         if now - self._last_warn >= self.period_s:
             self._last_warn = now

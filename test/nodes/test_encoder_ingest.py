@@ -340,6 +340,10 @@ def test_bad_messages_are_rejected_counted_and_warned_about_once(ros, capfd):
     assert robot.node.rejects.counts == {'bad_joint_state': 5}
     status = robot.status(j1, lambda s: robot.ros.key_values(s).get('published') == '200')
     assert robot.ros.key_values(status)['rejected_messages'] == '5'
+    # Never 'streams clean' beside dropped messages: a controller whose messages all lack
+    # the configured names would otherwise read as a quiet, clean stream.
+    assert status.level == DiagnosticStatus.WARN
+    assert status.message.startswith('5 messages dropped, the latest: ')
     err = capfd.readouterr().err
     assert err.count('dropped a message (bad_joint_state)') == 1, err[-2000:]
     assert 'JointState lacks' in err
