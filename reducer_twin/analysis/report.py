@@ -67,12 +67,29 @@ def _hours(res):
     return np.cumsum(_col(res.features, TE_FEATURES, 'exposure_s')) / HOUR
 
 
-def _lost_motion(ax, joint, res, limit):
+def _readings(ax, joint, res):
+    """
+    Plot the windows' lost-motion readings with their sd; return their line.
+
+    A reading whose wear fit lies on the table's lower bound (no play beyond a new
+    nominal unit's: censored, never used by the estimate) is drawn hollow, apart.
+    """
     h = _hours(res)
     obs = _col(res.features, TE_FEATURES, 'lost_motion_rad') / ARCMIN
     std = _col(res.features, TE_FEATURES, 'lost_motion_std_rad') / ARCMIN
-    line, = ax.plot(h, obs, '.', ms=3, alpha=0.5, label=f'{joint} observed per window')
+    bound = _col(res.features, TE_FEATURES, 'wear_fit_m') <= 0.0
+    used = ~bound
+    line, = ax.plot(h[used], obs[used], '.', ms=3, alpha=0.5,
+                    label=f'{joint} observed per window' if used.any() else '_readings')
     ax.errorbar(h, obs, yerr=std, fmt='none', ecolor=line.get_color(), alpha=0.15)
+    if bound.any():
+        ax.plot(h[bound], obs[bound], 'o', ms=4, mfc='none', color=line.get_color(),
+                alpha=0.6, label=f"{joint} per window, at a new unit's play (not used)")
+    return line
+
+
+def _lost_motion(ax, joint, res, limit):
+    line = _readings(ax, joint, res)
     wh = _col(res.wear, WEAR_ESTIMATE, 'exposure_s') / HOUR
     ax.plot(wh, _col(res.wear, WEAR_ESTIMATE, 'lost_motion_rad') / ARCMIN,
             color=line.get_color(), label=f'{joint} estimate')
@@ -80,7 +97,6 @@ def _lost_motion(ax, joint, res, limit):
         ax.plot(_col(res.truth, GROUND_TRUTH, 'exposure_s') / HOUR,
                 _col(res.truth, GROUND_TRUTH, 'lost_motion_rad') / ARCMIN, '--',
                 color=line.get_color(), label=f'{joint} truth')
-    ax.axhline(limit / ARCMIN, color='k', lw=0.8, ls=':')
 
 
 def _wear(ax, joint, res):
@@ -171,16 +187,28 @@ def _figures(result, limit):
             ('remaining_life', _life, 'remaining life (h), band P10–P90')):
         fig, ax = plt.subplots(figsize=(10.5, 4.5))
         for joint, res in joints.items():
-            if stem == 'lost_motion':
+            if not res.observed:
+                # Never a curve of the model's guess beside "NOT OBSERVED" in the table:
+                # without a lost motion the estimate is the prior's alone (a remaining life
+                # of 0 h from the model's rate at a heavy duty). Only the windows' readings.
+                if stem == 'lost_motion':
+                    _readings(ax, joint, res)
+                ax.plot([], [], ' ', label=f'{joint}: not observed, no estimate')
+            elif stem == 'lost_motion':
                 draw(ax, joint, res, limit)
             else:
                 draw(ax, joint, res)
+        if stem == 'lost_motion':
+            ax.axhline(limit / ARCMIN, color='k', lw=0.8, ls=':')
+        elif not any(res.observed for res in joints.values()):
+            ax.text(0.5, 0.5, 'no joint observed: no estimate', transform=ax.transAxes,
+                    ha='center', va='center', color='0.4')
         ax.set_xlabel('operating hours (exposure)')
         ax.set_ylabel(ylabel)
         if stem == 'remaining_life':
-            _life_limits(ax, joints.values())
+            _life_limits(ax, [r for r in joints.values() if r.observed])
         elif stem == 'wear':
-            _wear_limits(ax, joints.values())
+            _wear_limits(ax, [r for r in joints.values() if r.observed])
         ax.grid(alpha=0.3)
         # Outside the axes: a legend inside covered the curves and the axis label.
         ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
@@ -333,6 +361,8 @@ def _page(result, images, life=None):
         '<style>body{font-family:sans-serif;margin:2em;max-width:1000px}',
         'table{border-collapse:collapse}',
         'td,th{border:1px solid #bbb;padding:3px 8px;text-align:right}',
+        # The verdict table's text cells (the fleet view's classes): read left to right.
+        'td.t,th.t{text-align:left}td.rule{min-width:240px;font-size:13px}',
         'img{max-width:100%}</style></head><body>',
         f'<h1>{html.escape(title)}</h1>',
         f'<p>Bag: <code>{html.escape(str(result.bag))}</code>; derived bag: '

@@ -130,7 +130,7 @@ def life_axis_limits(p10, p50, p90, skip=None):
     return lo - 0.05 * span, hi + 0.1 * span
 
 
-def trend_figure(trend, title, limit_rad):
+def trend_figure(trend, title, limit_rad, observed=True):
     """
     Draw a reducer's lost-motion and remaining-life trends across its bags.
 
@@ -142,6 +142,10 @@ def trend_figure(trend, title, limit_rad):
         Robot and joint.
     limit_rad : float
         Lost-motion limit [rad].
+    observed : bool
+        Whether any lost motion was used: without one the estimate is the prior's
+        alone, and only the windows' readings are drawn (never a curve beside NOT
+        OBSERVED: on a heavy duty the model's rate alone reaches a remaining life of 0 h).
 
     Returns
     -------
@@ -160,19 +164,24 @@ def trend_figure(trend, title, limit_rad):
     window_hours = np.cumsum(col(trend.features, TE_FEATURES, 'exposure_s')) / HOUR
     ax_lm.plot(window_hours, col(trend.features, TE_FEATURES, 'lost_motion_rad') / ARCMIN,
                '.', ms=3, alpha=0.5, label='observed per window')
-    ax_lm.plot(hours, col(trend.wear, WEAR_ESTIMATE, 'lost_motion_rad') / ARCMIN,
-               label='estimate')
+    if observed:
+        ax_lm.plot(hours, col(trend.wear, WEAR_ESTIMATE, 'lost_motion_rad') / ARCMIN,
+                   label='estimate')
     if limit_rad:
         ax_lm.axhline(limit_rad / ARCMIN, color='C3', lw=1.2, ls='--', label='limit')
     ax_lm.set_ylabel('lost motion (arcmin)')
     p10, p50, p90 = (col(trend.life, REMAINING_LIFE, k) / HOUR
                      for k in ('p10_s', 'p50_s', 'p90_s'))
-    ax_life.fill_between(hours, p10, p90, alpha=0.25, label='P10–P90')
-    ax_life.plot(hours, p50, label='P50')
+    if observed:
+        ax_life.fill_between(hours, p10, p90, alpha=0.25, label='P10–P90')
+        ax_life.plot(hours, p50, label='P50')
+        limits = life_axis_limits(p10, p50, p90)
+        if limits:
+            ax_life.set_ylim(*limits)
+    else:
+        for ax in (ax_lm, ax_life):
+            ax.plot([], [], ' ', label='not observed: no estimate')
     ax_life.axhline(0.0, color='C3', lw=1.2, ls='--', label='limit reached')
-    limits = life_axis_limits(p10, p50, p90)
-    if limits:
-        ax_life.set_ylim(*limits)
     ax_life.set_ylabel('remaining life (h)')
     for ax in (ax_lm, ax_life):
         for start in trend.bag_starts_h[1:]:
@@ -225,7 +234,8 @@ def write_fleet_report(store, rows, out_dir):
             continue
         title = f'{row["robot"]} / {row["joint"]}: {row["verdict"]}'
         image = _png(trend_figure(store.trend(reducer.row_id), title,
-                                  reducer.lost_motion_limit_rad))
+                                  reducer.lost_motion_limit_rad,
+                                  observed=row['verdict'] != 'NOT OBSERVED'))
         sections.append(f'<h3>{html.escape(title)}</h3><p class="rule">'
                         f'{html.escape(row["reason"])}</p><img alt="{html.escape(title)}" '
                         f'src="data:image/png;base64,{image}">')

@@ -1,6 +1,7 @@
 """The analysis report: PNG plots and one self-contained HTML page."""
 
 import base64
+import copy
 import re
 
 import numpy as np
@@ -11,6 +12,7 @@ from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
 from reducer_twin.cli import main
 from reducer_twin.core.errors import BagError
 from reducer_twin.core.units import ARCMIN
+from reducer_twin.msg_adapters.layouts import TE_FEATURES
 
 PNG = b'\x89PNG\r\n\x1a\n'
 
@@ -76,3 +78,35 @@ def test_the_wear_band_never_goes_below_zero_wear(result):
         ys = np.concatenate([p.vertices[:, 1] for p in band.get_paths()])
         assert ys.min() >= 0.0
     assert ax.get_ylim()[0] <= 0.0
+
+
+def test_a_joint_not_observed_gets_no_estimate_curve_only_its_readings(result):
+    # Beside NOT OBSERVED in the table, the plots drew the prior's guess: on a heavy duty a
+    # lost motion rising to the limit and a remaining life of 0 h.
+    blind = copy.copy(result)
+    blind.joints = dict(result.joints)
+    blind.joints['joint_2'] = copy.copy(result.joints['joint_2'])
+    blind.joints['joint_2'].reason = 'the link angle follows the motor angle'
+    assert not blind.joints['joint_2'].observed
+    figures = dict(_figures(blind, limit=3.0 * ARCMIN))
+    for stem in ('lost_motion', 'wear', 'remaining_life'):
+        ax = figures[stem].axes[0]
+        labels = [a.get_label() for a in (*ax.lines, *ax.collections)]
+        assert 'joint_2: not observed, no estimate' in labels, stem
+        assert not [x for x in labels if x.startswith('joint_2 ') and 'observed per' not in x]
+        assert any(x.startswith('joint_1 ') for x in labels), stem
+    lines = figures['lost_motion'].axes[0].lines
+    assert 'joint_2 observed per window' in [line.get_label() for line in lines]
+
+
+def test_readings_on_a_new_units_bound_are_drawn_apart_as_not_used(result):
+    bound = copy.copy(result)
+    bound.joints = dict(result.joints)
+    res = bound.joints['joint_1'] = copy.copy(result.joints['joint_1'])
+    res.features = res.features.copy()
+    res.features[:3, TE_FEATURES.fields.index('wear_fit_m')] = 0.0
+    ax = dict(_figures(bound, limit=3.0 * ARCMIN))['lost_motion'].axes[0]
+    lines = {line.get_label(): line for line in ax.lines}
+    apart = lines["joint_1 per window, at a new unit's play (not used)"]
+    assert len(apart.get_xdata()) == 3
+    assert len(lines['joint_1 observed per window'].get_xdata()) == len(res.features) - 3

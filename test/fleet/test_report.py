@@ -68,3 +68,21 @@ def test_headless_chromium_renders_the_report(fleet_report, tmp_path, capsys):
     rgb = [int(COLOURS[first][k:k + 2], 16) for k in (1, 3, 5)]
     cell = np.all(np.abs(image[..., :3] * 255 - rgb) < 3, axis=-1)
     assert cell.sum() > 200, f'the {first} cell is not drawn'
+
+
+def test_a_reducer_not_observed_gets_its_readings_and_no_estimate_curve(fleet_report):
+    from reducer_twin.fleet.report import trend_figure
+    from reducer_twin.fleet.store import FleetStore
+    with FleetStore(fleet_report / 'f.db') as store:
+        reducer = store.in_service('r1', 'joint_2')
+        trend = store.trend(reducer.row_id)
+    labels = {}
+    for observed in (True, False):
+        fig = trend_figure(trend, 'r1 / joint_2', reducer.lost_motion_limit_rad, observed)
+        labels[observed] = [[a.get_label() for a in (*ax.lines, *ax.collections)]
+                            for ax in fig.axes]
+    assert 'estimate' in labels[True][0] and 'P50' in labels[True][1]
+    lm, life = labels[False]
+    assert 'observed per window' in lm and 'estimate' not in lm
+    assert 'P50' not in life and 'P10–P90' not in life
+    assert 'not observed: no estimate' in lm and 'not observed: no estimate' in life
