@@ -612,10 +612,14 @@ class LifeStage:
         else:
             message += (growth_note(wear_record, self.limit) + rate_note(wear_record)
                         + curve_note(wear_record, record))
-        if level == 'OK' and int(wear_record.get('updates', 0)) == 0:
-            # A prediction from the duty alone is no assessment: never 'OK' without evidence.
+        if int(wear_record.get('updates', 0)) == 0:
+            # A prediction from the duty alone is no assessment: never 'OK' without
+            # evidence, nor 'ERROR' (on a heavy duty the model's rate alone wore a joint
+            # whose link angle was the motor's out in 1 500 h: "reducer worn out", from
+            # no lost motion at all).
             level = 'STALE'
-            message = 'not observed: no lost-motion observation yet; ' + message
+            message = ('not observed: no lost-motion observation yet; from the duty alone '
+                       f"(the model's wear rate, no evidence): {message}")
         return record, level, message
 
 

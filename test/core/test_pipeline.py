@@ -197,6 +197,19 @@ def test_life_levels_follow_the_thresholds_on_p10(windows, worn_record, warn_h, 
     assert 'remaining life P10' in message
 
 
+@pytest.mark.parametrize('warn_h, error_h', [(1.0, 0.5), (1e6, 1.0), (1e6, 1e6)])
+def test_without_a_lost_motion_the_level_is_stale_whatever_the_duty_alone_predicts(
+        windows, worn_record, warn_h, error_h):
+    # The same prediction with no observation behind it: never OK, WARN or ERROR.
+    stage = LifeStage(PARAMS, LifeConfig(warn_s=warn_h * HOUR, error_s=error_h * HOUR))
+    stage.observe_duty(windows[-1].duty)
+    record, level, message = stage.process({**worn_record, 'updates': 0.0})
+    assert level == 'STALE'
+    assert message.startswith('not observed: no lost-motion observation yet; from the duty '
+                              "alone (the model's wear rate, no evidence): remaining life P10")
+    assert 0.0 < record['p10_s'] <= record['p50_s'] <= record['p90_s']
+
+
 def test_a_reducer_beyond_the_limit_is_an_error_with_no_life_left(worn_record):
     worn_out = {**worn_record, 'wear_m': 200e-6}
     record, level, message = LifeStage(PARAMS).process(worn_out)
