@@ -67,7 +67,8 @@ def estimator_status(stage, rejected, live=None):
     Returns
     -------
     tuple
-        ``(level, message, values)``.
+        ``(level, message, values)``: ``STALE`` while no lost motion has been used
+        (the wear is then the prior's, moved by the model's rate alone).
 
     """
     est = stage.estimator
@@ -103,12 +104,16 @@ def estimator_status(stage, rejected, live=None):
         if verdict is not None and not verdict[0]:
             level = 'WARN' if level == 'OK' else level
             message += '; ' + service_note(verdict, est.config.service_time_s)
+    if est.updates == 0:
+        # The prior's wear, moved by the model's rate alone: no finding, never 'OK'.
+        message = f'not observed: no lost motion used yet; {message} from the prior alone'
+        level = 'STALE' if level == 'OK' else level
     if error is not None:
         message = f'{error}; {message}'
     if live is not None:
         store_level, store_values = live.status()
         values.update(store_values)
-        if store_level == 'ERROR' or (store_level == 'WARN' and level == 'OK'):
+        if store_level == 'ERROR' or (store_level == 'WARN' and level in ('OK', 'STALE')):
             level = store_level
         if store_level != 'OK':
             message += '; fleet store: ' + (store_values.get('store_error')

@@ -11,7 +11,7 @@ from the same windows, so the node must match it exactly.
 import itertools
 import subprocess
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -214,6 +214,18 @@ def test_the_diagnostics_say_how_the_windows_scatter_against_their_reported_sd(
     assert learnt != 1.0, 'twelve windows teach the noise scale something'
     status = est.status(lambda s: ros.key_values(s)['updates'] == '12')
     assert float(ros.key_values(status)['window_noise_scale']) == pytest.approx(learnt, rel=1e-4)
+
+
+def test_the_diagnostics_are_stale_until_a_lost_motion_is_used(ros, tmp_path, records):
+    # The prior's wear moved by the model's rate was said OK, from no observation at all.
+    est = Estimator(ros, tmp_path)
+    status = est.status(lambda s: ros.key_values(s)['updates'] == '0')
+    assert status.level == DiagnosticStatus.STALE
+    assert status.message.startswith('not observed: no lost motion used yet; wear ')
+    assert status.message.endswith(' um from the prior alone')
+    est.send(records[:1])
+    status = est.status(lambda s: ros.key_values(s)['updates'] == '1')
+    assert status.level == DiagnosticStatus.OK and status.message.startswith('wear ')
 
 
 def test_the_diagnostics_say_how_far_the_forecasts_fell_short(ros, tmp_path, records):
