@@ -230,7 +230,8 @@ def _summary(nodes, joints, _rows):
 
 
 def _fmt(value, spec):
-    return '-' if value is None else format(value, spec)
+    # NaN: no number stands for the reducer (a remaining life before any lost motion).
+    return '-' if value is None or not math.isfinite(value) else format(value, spec)
 
 
 def _table(summary, title):

@@ -616,11 +616,22 @@ class LifeStage:
             # A prediction from the duty alone is no assessment: never 'OK' without
             # evidence, nor 'ERROR' (on a heavy duty the model's rate alone wore a joint
             # whose link angle was the motor's out in 1 500 h: "reducer worn out", from
-            # no lost motion at all).
+            # no lost motion at all). No number stands for the reducer in the record (a
+            # consumer of the topic that acts on threshold_met or P10 acts on evidence);
+            # the message keeps the duty's prediction as words.
+            record.update(dict.fromkeys(_UNOBSERVED_NAN, math.nan))
+            record.update(dict.fromkeys(_UNOBSERVED_ZERO, 0.0))
             level = 'STALE'
             message = ('not observed: no lost-motion observation yet; from the duty alone '
                        f"(the model's wear rate, no evidence): {message}")
         return record, level, message
+
+
+_UNOBSERVED_NAN = ('p10_s', 'p50_s', 'p90_s', 'mean_s', 'censored_fraction', 'event_state')
+"""``remaining_life`` fields that are NaN while no lost motion has been observed."""
+
+_UNOBSERVED_ZERO = ('p10_censored', 'p50_censored', 'p90_censored', 'threshold_met')
+"""``remaining_life`` flags that are 0 while no lost motion has been observed."""
 
 
 def trend_from_record(record):

@@ -200,14 +200,18 @@ def test_life_levels_follow_the_thresholds_on_p10(windows, worn_record, warn_h, 
 @pytest.mark.parametrize('warn_h, error_h', [(1.0, 0.5), (1e6, 1.0), (1e6, 1e6)])
 def test_without_a_lost_motion_the_level_is_stale_whatever_the_duty_alone_predicts(
         windows, worn_record, warn_h, error_h):
-    # The same prediction with no observation behind it: never OK, WARN or ERROR.
+    # The same prediction with no observation behind it: never OK, WARN or ERROR, and no
+    # number in the record (a consumer acting on P10 or threshold_met acts on evidence).
     stage = LifeStage(PARAMS, LifeConfig(warn_s=warn_h * HOUR, error_s=error_h * HOUR))
     stage.observe_duty(windows[-1].duty)
     record, level, message = stage.process({**worn_record, 'updates': 0.0})
     assert level == 'STALE'
     assert message.startswith('not observed: no lost-motion observation yet; from the duty '
                               "alone (the model's wear rate, no evidence): remaining life P10")
-    assert 0.0 < record['p10_s'] <= record['p50_s'] <= record['p90_s']
+    for key in ('p10_s', 'p50_s', 'p90_s', 'mean_s', 'event_state', 'censored_fraction'):
+        assert math.isnan(record[key]), key
+    assert record['threshold_met'] == record['p10_censored'] == 0.0
+    assert math.isfinite(record['catalogue_life_s']) and record['horizon_s'] > 0.0
 
 
 def test_a_reducer_beyond_the_limit_is_an_error_with_no_life_left(worn_record):
