@@ -254,7 +254,7 @@ def suffix_guess(name_lists):
     return best, ', '.join(pairs[best][:3])
 
 
-def say_unpaired(bag, plan, analysed, suffix):
+def say_unpaired(bag, plan, analysed, settings):
     """
     Warn of entries of the link topic that paired with nothing, so were not analysed.
 
@@ -270,10 +270,11 @@ def say_unpaired(bag, plan, analysed, suffix):
         The plan from the first messages (:attr:`JointPlan.unpaired`).
     analysed : collection of str
         Entry names analysed in the end (joints found late included), without prefix.
-    suffix : str
-        The motor entries' suffix.
+    settings : AnalysisSettings
+        The motor entries' suffix and DynamicJointState interfaces.
 
     """
+    suffix = settings.motor_suffix
     lone = [n for n in plan.unpaired if n not in analysed]
     links = [n for n in lone if not (suffix and n.endswith(suffix))]
     motors = [n for n in lone if suffix and n.endswith(suffix)]
@@ -283,10 +284,14 @@ def say_unpaired(bag, plan, analysed, suffix):
         parts.append(f'{_listed(links)} without a motor entry (<joint>{suffix}{where})')
     if motors:
         parts.append(f'{_listed(motors)} without a link entry')
-    if parts:
-        warn(bag, f'{plan.link_topic} also carries {" and ".join(parts)}: not analysed; a '
-             "reducer among them needs both its encoders published under the twin's names "
-             '(twin.motor_suffix, twin.motor_topic; twin.joints chooses the joints)')
+    if not parts:
+        return
+    names = ('twin.motor_suffix, twin.motor_topic' if bag.topics[plan.link_topic].msgtype
+             == JOINT_STATE else f'its interface {settings.interfaces.motor_position!r}: '
+             'twin.interfaces.motor_position')
+    warn(bag, f'{plan.link_topic} also carries {" and ".join(parts)}: not analysed; a '
+         "reducer among them needs both its encoders published under the twin's names "
+         f'({names}; twin.joints chooses the joints)')
 
 
 def _listed(names, most=8):

@@ -957,7 +957,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                 analysed = {n[len(p.prefix):] for p in (*plans, *late)
                             if p.link_topic == first.link_topic
                             for n in (*p.joints, *p.motor_names)}
-                say_unpaired(bag, first, analysed, settings.motor_suffix)
+                say_unpaired(bag, first, analysed, settings)
             warnings = list(bag.warnings)
     except BaseException:
         if isinstance(backs, WorkerBacks):

@@ -61,14 +61,14 @@ def _interfaces(msg, joint, names):
 
 
 def _write_djs(dst, messages, storage=StoragePlugin.MCAP, joint_states=False,
-               motor_only=False, motor='motor_position'):
+               motor_only=False, motor='motor_position', extra=()):
     """
     Rewrite combined JointState messages as ros2_control publishes them.
 
     ``/dynamic_joint_states`` with each joint's interfaces (in a different order per joint,
     as hardware exports them), and with ``joint_states`` the broadcaster's ``/joint_states``
     that holds the joints only. ``motor_only``: the dynamic topic carries the motor
-    interface alone.
+    interface alone. ``extra``: joints with a position interface only (a gripper).
     """
     with Writer(dst, version=9, storage_plugin=storage) as writer:
         dynamic = writer.add_connection('/dynamic_joint_states', DJS, typestore=STORE)
@@ -80,8 +80,9 @@ def _write_djs(dst, messages, storage=StoragePlugin.MCAP, joint_states=False,
                 values = _interfaces(msg, joint, {'motor': motor})
                 names = [motor] if motor_only else list(values)[::1 if k == 0 else -1]
                 ivs.append(TYPES[IV](names, np.array([values[n] for n in names])))
+            ivs += [TYPES[IV](['position'], np.array([0.01])) for _ in extra]
             writer.write(dynamic, stamp, STORE.serialize_cdr(
-                TYPES[DJS](msg.header, list(JOINTS), ivs), DJS))
+                TYPES[DJS](msg.header, [*JOINTS, *extra], ivs), DJS))
             if states is not None:
                 keep = [msg.name.index(j) for j in JOINTS]
                 writer.write(states, stamp, STORE.serialize_cdr(TYPES[JOINT_STATE](
@@ -156,6 +157,18 @@ def test_a_dynamic_joint_states_bag_alone_analyses_like_the_joint_states_it_came
     assert result.plan.motor_names == ('joint_1_motor', 'joint_2_motor')
     assert result.messages == len(combined[1]) and result.warnings == []
     _agree(result, combined[2])
+
+
+def test_a_dynamic_joint_without_the_motor_interface_is_named_with_the_setting(
+        combined, tmp_path):
+    bag = _write_djs(tmp_path / 'gripper', combined[1], extra=('gripper',))
+    result = analyze_bag(bag, tmp_path / 'out', SETTINGS)
+    _agree(result, combined[2])
+    (warning,) = result.warnings
+    assert ('/dynamic_joint_states also carries gripper without a motor entry '
+            '(<joint>_motor): not analysed; a reducer among them needs both its encoders '
+            "published under the twin's names (its interface 'motor_position': "
+            'twin.interfaces.motor_position; twin.joints chooses the joints)') in str(warning)
 
 
 def test_dynamic_joint_states_beside_the_broadcasters_joint_states_give_the_motor_angles(
