@@ -131,8 +131,9 @@ def ingest_statuses(counts, rejects, mismatch=None):
         Per joint, the count of every ingestion rule and ``published``.
     rejects : RejectCounter
         Malformed messages dropped (:class:`.rejects.RejectCounter`).
-    mismatch : QoSMismatch, optional
-        Publishers the subscriptions cannot match (:class:`.qos.QoSMismatch`).
+    mismatch : UnheardPublishers, optional
+        Publishers the subscriptions cannot hear, for their QoS or type
+        (:class:`.qos.UnheardPublishers`).
 
     Returns
     -------
@@ -141,7 +142,7 @@ def ingest_statuses(counts, rejects, mismatch=None):
         was dropped or repaired (unwrapping and steps are no fault) or a message dropped
         (the latest one's fault said: a message that lacks the joint's entries never
         counts as a sample); ERROR while a publisher of the joint states is not heard
-        for its QoS.
+        for its QoS or its type.
 
     """
     unheard = [mismatch.reason(t) for t in mismatch.topics] if mismatch is not None else []
@@ -157,7 +158,7 @@ def ingest_statuses(counts, rejects, mismatch=None):
             level, message = 'WARN', said if bad == 0 else f'{message}; {said}'
         if unheard:
             level, message = 'ERROR', '; '.join([*unheard, message])
-            c['qos_mismatched_topics'] = ', '.join(mismatch.topics)
+            c['unheard_topics'] = ', '.join(mismatch.topics)
         statuses.append((f'reducer_twin: {joint} encoder ingest', joint, level, message, c))
     return statuses
 

@@ -30,12 +30,13 @@ from reducer_twin.core.robot_ingest import check_effort_scale, check_motor_direc
 from reducer_twin.core.robot_ingest import check_streams, RobotIngest
 from reducer_twin.core.robot_ingest import STREAMS
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
+from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
 from reducer_twin.msg_adapters.ros import JointStatePicker
 from reducer_twin.nodes.diagnostics import ingest_statuses, publish_diagnostics
 from reducer_twin.nodes.intra_process import SharedOutput
 from reducer_twin.nodes.parameters import check_choice, declare_plain, SpecParameters
-from reducer_twin.nodes.qos import encoder_qos, QoSMismatch
+from reducer_twin.nodes.qos import encoder_qos, UnheardPublishers
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes
 from reducer_twin.nodes.settings import IngestSettings
@@ -76,9 +77,9 @@ class EncoderIngest(Node):
         self._raw = {'link': [], 'motor': []}
         self._raw_since = None
         self._retimed_said = False
-        self._link_topic = p['link_topic']
+        self._link_topic, self._motor_topic = p['link_topic'], p['motor_topic']
         qos = encoder_qos(p['reliable'])
-        self.mismatch = QoSMismatch(self, p['reliable'])
+        self.mismatch = UnheardPublishers(self, p['reliable'])
         # The controller streams are taken as their serialised bytes and read by a
         # JointStateReader: no JointState object (names, arrays) is built per message.
         if self.split:
@@ -170,6 +171,7 @@ class EncoderIngest(Node):
     def _check_listeners(self):
         for out in self.outputs.values():
             out.check_listeners()
+        self.mismatch.check_types({self._link_topic, self._motor_topic} - {''}, JOINT_STATE)
 
     def _flush_stale(self):
         if self._raw_since is None:

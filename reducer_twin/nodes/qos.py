@@ -70,19 +70,20 @@ def diagnostics_qos():
                       durability=DurabilityPolicy.VOLATILE)
 
 
-class QoSMismatch:
+class UnheardPublishers:
     """
-    Publishers whose QoS a node's subscriptions cannot match, by topic.
+    Publishers a node's subscriptions cannot hear, by topic: their QoS or their type.
 
     Such a publisher's messages never arrive, and the stream looks merely quiet: a
     controller that publishes its joint states BEST_EFFORT (sensor-data QoS) to a RELIABLE
-    subscription. Each topic is said once in the node's log (an error) and kept for
+    subscription, or a topic of another type (``/dynamic_joint_states`` given as the
+    link topic). Each topic is said once in the node's log (an error) and kept for
     ``/diagnostics``.
 
     Parameters
     ----------
     node : rclpy.node.Node
-        The subscribing node (its logger).
+        The subscribing node (its logger and the ROS graph).
     reliable : bool
         Whether the subscriptions are RELIABLE (the remedy then named).
 
@@ -98,15 +99,32 @@ class QoSMismatch:
         return SubscriptionEventCallbacks(incompatible_qos=partial(self._on_event, topic))
 
     def _on_event(self, topic, event):
-        first = topic not in self.topics
-        self.topics[topic] = qos_policy_name_from_kind(event.last_policy_kind)
-        if first:
-            self._node.get_logger().error(self.reason(topic))
+        policy = qos_policy_name_from_kind(event.last_policy_kind)
+        hint = ('; it publishes BEST_EFFORT: set reliable to false (twin.reliable in the '
+                'bringup YAML)' if policy == 'RELIABILITY' and self._reliable else '')
+        self._say(topic, f'a publisher of {topic} offers a QoS this subscription cannot '
+                         f'match ({policy}): none of its messages are received{hint}')
+
+    def check_types(self, topics, type_name):
+        """
+        Say a topic whose publishers are all of another type than ``type_name``.
+
+        DDS matches no such publisher and raises no event for it (Fast DDS): it is read
+        from the ROS graph, as ``ros2 topic info`` reads it.
+        """
+        for topic in topics:
+            if topic in self.topics:
+                continue
+            types = {i.topic_type for i in self._node.get_publishers_info_by_topic(topic)}
+            if types and type_name not in types:
+                self._say(topic, f'the publishers of {topic} publish {", ".join(sorted(types))}'
+                                 f', not {type_name}: none of their messages are received')
+
+    def _say(self, topic, reason):
+        if topic not in self.topics:
+            self._node.get_logger().error(reason)
+        self.topics[topic] = reason
 
     def reason(self, topic):
         """Say why ``topic``'s publisher is not heard, and what to set."""
-        policy = self.topics[topic]
-        hint = ('; it publishes BEST_EFFORT: set reliable to false (twin.reliable in the '
-                'bringup YAML)' if policy == 'RELIABILITY' and self._reliable else '')
-        return (f'a publisher of {topic} offers a QoS this subscription cannot match '
-                f'({policy}): none of its messages are received{hint}')
+        return self.topics[topic]

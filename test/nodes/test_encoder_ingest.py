@@ -18,8 +18,11 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 import numpy as np
 import pytest
+import rclpy
+from rclpy.context import Context
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
@@ -411,7 +414,7 @@ def test_a_best_effort_controller_is_an_error_naming_the_setting_not_a_quiet_str
                                      'subscription cannot match (RELIABILITY): none of its '
                                      'messages are received; it publishes BEST_EFFORT: set '
                                      'reliable to false')
-    assert ros.key_values(status)['qos_mismatched_topics'] == robot.link_topic
+    assert ros.key_values(status)['unheard_topics'] == robot.link_topic
     assert 'cannot match (RELIABILITY)' in capfd.readouterr().err
 
 
@@ -425,6 +428,33 @@ def test_with_reliable_false_a_best_effort_controller_is_heard(ros):
             ros.spin_for(0.05)
     assert robot.wait_rows(robot.joints[0], 50).shape[0] >= 50
     assert not robot.node.mismatch.topics
+
+
+def test_a_link_topic_of_another_type_is_an_error_naming_the_type(ros):
+    # /dynamic_joint_states given as the link topic: DDS matches nothing and says nothing.
+    robot = Robot(ros)                        # its probe hears /diagnostics
+    wrong = f'{robot.link_topic}_array'
+    other = Context()                         # its own participant, as another process
+    rclpy.init(context=other, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        publisher = rclpy.create_node('other_type_publisher', context=other)
+        publisher.create_publisher(Float64MultiArray, wrong, 10)
+        joint = f'typed_{next(_ids)}'
+        ros.add(EncoderIngest(f'encoder_ingest_{joint}', context=ros.context,
+                              parameter_overrides=[
+                                  Parameter('joints', value=[joint]),
+                                  Parameter('link_topic', value=wrong),
+                                  Parameter('diagnostics_period_s', value=0.1)]))
+        status = ros.wait_status(robot.diagnostics, f'reducer_twin: {joint} encoder ingest',
+                                 lambda s: 'publish' in s.message)
+        assert status.level == DiagnosticStatus.ERROR
+        assert status.message.startswith(
+            f'the publishers of {wrong} publish std_msgs/msg/Float64MultiArray, not '
+            'sensor_msgs/msg/JointState: none of their messages are received')
+        assert ros.key_values(status)['unheard_topics'] == wrong
+        publisher.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=other)
 
 
 # -- composed in one process: pairs handed over directly ---------------------------------------
