@@ -53,16 +53,10 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
     fault = analyzer.effort_fault
     if fault is None and analyzer.windows_read:
         return None
-    if link_from_motor(analyzer):
+    derived = derived_link_reason(analyzer)
+    if derived is not None:
         # Before the effort's checks: without a TE they read nothing of the effort.
-        span = analyzer.largest_reversed_te_span
-        return (f'the link angle follows the motor angle divided by the reduction ratio to '
-                f'within {span / ARCSEC:.2g} arcsec in all {analyzer.windows_reversed} '
-                "windows with a torque reversal under load, where a reducer's play alone "
-                'moves it by tenths of an arcminute: the link position is computed from the '
-                "motor encoder, not read by an encoder at the reducer's output (or the motor "
-                "position from the link's); the lost motion needs both encoders (a "
-                'secondary, output-side one)')
+        return derived
     if fault is not None and not analyzer.windows_implausible:
         return fault
     seen = analyzer.samples_seen
@@ -140,6 +134,23 @@ def link_from_motor(analyzer):
     """
     return bool(analyzer.windows_reversed) and \
         analyzer.largest_reversed_te_span < DERIVED_LINK_SPAN_RAD
+
+
+def derived_link_reason(analyzer):
+    """
+    Say that a joint's link angle is its motor angle over the ratio, else None.
+
+    :func:`link_from_motor` in words: the reason it is not observed, wherever said.
+    """
+    if not link_from_motor(analyzer):
+        return None
+    return (f'the link angle follows the motor angle divided by the reduction ratio to within '
+            f'{analyzer.largest_reversed_te_span / ARCSEC:.2g} arcsec in all '
+            f'{analyzer.windows_reversed} windows with a torque reversal under load, where a '
+            "reducer's play alone moves it by tenths of an arcminute: the link position is "
+            "computed from the motor encoder, not read by an encoder at the reducer's output "
+            "(or the motor position from the link's); the lost motion needs both encoders (a "
+            'secondary, output-side one)')
 
 
 def stale_reason(analyzer, after_s, effort_source='the joint states'):

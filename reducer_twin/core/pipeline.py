@@ -557,9 +557,10 @@ class LifeStage:
         -------
         tuple
             ``(record, level, message)``: the ``remaining_life`` record, the
-            level ``'OK'``/``'WARN'``/``'ERROR'`` and a one-line message;
-            ``'STALE'`` instead of ``'OK'`` while no lost motion has been observed
-            (``updates`` 0).
+            level ``'OK'``/``'WARN'``/``'ERROR'`` and a one-line message; while no
+            lost motion has been observed (``updates`` 0), ``'STALE'`` whatever the duty
+            alone predicts, and the record's percentiles, mean and event state NaN, its
+            flags 0 (the message keeps the duty's prediction as words).
 
         """
         return self.process_many([wear_record])[0]

@@ -4,7 +4,7 @@ import math
 
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
-from reducer_twin.core.observability import link_from_motor
+from reducer_twin.core.observability import derived_link_reason, link_from_motor
 from reducer_twin.core.service_time import service_note
 from reducer_twin.core.units import HOUR, m_to_um
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
@@ -93,6 +93,10 @@ def estimator_status(stage, rejected, live=None):
         level = 'ERROR'
         values['state_write_error'] = str(error)
     message = f'wear {values["wear_um"]:.2f} +/- {values["wear_std_um"]:.2f} um'
+    if est.updates == 0:
+        # The prior's wear, moved by the model's rate alone: no finding, never 'OK'.
+        message = f'not observed: no lost motion used yet; {message} from the prior alone'
+        level = 'STALE' if level == 'OK' else level
     if est.config.service_time_s > 0.0:
         # The service time the node was given, and what became of it.
         verdict = est.service_verdict
@@ -104,10 +108,6 @@ def estimator_status(stage, rejected, live=None):
         if verdict is not None and not verdict[0]:
             level = 'WARN' if level == 'OK' else level
             message += '; ' + service_note(verdict, est.config.service_time_s)
-    if est.updates == 0:
-        # The prior's wear, moved by the model's rate alone: no finding, never 'OK'.
-        message = f'not observed: no lost motion used yet; {message} from the prior alone'
-        level = 'STALE' if level == 'OK' else level
     if error is not None:
         message = f'{error}; {message}'
     if live is not None:
@@ -121,7 +121,7 @@ def estimator_status(stage, rejected, live=None):
     return level, message, values
 
 
-def ingest_statuses(counts, rejects, mismatch=None):
+def ingest_statuses(counts, rejects, unheard=None):
     """
     Return the ``encoder_ingest`` statuses, one per joint, from its rule counts.
 
@@ -131,7 +131,7 @@ def ingest_statuses(counts, rejects, mismatch=None):
         Per joint, the count of every ingestion rule and ``published``.
     rejects : RejectCounter
         Malformed messages dropped (:class:`.rejects.RejectCounter`).
-    mismatch : UnheardPublishers, optional
+    unheard : UnheardPublishers, optional
         Publishers the subscriptions cannot hear, for their QoS or type
         (:class:`.qos.UnheardPublishers`).
 
@@ -145,7 +145,7 @@ def ingest_statuses(counts, rejects, mismatch=None):
         for its QoS or its type.
 
     """
-    unheard = [mismatch.reason(t) for t in mismatch.topics] if mismatch is not None else []
+    not_heard = [unheard.reason(t) for t in unheard.topics] if unheard is not None else []
     statuses = []
     for joint, c in counts.items():
         bad = sum(v for k, v in c.items()
@@ -156,9 +156,9 @@ def ingest_statuses(counts, rejects, mismatch=None):
         if rejects.total:
             said = f'{rejects.total} messages dropped, the latest: {rejects.last}'
             level, message = 'WARN', said if bad == 0 else f'{message}; {said}'
-        if unheard:
-            level, message = 'ERROR', '; '.join([*unheard, message])
-            c['unheard_topics'] = ', '.join(mismatch.topics)
+        if not_heard:
+            level, message = 'ERROR', '; '.join([*not_heard, message])
+            c['unheard_topics'] = ', '.join(unheard.topics)
         statuses.append((f'reducer_twin: {joint} encoder ingest', joint, level, message, c))
     return statuses
 
@@ -188,9 +188,10 @@ def say_faults(logger, joint, twin, said):
 
     """
     analyzer = twin.analyzer
-    if link_from_motor(analyzer):
+    derived = derived_link_reason(analyzer)
+    if derived is not None:
         # No TE to read: the effort's checks, which read it, say nothing then.
-        faults = {'link': ('error', f'not observed: {analyzer.not_observed_reason()}')}
+        faults = {'link': ('error', f'not observed: {derived}')}
     else:
         fault = analyzer.effort_fault
         faults = {'effort': ('error', fault and f'not observed: {fault}')}

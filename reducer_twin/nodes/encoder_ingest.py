@@ -79,7 +79,7 @@ class EncoderIngest(Node):
         self._retimed_said = False
         self._link_topic, self._motor_topic = p['link_topic'], p['motor_topic']
         qos = encoder_qos(p['reliable'])
-        self.mismatch = UnheardPublishers(self, p['reliable'])
+        self.unheard = UnheardPublishers(self, p['reliable'])
         # The controller streams are taken as their serialised bytes and read by a
         # JointStateReader: no JointState object (names, arrays) is built per message.
         if self.split:
@@ -88,13 +88,13 @@ class EncoderIngest(Node):
             self._motor_reader = JointStateReader()
             self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos,
                                      raw=True,
-                                     event_callbacks=self.mismatch.callbacks(p['motor_topic']))
+                                     event_callbacks=self.unheard.callbacks(p['motor_topic']))
         else:
             self._link_pick = JointStatePicker(
                 [x for joint in self.joints for x in (joint, joint + p['motor_suffix'])])
         self._link_reader = JointStateReader()
         self.create_subscription(JointState, p['link_topic'], self._on_link, qos, raw=True,
-                                 event_callbacks=self.mismatch.callbacks(p['link_topic']))
+                                 event_callbacks=self.unheard.callbacks(p['link_topic']))
         publish_diagnostics(self, self._statuses)
         if self.batch_ns > 0:   # with 0 nothing waits: no timer to wake the executor
             self.create_timer(max(s.batch_period_s * 5, 0.01), self._flush_stale)
@@ -171,7 +171,7 @@ class EncoderIngest(Node):
     def _check_listeners(self):
         for out in self.outputs.values():
             out.check_listeners()
-        self.mismatch.check_types({self._link_topic, self._motor_topic} - {''}, JOINT_STATE)
+        self.unheard.check_types({self._link_topic, self._motor_topic} - {''}, JOINT_STATE)
 
     def _flush_stale(self):
         if self._raw_since is None:
@@ -186,7 +186,7 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        return ingest_statuses(self.counts(), self.rejects, self.mismatch)
+        return ingest_statuses(self.counts(), self.rejects, self.unheard)
 
 
 def main(args=None):

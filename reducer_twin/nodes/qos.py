@@ -93,6 +93,7 @@ class UnheardPublishers:
         self._node = node
         self._reliable = reliable
         self.topics = {}
+        self._typed = set()     # topics said for their type (judged again at every check)
 
     def callbacks(self, topic):
         """Return the event callbacks of a subscription to ``topic``."""
@@ -110,15 +111,21 @@ class UnheardPublishers:
         Say a topic whose publishers are all of another type than ``type_name``.
 
         DDS matches no such publisher and raises no event for it (Fast DDS): it is read
-        from the ROS graph, as ``ros2 topic info`` reads it.
+        from the ROS graph, as ``ros2 topic info`` reads it. Unlike a QoS event, which
+        DDS reports once, the graph is read again at every check: a topic said for its
+        type is no longer said once a publisher of ``type_name`` appears.
         """
         for topic in topics:
-            if topic in self.topics:
+            if topic in self.topics and topic not in self._typed:
                 continue
             types = {i.topic_type for i in self._node.get_publishers_info_by_topic(topic)}
             if types and type_name not in types:
+                self._typed.add(topic)
                 self._say(topic, f'the publishers of {topic} publish {", ".join(sorted(types))}'
                                  f', not {type_name}: none of their messages are received')
+            elif topic in self._typed:
+                self._typed.discard(topic)
+                del self.topics[topic]
 
     def _say(self, topic, reason):
         if topic not in self.topics:
