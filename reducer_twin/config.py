@@ -28,7 +28,8 @@ DEFAULTS = {
                 for name, (default, _) in STREAMS.items()},
              'aging_factor': _TWIN.aging_factor,
              'window_s': _TWIN.window_s, 'max_gap_s': _TWIN.max_gap_s,
-             'friction_in_effort': _TWIN.friction_in_effort, 'state_dir': '',
+             'friction_in_effort': _TWIN.friction_in_effort,
+             'effort_lag_s': _TWIN.effort_lag_s, 'state_dir': '',
              'simulate': False, 'intra_process': True, 'reliable': True, 'robot': '',
              'store': '',
              'store_period_s': StoreSettings().store_period_s, 'interfaces': {}},
@@ -289,7 +290,8 @@ def twin_config(config):
     """
     twin = config['twin']
     return TwinConfig(aging_factor=twin['aging_factor'], window_s=twin['window_s'],
-                      max_gap_s=twin['max_gap_s'], friction_in_effort=twin['friction_in_effort'])
+                      max_gap_s=twin['max_gap_s'], friction_in_effort=twin['friction_in_effort'],
+                      effort_lag_s=twin['effort_lag_s'])
 
 
 def joint_reducers(config, path=None):

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+from reducer_twin.analysis.stages import JointFront
 from reducer_twin.cli import main
 from reducer_twin.config import default_config, joint_reducers, load_config, twin_config
 from reducer_twin.core.errors import InvalidParameter
@@ -229,12 +230,27 @@ def test_friction_in_effort_is_0_or_1_and_reaches_the_window_analysis(tmp_path):
         assert str(err.value).startswith(f'{path}: twin.friction_in_effort {said}'), err.value
 
 
+def test_the_effort_lag_reaches_the_window_analysis_and_is_checked(tmp_path):
+    # A drive's torque filter time constant, in seconds: 0-1 s.
+    path = _file(tmp_path, 'twin:\n  effort_lag_s: 0.05\n')
+    assert twin_config(load_config(path)).effort_lag_s == 0.05
+    settings = AnalysisSettings.from_config(path)
+    assert settings.effort_lag_s == 0.05
+    assert JointFront('joint_1', settings, 1.0, 1.0, 1).analyzer.effort_lag_s == 0.05
+    path = _file(tmp_path, 'twin:\n  effort_lag_s: 50\n')
+    with pytest.raises(InvalidParameter) as err:
+        twin_config(load_config(path))
+    assert 'effort_lag_s' in str(err.value) and '50' in str(err.value), err.value
+
+
 def test_the_twin_defaults_are_the_core_spec_of_a_joints_processing():
     config = load_config(None)
     spec = TwinConfig()
     assert (config['twin']['window_s'], config['twin']['max_gap_s'],
-            config['twin']['aging_factor'], config['twin']['friction_in_effort']) == (
-        spec.window_s, spec.max_gap_s, spec.aging_factor, spec.friction_in_effort)
+            config['twin']['aging_factor'], config['twin']['friction_in_effort'],
+            config['twin']['effort_lag_s']) == (
+        spec.window_s, spec.max_gap_s, spec.aging_factor, spec.friction_in_effort,
+        spec.effort_lag_s)
     settings = AnalysisSettings()
     assert (settings.window_s, settings.max_gap_s, settings.friction_in_effort) == (
         spec.window_s, spec.max_gap_s, spec.friction_in_effort)

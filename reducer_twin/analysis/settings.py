@@ -66,6 +66,9 @@ class AnalysisSettings:
     friction_in_effort : int
         1: the effort is the drive's torque, whose friction and efficiency are fitted
         and taken out; 0: a torque sensor at the reducer's output (``twin.friction_in_effort``).
+    effort_lag_s : float
+        How late the effort is published against the encoders [s]: the time constant of
+        the drive's torque filter (``twin.effort_lag_s``; 0: unfiltered).
     params : ReducerParams
         Reducer parameters of every joint without its own.
     joint_params : tuple of (str, ReducerParams)
@@ -102,6 +105,7 @@ class AnalysisSettings:
     window_s: float = TwinConfig().window_s
     max_gap_s: float = TwinConfig().max_gap_s
     friction_in_effort: int = TwinConfig().friction_in_effort
+    effort_lag_s: float = TwinConfig().effort_lag_s
     params: ReducerParams = field(default_factory=ReducerParams)
     joint_params: tuple = ()
     service_times: tuple = ()
@@ -196,6 +200,7 @@ class AnalysisSettings:
                    effort_scale=check_effort_scale(twin['effort_scale'], f'{path}: twin.'),
                    interfaces=interfaces, aging_factor=aging, window_s=spec.window_s,
                    max_gap_s=spec.max_gap_s, friction_in_effort=spec.friction_in_effort,
+                   effort_lag_s=spec.effort_lag_s,
                    params=params, joint_params=tuple(joint_params.items()),
                    service_times=tuple(config['service_time_s'].items()), life=life)
 

@@ -73,7 +73,7 @@ class JointFront:
         self.params = params
         self.twin = TwinFront(params, TwinConfig(
             aging_factor=aging_factor, window_s=settings.window_s, max_gap_s=settings.max_gap_s,
-            friction_in_effort=settings.friction_in_effort))
+            friction_in_effort=settings.friction_in_effort, effort_lag_s=settings.effort_lag_s))
         self.ratio = self.twin.ratio
         self.extractor = self.twin.extractor
         self.calibration = self.twin.calibration

@@ -122,6 +122,8 @@ class TwinConfig(_Validated):
                                    'current), whose friction and efficiency are fitted and '
                                    'taken out; 0: a torque sensor at the output (nothing is)',
                                    integer=True)
+    effort_lag_s: float = spec(0.0, 's', 0.0, 1.0, 'how late the effort is published: the time '
+                               "constant of the drive's torque filter (0: unfiltered)")
 
 
 @dataclass(frozen=True)
@@ -376,7 +378,8 @@ class TwinFront:
         self._restarted_for_held = False
         self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
                                        aging_factor=config.aging_factor,
-                                       friction=bool(config.friction_in_effort))
+                                       friction=bool(config.friction_in_effort),
+                                       effort_lag_s=config.effort_lag_s)
         self.windows = 0
 
     def te(self, t_s, motor, link):

@@ -230,6 +230,12 @@ class WindowAnalyzer:
         not see, and take it out of the torque (see :meth:`.friction_fit.FrictionFit.fit`).
     friction_memory_windows : float
         Memory of the pooled friction identification in windows.
+    effort_lag_s : float
+        How late the effort is published against the encoders [s]: a drive that
+        low-pass filters its torque estimate publishes the load of about one time
+        constant before (a first-order filter delays slow signals by its time
+        constant). The filter is undone (:meth:`_unfiltered_torque`); 0 (default):
+        the effort is read as published.
 
     Raises
     ------
@@ -242,7 +248,7 @@ class WindowAnalyzer:
                  orders=None, torque_bins=16, bin_range=(0.02, 1.5), min_bin_samples=20,
                  min_bins=2, memory_windows=10.0, min_speed=0.01, compliance_prior=0.3,
                  min_window_samples=1000, torque_smoothing_s=0.03, sign_sigmas=3.0,
-                 friction=True, friction_memory_windows=30.0):
+                 friction=True, friction_memory_windows=30.0, effort_lag_s=0.0):
         if window not in WINDOW_MODES:
             raise InvalidParameter(out_of_range(
                 'window', window, '', 'one of ' + ', '.join(repr(m) for m in WINDOW_MODES)))
@@ -268,6 +274,8 @@ class WindowAnalyzer:
         self.sign_sigmas = checked_float('sign_sigmas', sign_sigmas, '', '>= 0',
                                          lambda v: v >= 0.0)
         self.friction = bool(friction)
+        self.effort_lag_s = checked_float('effort_lag_s', effort_lag_s, 's', '0-1',
+                                          lambda v: 0.0 <= v <= 1.0)
         friction_memory_windows = checked_float(
             'friction_memory_windows', friction_memory_windows, 'windows', '> 0',
             lambda v: v > 0.0)
@@ -303,6 +311,7 @@ class WindowAnalyzer:
         self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
                                               self.compliance_prior, self.min_bins)
         self._buf = {name: np.empty(0) for name in _BUFFER}
+        self._lag_head = None   # (stamps, effort) just before the buffer (effort_lag_s)
         self._last_t = None
         self._last_theta = None
         self._aliased = False
@@ -499,16 +508,25 @@ class WindowAnalyzer:
         """
         Say when the effort's noise is correlated over samples, else None.
 
-        See :meth:`.torque_smoothing.TorqueSmoothing.mean_noise`.
+        See :meth:`.torque_smoothing.TorqueSmoothing.mean_noise`. A filter that makes the
+        noise so also delays the load (a drive's torque filter: by its time constant), which
+        the noise cannot tell from a ripple of the current loop: the line names the setting
+        that undoes a filter (``effort_lag_s``) while it is 0.
         """
         ratio = self._smoothing.correlated_ratio
         if ratio is None:
             return None
-        return (f"the effort's noise is correlated over successive samples (band-limited or "
+        line = (f"the effort's noise is correlated over successive samples (band-limited or "
                 f'filtered): its averages are {ratio:.1f} times as noisy as its sample-to-sample '
                 f'scatter implies (in {self._smoothing.correlated_windows} windows); the torque '
                 "bands are widened to the averages' own noise, and the lost motion rests on "
                 'fewer independent samples')
+        if self.effort_lag_s:
+            return line
+        return (f"{line}. If the drive low-pass filters its torque, the effort also lags the "
+                'load by about the time constant, which puts samples of each torque reversal '
+                'on the wrong flank (an unloaded joint read half its lost motion through a '
+                "50 ms filter): set twin.effort_lag_s to the drive's filter time constant")
 
     @property
     def velocity_scale(self):
@@ -592,6 +610,7 @@ class WindowAnalyzer:
         """
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._rate_held = None
+        self._lag_head = None
         self._flanks.restart()
 
     def retime(self, delta_s):
@@ -626,6 +645,8 @@ class WindowAnalyzer:
 
     def _emit(self, final):
         cuts = self._cut(final)
+        if final and not cuts:
+            self._lag_head = None   # the stream starts over (a reset, a flush): nothing before
         if not cuts:
             if self._aliased:
                 # The buffer must not alias arrays the caller may reuse.
@@ -635,6 +656,9 @@ class WindowAnalyzer:
                 self._aliased = False
             return []
         out, first = [], 0
+        buf = self._buf
+        if self.effort_lag_s:
+            buf = {**buf, 'torque': self._unfiltered_torque()}
         # Batches of windows of about _BATCH_SAMPLES samples keep the temporaries small.
         while first < len(cuts):
             base = cuts[first][0]
@@ -642,7 +666,7 @@ class WindowAnalyzer:
             while last < len(cuts) and cuts[last][1] - base <= _BATCH_SAMPLES:
                 last += 1
             end = cuts[last - 1][1]
-            part = {k: v[base:end] for k, v in self._buf.items()}
+            part = {k: v[base:end] for k, v in buf.items()}
             found = self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
             self.windows_emitted += len(found)
             self.windows_observed += sum(math.isfinite(f.lost_motion) for f in found)
@@ -662,6 +686,10 @@ class WindowAnalyzer:
             out += found
             first = last
         end = cuts[-1][1]
+        if self.effort_lag_s:
+            half = self._rate_reach()[0]
+            self._lag_head = None if final else (self._buf['t'][max(0, end - half):end].copy(),
+                                                 self._buf['torque'][max(0, end - half):end].copy())
         self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
         if self._rate_held is not None:
             self._rate_held = self._rate_held[:, end:].copy()
@@ -671,9 +699,51 @@ class WindowAnalyzer:
     def _cut(self, final):
         """Return ``[(start, end, reason)]`` of the windows complete in the buffer."""
         b = self._buf
-        return cut_windows(b['t'], b['theta'], b['speed'], b['gap'], final, self.window,
-                           self.window_s, self.max_window_s, self.min_window_samples,
-                           self.min_speed)
+        known = b['t'].size
+        if self.effort_lag_s and not final and known:
+            # A sample's torque needs the effort's rate over the samples after it
+            # (:meth:`_unfiltered_torque`): windows end before those that have not come.
+            half, period = self._rate_reach()
+            known = int(np.searchsorted(b['t'], b['t'][-1] - half * period, side='right'))
+        return cut_windows(*(b[k][:known] for k in ('t', 'theta', 'speed', 'gap')), final,
+                           self.window, self.window_s, self.max_window_s,
+                           self.min_window_samples, self.min_speed)
+
+    def _rate_reach(self):
+        """Samples either side the effort's rate is taken over, and the stamp step [s]."""
+        period = self._period_s or nominal_step(self._buf['t'])
+        return max(1, self._smoothing.half_width(period)), period
+
+    def _unfiltered_torque(self):
+        """
+        Return the buffered samples' torque with the drive's torque filter undone.
+
+        A first-order filter of time constant ``tau`` (``effort_lag_s``) publishes
+        ``E`` with ``tau·dE/dt = T - E``, so the torque is ``E + tau·dE/dt``. The rate
+        is taken over the torque average's half-width either side
+        (:meth:`.torque_smoothing.TorqueSmoothing.half_width`: the average then quiets
+        the noise it adds as it quiets the effort's), within each run of samples
+        between gaps of the stream (never across one; one-sided at a run's ends).
+        """
+        b = self._buf
+        t, effort, gap = b['t'], b['torque'], b['gap']
+        half = self._rate_reach()[0]
+        head = self._lag_head
+        if head is not None and t.size and not gap[0] > 0.0:
+            # The samples before the buffer, of the windows cut already, in the same run.
+            t, effort = np.concatenate([head[0], t]), np.concatenate([head[1], effort])
+            gap = np.concatenate([np.zeros(head[0].size), gap])
+        skip = t.size - b['t'].size
+        out = effort.copy()
+        bounds = np.concatenate([[0], np.flatnonzero(gap[1:] > 0.0) + 1, [t.size]])
+        for a, z in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
+            k = np.arange(a, z)
+            lo, hi = np.maximum(k - half, a), np.minimum(k + half, z - 1)
+            span = t[hi] - t[lo]
+            with np.errstate(invalid='ignore', divide='ignore'):
+                rate = np.where(span > 0.0, (effort[hi] - effort[lo]) / span, 0.0)
+            out[a:z] += self.effort_lag_s * rate
+        return out[skip:]
 
     def _analyze(self, buf, cuts):
         """Compute the features of the windows ``cuts`` of ``buf`` (vectorised over windows)."""

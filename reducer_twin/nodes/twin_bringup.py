@@ -91,7 +91,7 @@ def build_nodes(config, sim_overrides=None):
             f'te_monitor_{name}', params=reducer, subscribe=not local, parameter_overrides=[
                 Parameter('joint', value=joint),
                 *(Parameter(name, value=float(getattr(spec, name)))
-                  for name in ('aging_factor', 'window_s', 'max_gap_s')),
+                  for name in ('aging_factor', 'window_s', 'max_gap_s', 'effort_lag_s')),
                 Parameter('friction_in_effort', value=int(spec.friction_in_effort))])
         if local:
             nodes['ingest'].attach(joint, nodes['te'][joint].take_pairs)

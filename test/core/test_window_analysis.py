@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
+from scipy.signal import lfilter
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.te_extraction import compute_te, TEExtractor
@@ -110,6 +111,87 @@ def test_feeding_the_stream_in_chunks_gives_the_same_windows(chunks):
         np.testing.assert_allclose([a.lost_motion, a.te_mean, a.duty.archard_increment],
                                    [c.lost_motion, c.te_mean, c.duty.archard_increment],
                                    rtol=1e-9)
+
+
+def _through_torque_filter(effort, tau_s, rate_hz):
+    """A drive's first-order torque filter of time constant ``tau_s`` (causal)."""
+    a = 1.0 - np.exp(-1.0 / (tau_s * rate_hz))
+    return lfilter([a], [1.0, a - 1.0], effort, zi=[(1.0 - a) * effort[0]])[0]
+
+
+@pytest.fixture(scope='module')
+def filtered_efforts():
+    """Joints at 1 kHz, 2 % effort noise, published through 20 and 50 ms torque filters."""
+    runs = {}
+    for load in (0.0, 470.0):
+        cfg = SimConfig(load='gravity', load_torque_nm=load, effort_noise_nm=0.02 * 784.0,
+                        rate_hz=1000.0, initial_wear_m=2e-6, aging_factor=0.0,
+                        exact_mesh=False, seed=11)
+        b = JointSimulator(PARAMS, cfg).step(60000)
+        runs[load] = (b, {tau: _through_torque_filter(b.effort, tau, 1000.0)
+                          for tau in (0.02, 0.05)})
+    return runs
+
+
+def _median_lost_motion(b, effort, **kw):
+    return _filtered_run(b, effort, **kw)[0]
+
+
+def _filtered_run(b, effort, **kw):
+    stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS, **kw)
+    feats = analyzer.update(stream, effort, b.link_velocity) + analyzer.flush()
+    lm = np.array([f.lost_motion for f in feats])
+    assert np.isfinite(lm).sum() >= 20
+    return float(np.median(lm[np.isfinite(lm)])), analyzer
+
+
+@pytest.mark.parametrize('load', [0.0, 470.0], ids=['unloaded (no gravity)', 'gravity'])
+@pytest.mark.parametrize('tau_s', [0.02, 0.05])
+def test_an_effort_through_a_drives_torque_filter_told_reads_like_the_unfiltered(
+        filtered_efforts, load, tau_s):
+    # Told the filter's time constant (twin.effort_lag_s), the twin undoes it: E + tau·dE/dt.
+    b, filtered = filtered_efforts[load]
+    truth = lost_motion(2e-6, PARAMS)
+    unfiltered = _median_lost_motion(b, b.effort)
+    told = _median_lost_motion(b, filtered[tau_s], effort_lag_s=tau_s)
+    assert told == pytest.approx(unfiltered, rel=0.01)
+    assert told == pytest.approx(truth, rel=0.03)
+
+
+def test_an_unloaded_joints_effort_through_a_50_ms_filter_untold_is_read_low_and_said(
+        filtered_efforts):
+    # Why the setting exists: at each quick reversal the lagging effort puts samples on
+    # the wrong flank (measured: half the lost motion, the wear fit at 0). The filter also
+    # correlates the effort's noise, which the twin sees: its line names the setting.
+    b, filtered = filtered_efforts[0.0]
+    lm, analyzer = _filtered_run(b, filtered[0.05])
+    assert lm < 0.8 * lost_motion(2e-6, PARAMS)
+    assert 'set twin.effort_lag_s' in analyzer.effort_correlated
+    _, told = _filtered_run(b, filtered[0.05], effort_lag_s=0.05)
+    assert told.effort_correlated is None or 'effort_lag_s' not in told.effort_correlated
+
+
+@settings(max_examples=5, deadline=None)
+@given(chunks=st.lists(st.integers(1, 4000), min_size=1, max_size=12))
+def test_an_effort_lag_gives_the_same_windows_however_the_stream_is_chunked(chunks):
+    # The torque of a sample needs the effort after it: windows wait for it, so chunks
+    # ending anywhere give the windows of the whole stream.
+    _, b = simulated(samples=16000, exact=False)
+
+    def run(sizes):
+        analyzer, feats, start = WindowAnalyzer(PARAMS, effort_lag_s=0.03), [], 0
+        for size in sizes:
+            sl = slice(start, start + size)
+            stream = compute_te(b.t[sl], b.motor_angle[sl], b.t[sl], b.link_angle[sl], RATIO)
+            feats += analyzer.update(stream, b.effort[sl], b.link_velocity[sl])
+            start += size
+        return feats + analyzer.flush()
+
+    whole, pieces = run([b.t.size]), run(chunks + [b.t.size])
+    assert [(f.t_start, f.samples) for f in pieces] == [(f.t_start, f.samples) for f in whole]
+    np.testing.assert_allclose([f.lost_motion for f in pieces], [f.lost_motion for f in whole],
+                               rtol=1e-9)
 
 
 @pytest.mark.parametrize('rate_hz', [200.0, 1000.0])

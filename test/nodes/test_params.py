@@ -94,7 +94,7 @@ def test_life_thresholds_and_limit_are_described_in_si_units(ros):
 @pytest.mark.parametrize('kind, names', [
     ('joint_simulator', ['joints', 'layout', 'sim.rate_hz', 'sim.aging_factor']),
     ('encoder_ingest', ['joints', 'motor_angles', 'ingest.max_gap_s']),
-    ('te_monitor', ['joint', 'window_s', 'friction_in_effort']),
+    ('te_monitor', ['joint', 'window_s', 'friction_in_effort', 'effort_lag_s']),
     ('wear_estimator', ['state_file', 'estimator.gate_nis']),
 ])
 def test_parameters_a_node_reads_only_at_start_are_read_only(ros, kind, names):
@@ -118,6 +118,7 @@ def test_parameters_a_node_reads_only_at_start_are_read_only(ros, kind, names):
     ('encoder_ingest', 'batch_period_s', 2.0, 'batch_period_s must be'),
     ('te_monitor', 'window_s', 0.0, 'window_s must be'),
     ('te_monitor', 'friction_in_effort', 2, r'friction_in_effort must be in \[0, 1\]'),
+    ('te_monitor', 'effort_lag_s', 50.0, r'effort_lag_s must be in \[0, 1\] s'),
     ('wear_estimator', 'estimator.gate_nis', 0.5, r'estimator\.gate_nis must be in \[1'),
     ('life_publisher', 'life.warn_s', -1.0, r'life\.warn_s must be in \[0'),
     ('life_publisher', 'life.error_s', 1e9, r'life\.error_s .* must not exceed life\.warn_s'),

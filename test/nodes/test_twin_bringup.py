@@ -26,7 +26,7 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
     config_file = tmp_path / 'twin.yaml'
     config_file.write_text(
         'twin:\n  joints: [base, elbow, wrist]\n  simulate: true\n  window_s: 3.0\n'
-        '  friction_in_effort: 0\n  reliable: false\n'
+        '  friction_in_effort: 0\n  effort_lag_s: 0.02\n  reliable: false\n'
         f'  state_dir: {tmp_path}\n'
         'reducer: {rating: {rated_life: 3.6e7}}\n'
         f'reducers:\n  base: {{file: {RV80E}, rating: {{rated_torque: 1568.0}}}}\n'
@@ -46,9 +46,10 @@ def test_each_joint_runs_on_its_own_reducer_and_the_others_on_the_common_one(
         for kind in ('te', 'estimator', 'life'):
             assert nodes[kind][joint].params == params, (kind, joint)
         te = nodes['te'][joint]
-        assert te.config == TwinConfig(window_s=3.0, friction_in_effort=0)
+        assert te.config == TwinConfig(window_s=3.0, friction_in_effort=0, effort_lag_s=0.02)
         assert te.get_parameter('window_s').value == 3.0
         assert te.twin.analyzer.friction is False
+        assert te.twin.analyzer.effort_lag_s == 0.02
         assert te.get_parameter('max_gap_s').value == TwinConfig().max_gap_s
     # A controller that publishes BEST_EFFORT is subscribed to so.
     assert nodes['ingest'].get_parameter('reliable').value is False
