@@ -523,7 +523,7 @@ class WindowAnalyzer:
                 'fewer independent samples')
         if self.effort_lag_s:
             return line
-        return (f"{line}. If the drive low-pass filters its torque, the effort also lags the "
+        return (line + '. If the drive low-pass filters its torque, the effort also lags the '
                 'load by about the time constant, which puts samples of each torque reversal '
                 'on the wrong flank (an unloaded joint read half its lost motion through a '
                 "50 ms filter): set twin.effort_lag_s to the drive's filter time constant")
@@ -687,9 +687,9 @@ class WindowAnalyzer:
             first = last
         end = cuts[-1][1]
         if self.effort_lag_s:
-            half = self._rate_reach()[0]
-            self._lag_head = None if final else (self._buf['t'][max(0, end - half):end].copy(),
-                                                 self._buf['torque'][max(0, end - half):end].copy())
+            head = slice(max(0, end - self._rate_reach()[0]), end)
+            self._lag_head = None if final else (self._buf['t'][head].copy(),
+                                                 self._buf['torque'][head].copy())
         self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
         if self._rate_held is not None:
             self._rate_held = self._rate_held[:, end:].copy()
@@ -710,7 +710,7 @@ class WindowAnalyzer:
                            self.min_window_samples, self.min_speed)
 
     def _rate_reach(self):
-        """Samples either side the effort's rate is taken over, and the stamp step [s]."""
+        """Return the samples either side the effort's rate is taken over, and the step [s]."""
         period = self._period_s or nominal_step(self._buf['t'])
         return max(1, self._smoothing.half_width(period)), period
 

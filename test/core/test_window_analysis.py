@@ -5,7 +5,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-from scipy.signal import lfilter
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.te_extraction import compute_te, TEExtractor
@@ -13,6 +12,7 @@ from reducer_twin.core.transmission_error import lost_motion, model_tables
 from reducer_twin.core.units import ARCSEC, DEG, UM
 from reducer_twin.core.wear import wear_rate
 from reducer_twin.core.window_analysis import WindowAnalyzer
+from scipy.signal import lfilter
 from te_streams import analyse, PARAMS, RATIO, simulated
 
 
@@ -114,7 +114,7 @@ def test_feeding_the_stream_in_chunks_gives_the_same_windows(chunks):
 
 
 def _through_torque_filter(effort, tau_s, rate_hz):
-    """A drive's first-order torque filter of time constant ``tau_s`` (causal)."""
+    """Pass the effort through a drive's first-order torque filter (causal)."""
     a = 1.0 - np.exp(-1.0 / (tau_s * rate_hz))
     return lfilter([a], [1.0, a - 1.0], effort, zi=[(1.0 - a) * effort[0]])[0]
 
