@@ -28,10 +28,14 @@ Usage::
 
     .venv/bin/python bench/bench_lost_motion.py [--runs 24] [--noise 2,1] [--duration-s 150]
         [--stamp-jitter-us 300 --layout combined --rate-hz 1000] [--generator third]
+        [--effort-filter-ms 50 [--effort-lag-ms 50]]
 
 ``--generator third`` runs the same on ``bench/third_generator.py`` (a catalogue-style
 torsional curve whose play may still open beyond the test torque, its own effort noise
 and controller).
+``--effort-filter-ms 50`` passes the independent generator's effort through a drive's
+first-order torque filter; ``--effort-lag-ms 50`` tells ``analyze`` so
+(``twin.effort_lag_s`` in ``--config``).
 """
 
 import argparse
@@ -90,7 +94,7 @@ def window_lost_motion(derived, joints):
 
 
 def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen,
-            layout='split', rate_hz=None, band_hz=None):
+            layout='split', rate_hz=None, band_hz=None, effort_filter_s=None, told_lag_s=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -118,6 +122,11 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
         Sample rate [Hz]; drawn in 100-1000 Hz when None.
     band_hz : tuple of float, optional
         The independent generator's effort noise band-limited to it [Hz]; None: white.
+    effort_filter_s : float, optional
+        The independent generator's effort through a first-order filter of this time
+        constant [s] (a drive's filtered torque); None: unfiltered.
+    told_lag_s : float, optional
+        The ``twin.effort_lag_s`` given to ``analyze`` (by ``--config``); None: none.
 
     Returns
     -------
@@ -131,13 +140,20 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
                        aging_factor=1.0, start_fraction=start_fraction,
                        effort_noise_pct=noise_pct, layout=layout, rate_hz=rate_hz,
                        stamp_jitter_us=stamp_jitter_us,
-                       **({} if band_hz is None else {'effort_noise_band_hz': band_hz}))
+                       **({} if band_hz is None else {'effort_noise_band_hz': band_hz}),
+                       **({} if effort_filter_s is None else {'effort_filter_s': effort_filter_s}))
     bag = tmp / f'bag-{seed}-{noise_pct}'
     derived = tmp / f'out-{seed}-{noise_pct}'
     truth = source.generate_bag(spec, bag)
     t0 = time.perf_counter()
+    told = []
+    if told_lag_s is not None:
+        config = tmp / f'twin-{seed}.yaml'
+        config.write_text(f'twin:\n  effort_lag_s: {told_lag_s!r}\n')
+        told = ['--config', str(config)]
     proc = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze', str(bag),
-                           '--out', str(derived), '--json'], capture_output=True, text=True)
+                           '--out', str(derived), '--json', *told],
+                          capture_output=True, text=True)
     elapsed = time.perf_counter() - t0
     try:
         reported = json.loads(proc.stdout)['joints']
@@ -255,11 +271,19 @@ def main(argv=None):
     parser.add_argument('--effort-noise-band', type=gen.band_hz, metavar='LOW-HIGH',
                         help='effort noise band-limited to LOW-HIGH Hz (independent generator '
                         'with --rate-hz above twice HIGH; default white)')
+    parser.add_argument('--effort-filter-ms', type=float, metavar='MS',
+                        help="effort through a first-order filter of MS ms (a drive's filtered "
+                        'torque; independent generator; default unfiltered)')
+    parser.add_argument('--effort-lag-ms', type=float, metavar='MS',
+                        help='tell analyze the filter: twin.effort_lag_s of MS ms (default '
+                        'not told)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
     if args.effort_noise_band is not None and (args.generator != 'independent'
                                                or args.rate_hz is None):
         parser.error('--effort-noise-band: give --generator independent and --rate-hz')
+    if args.effort_filter_ms is not None and args.generator != 'independent':
+        parser.error('--effort-filter-ms: give --generator independent')
     source = gen if args.generator == 'independent' else third_generator
     levels = [float(x) for x in args.noise.split(',')] if source is gen else [None]
     kinds = tuple(k.strip() for k in args.kinds.split(','))
@@ -272,7 +296,10 @@ def main(argv=None):
             for level in levels:
                 run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
                               args.stamp_jitter_us, source, args.layout, args.rate_hz,
-                              args.effort_noise_band)
+                              args.effort_noise_band,
+                              None if args.effort_filter_ms is None
+                              else 1e-3 * args.effort_filter_ms,
+                              None if args.effort_lag_ms is None else 1e-3 * args.effort_lag_ms)
                 results[level].append(run)
                 if args.quiet:
                     continue

@@ -560,6 +560,9 @@ class Spec:
     velocity_filter_s : float or None
         Time constant of a first-order filter the velocity field passes through [s] (a
         drive's filtered velocity, which lags the motion); None: unfiltered.
+    effort_filter_s : float or None
+        Time constant of a first-order filter the effort passes through [s] (a drive's
+        filtered torque estimate, which lags the load); None: unfiltered.
     law : str or None
         Force the growth law of every joint.
     layout : str
@@ -590,6 +593,7 @@ class Spec:
     effort_noise_pct: float = None
     effort_noise_band_hz: tuple = None
     velocity_filter_s: float = None
+    effort_filter_s: float = None
     law: str = None
     layout: str = 'split'
     motor_angles: str = 'raw'
@@ -639,6 +643,8 @@ class Spec:
             bad('--effort-noise-band', band, f'HIGH below half the rate ({self.rate_hz:g} Hz)')
         if self.velocity_filter_s is not None and not (0.0 <= self.velocity_filter_s <= 1.0):
             bad('--velocity-filter-ms', 1e3 * self.velocity_filter_s, 'in [0, 1000] ms')
+        if self.effort_filter_s is not None and not (0.0 <= self.effort_filter_s <= 1.0):
+            bad('--effort-filter-ms', 1e3 * self.effort_filter_s, 'in [0, 1000] ms')
         if self.stamp_jitter_us is not None and not (0.0 <= self.stamp_jitter_us <= 1000.0):
             bad('--stamp-jitter-us', self.stamp_jitter_us, 'in [0, 1000] us')
         for name, value, allowed in (('--law', self.law, LAWS + (None,)),
@@ -786,6 +792,7 @@ class Stream(Recording):
                 'effort_noise_band_hz': (None if self.spec.effort_noise_band_hz is None
                                          else list(self.spec.effort_noise_band_hz)),
                 'velocity_filter_s': self.spec.velocity_filter_s,
+                'effort_filter_s': self.spec.effort_filter_s,
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
@@ -917,8 +924,9 @@ def generate(spec):
         motor_step = 2.0 * math.pi / 2 ** j.motor_bits
         motor = np.round((RATIO * q + j.motor_offset_rad) / motor_step
                          + noise.normal(0.0, j.motor_noise_rad / motor_step, n)) * motor_step
-        effort = torque + friction(j, qd) + j.effort_noise_nm * effort_noise(
-            noise.normal(0.0, 1.0, n), spec.effort_noise_band_hz, rate)
+        effort = filtered(torque + friction(j, qd) + j.effort_noise_nm * effort_noise(
+            noise.normal(0.0, 1.0, n), spec.effort_noise_band_hz, rate),
+            spec.effort_filter_s, rate)
         velocity = filtered(qd + noise.normal(0.0, j.velocity_noise_rad_s, n),
                             spec.velocity_filter_s, rate)
         for name, value in (('q', q), ('qd', qd), ('torque', torque), ('effort', effort),
@@ -1227,6 +1235,9 @@ def _parser():
     p.add_argument('--velocity-filter-ms', type=float, metavar='MS',
                    help="velocity field through a first-order filter of MS ms (a drive's "
                    'filtered velocity; default unfiltered)')
+    p.add_argument('--effort-filter-ms', type=float, metavar='MS',
+                   help="effort through a first-order filter of MS ms (a drive's filtered "
+                   'torque estimate; default unfiltered)')
     p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
@@ -1259,7 +1270,9 @@ def main(argv=None):
     spec = Spec(**cli_spec_options(args), effort_noise_pct=args.effort_noise,
                 effort_noise_band_hz=args.effort_noise_band,
                 velocity_filter_s=(None if args.velocity_filter_ms is None
-                                   else 1e-3 * args.velocity_filter_ms), law=args.law)
+                                   else 1e-3 * args.velocity_filter_ms),
+                effort_filter_s=(None if args.effort_filter_ms is None
+                                 else 1e-3 * args.effort_filter_ms), law=args.law)
     return cli_run(args, spec)
 
 

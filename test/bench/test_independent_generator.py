@@ -206,6 +206,19 @@ def test_a_filtered_velocity_field_lags_the_motion_by_its_time_constant():
         gen.Spec(**SHORT, velocity_filter_s=2.0).check()
 
 
+def test_a_filtered_effort_lags_the_load_by_its_time_constant():
+    # A drive's filtered torque estimate: the same effort, late by the filter's constant.
+    short = {**SHORT, 'rate_hz': 1000.0, 'hours': 10.0 / 3600.0, 'effort_noise_pct': 0.0}
+    stream = gen.generate(gen.Spec(**short, kinds=('shoulder',), effort_filter_s=0.03))
+    fresh = gen.generate(gen.Spec(**short, kinds=('shoulder',)))
+    lags = np.arange(0, 80)
+    misfit = [np.mean((stream.effort[200 + k:, 0] - fresh.effort[200:-k or None, 0]) ** 2)
+              for k in lags]
+    assert 25 <= lags[int(np.argmin(misfit))] <= 31
+    with pytest.raises(gen.GeneratorError, match='--effort-filter-ms'):
+        gen.Spec(**SHORT, effort_filter_s=2.0).check()
+
+
 def test_effort_carries_friction_the_reducer_does_not_transmit(split_bag):
     _, stream, _ = split_bag
     for i, j in enumerate(stream.joints):
