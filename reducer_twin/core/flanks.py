@@ -46,8 +46,19 @@ changing load restarted the pool of a third-generator base, loaded by its accele
 alone, at about every other window: 8 of its 153 windows read a lost motion, counted once.)
 """
 
-_POOL_JUMP = 0.01
-"""Change of a window's mean TE [rad] taken for a new TE constant: the pooled fit restarts."""
+POOL_JUMP_TURNS = 0.5
+"""
+Change of a window's mean TE taken for a new TE constant, in motor turns at the output.
+
+A motor turn count lost across a gap moves the TE's constant by ``2·pi/i`` (4.4° at
+``i = 81``): the pooled fit restarts at half of that. A TE whose mean follows the speed
+does not restart it: a time offset ``delta`` between the encoders adds ``omega·delta``
+(at 10 ms, a base's windows' means moved by 50 arcmin from one to the next). At a fixed
+0.01 rad (34 arcmin) the pool restarted on every such window, no window alone could tell
+the offset from the flanks, and the offset was never learnt: the joint was refused as
+"the effort has the opposite sign" (independent generator, link and motor topics stamped
+10 ms apart).
+"""
 
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
 """``friction_taken`` of a window from which no friction is taken out."""
@@ -69,10 +80,12 @@ class FlankPool:
         Usable bins a window needs for a lost motion.
     memory : float
         Factor by which the pool fades per window (0: this window only).
+    ratio : float
+        Reduction ratio (the TE jump of a lost motor turn, :data:`POOL_JUMP_TURNS`).
 
     """
 
-    def __init__(self, orders, edges, rated_torque, min_bins, memory):
+    def __init__(self, orders, edges, rated_torque, min_bins, memory, ratio):
         self.orders = orders
         self.edges = edges
         self.centres = np.sqrt(edges[1:] * edges[:-1])
@@ -80,6 +93,7 @@ class FlankPool:
         self.rated_torque = rated_torque
         self.min_bins = min_bins
         self._memory = memory
+        self._jump = POOL_JUMP_TURNS * 2.0 * math.pi / ratio
         n_par = 2 * len(orders) + 1
         n_groups = 2 * self.torque_bins
         self._te_ref = None
@@ -257,7 +271,7 @@ class FlankPool:
             fc0, fv0, eta0 = self._pool_friction
             moved = (abs(fc - fc0 + 0.5 * ((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
                      + abs(fv - fv0) * speed)
-            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > _POOL_JUMP or \
+            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > self._jump or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref = te_mean[k]
                 self._pool_friction = np.array([fc, fv, eta])

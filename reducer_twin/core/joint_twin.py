@@ -414,28 +414,33 @@ class TwinFront:
         correlated over samples; ``'encoders'``: an encoder reading held so; ``'steps'``:
         an encoder that reports the output angle coarsely (:mod:`.encoder_steps`);
         ``'ratio'``: a motor that turns another number of times than the configured
-        ratio (:mod:`.travel_ratio`).
+        ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped a millisecond or
+        more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('held', self.analyzer.effort_held),
                  ('correlated', self.analyzer.effort_correlated),
                  ('encoders', self.extractor.held_reason),
                  ('steps', self.extractor.step_reason),
-                 ('ratio', self.extractor.ratio_reason))
+                 ('ratio', self.extractor.ratio_reason),
+                 ('time_offset', self.calibration.reason))
         return {kind: line for kind, line in found if line is not None}
 
     def refusal(self, reason):
         """
-        Return why the joint is not observed, with the ratio the encoders show when it is off.
+        Return why the joint is not observed, with what else the encoders show that explains it.
 
         A motor that turns another number of times than the configured ratio is refused
         for what its TE then shows (an effort of the other sign, encoders that do not
-        measure one motion); the line naming the ratio (:mod:`.travel_ratio`) follows.
-        ``None`` (observed) stays ``None``. The nodes' ``/diagnostics`` and the analysis
-        of recordings both give this reason.
+        measure one motion); the line naming the ratio (:mod:`.travel_ratio`) follows, as
+        does the one of encoders stamped milliseconds apart (whose TE follows the speed
+        until the offset is learnt). ``None`` (observed) stays ``None``. The nodes'
+        ``/diagnostics`` and the analysis of recordings both give this reason.
         """
-        ratio = self.extractor.ratio_reason
-        return reason if reason is None or ratio is None else f'{reason}; {ratio}'
+        if reason is None:
+            return None
+        said = (self.extractor.ratio_reason, self.calibration.reason)
+        return '; '.join([reason] + [line for line in said if line is not None])
 
     def update(self, t_s, motor, link, effort, velocity):
         """TE and windows of paired samples; return the completed windows."""

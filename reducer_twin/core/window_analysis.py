@@ -297,7 +297,7 @@ class WindowAnalyzer:
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
         memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
         self._flanks = FlankPool(self.orders, self.edges, self.rated_torque, self.min_bins,
-                                 memory)
+                                 memory, total_ratio(g))
         self.centres = self._flanks.centres
         self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
         self._effort = EffortCheck(self.tables, self.takeup_torque)

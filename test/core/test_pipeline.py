@@ -468,3 +468,18 @@ def test_the_time_offset_is_learnt_once_from_the_first_windows_and_can_be_learnt
     calibration.restart()
     assert calibration.applied is None and extractor.link_time_offset_s == pytest.approx(10e-6)
     assert [calibration.observe(f) for f in fits] == [False, False, False, True]
+
+
+def test_encoders_stamped_milliseconds_apart_are_said_before_and_after_the_offset_is_learnt():
+    calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
+    calibration.observe(SimpleNamespace(time_offset_s=0.4e-3))
+    assert calibration.reason is None               # an encoder's latency: nothing to say
+    calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
+    for offset in (-10.1e-3, -10.3e-3):
+        calibration.observe(SimpleNamespace(time_offset_s=offset))
+    assert 'stamped 10.2 ms apart' in calibration.reason
+    assert 'removed from then on' in calibration.reason
+    assert calibration.reason.endswith('stamp both encoders on one clock')
+    pending = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=5)
+    pending.observe(SimpleNamespace(time_offset_s=30e-3))
+    assert 'stamped 30.0 ms apart' in pending.reason and 'not yet removed' in pending.reason
