@@ -46,18 +46,26 @@ changing load restarted the pool of a third-generator base, loaded by its accele
 alone, at about every other window: 8 of its 153 windows read a lost motion, counted once.)
 """
 
-POOL_JUMP_TURNS = 0.5
+_POOL_JUMP = 0.003
 """
-Change of a window's mean TE taken for a new TE constant, in motor turns at the output.
+Change of a window's mean TE [rad], less what the time offset gives it, taken for a new TE constant.
 
-A motor turn count lost across a gap moves the TE's constant by ``2·pi/i`` (4.4° at
-``i = 81``): the pooled fit restarts at half of that. A TE whose mean follows the speed
-does not restart it: a time offset ``delta`` between the encoders adds ``omega·delta``
-(at 10 ms, a base's windows' means moved by 50 arcmin from one to the next). At a fixed
-0.01 rad (34 arcmin) the pool restarted on every such window, no window alone could tell
-the offset from the flanks, and the offset was never learnt: the joint was refused as
-"the effort has the opposite sign" (independent generator, link and motor topics stamped
-10 ms apart).
+The pooled fit restarts there: a motor turn count lost across a gap (``2·pi/i``), a link
+encoder re-homed or its offset changed. The pool refers each window to one level through
+its mean, which does not carry its flank lines over such a step: a link re-homed by
+0.005 rad (17 arcmin) halfway through a recording read a forearm's lost motion 24 % high
+(independent generator), with or without a gap at the step, while the threshold was
+0.01 rad; from 3 mrad (10 arcmin) it reads within 0.3 %. A window's mean moves with the
+windup under its mean load (4 arcmin at rated torque) and the growth of the play over a
+life (1 mrad), within that.
+
+A time offset ``delta`` between the encoders adds ``omega·delta`` to the TE, so the
+windows' means also follow their mean speed: at 10 ms a base's moved by 50 arcmin from one
+window to the next. Taken for new constants, they restarted the pool on every window, no
+window alone could tell the offset from the flanks, and the offset was never learnt: the
+joint was refused as "the effort has the opposite sign" (independent generator, link and
+motor topics stamped 10 ms apart). The latest offset the pool identified, times each
+window's mean speed, is taken out of the mean before it is compared.
 """
 
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
@@ -80,12 +88,10 @@ class FlankPool:
         Usable bins a window needs for a lost motion.
     memory : float
         Factor by which the pool fades per window (0: this window only).
-    ratio : float
-        Reduction ratio (the TE jump of a lost motor turn, :data:`POOL_JUMP_TURNS`).
 
     """
 
-    def __init__(self, orders, edges, rated_torque, min_bins, memory, ratio):
+    def __init__(self, orders, edges, rated_torque, min_bins, memory):
         self.orders = orders
         self.edges = edges
         self.centres = np.sqrt(edges[1:] * edges[:-1])
@@ -93,10 +99,11 @@ class FlankPool:
         self.rated_torque = rated_torque
         self.min_bins = min_bins
         self._memory = memory
-        self._jump = POOL_JUMP_TURNS * 2.0 * math.pi / ratio
         n_par = 2 * len(orders) + 1
         n_groups = 2 * self.torque_bins
         self._te_ref = None
+        self._level_ref = None      # the restart window's mean less its offset's share
+        self._offset = 0.0          # the latest time offset identified [s]
         self._pool_friction = np.array([0.0, 0.0, 1.0])   # Coulomb, viscous, efficiency
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
@@ -224,7 +231,7 @@ class FlankPool:
             'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
         }
 
-    def fit_harmonics(self, stats, n_win, te_mean, exposure, friction_taken):
+    def fit_harmonics(self, stats, n_win, te_mean, exposure, friction_taken, speed_mean=None):
         """
         Pooled least squares of the harmonics and time offset.
 
@@ -236,7 +243,9 @@ class FlankPool:
         own flank lines. ``friction_taken`` (per window ``(Coulomb, viscous,
         RMS speed, efficiency, RMS load)`` of what :meth:`.friction_fit.FrictionFit.fit`
         took out of the effort, or None) restarts the pool where it changed
-        (:data:`_POOL_FRICTION_JUMP`).
+        (:data:`_POOL_FRICTION_JUMP`). ``speed_mean`` [rad/s] per window (None: 0)
+        takes the identified time offset's share out of ``te_mean`` where a jump of the
+        TE's constant is looked for (:data:`_POOL_JUMP`).
 
         Returns
         -------
@@ -271,9 +280,11 @@ class FlankPool:
             fc0, fv0, eta0 = self._pool_friction
             moved = (abs(fc - fc0 + 0.5 * ((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
                      + abs(fv - fv0) * speed)
-            if self._te_ref is None or abs(te_mean[k] - self._te_ref) > self._jump or \
+            level = te_mean[k] - (0.0 if speed_mean is None
+                                  else self._offset * float(speed_mean[k]))
+            if self._te_ref is None or abs(level - self._level_ref) > _POOL_JUMP or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
-                self._te_ref = te_mean[k]
+                self._te_ref, self._level_ref = te_mean[k], level
                 self._pool_friction = np.array([fc, fv, eta])
                 for value in pool.values():
                     value[...] = 0.0
@@ -305,6 +316,9 @@ class FlankPool:
         pool_n, pool_r = red[:, :-1, :-1], red[:, :-1, -1]
         pool_raw = np.diagonal(after['moments'], axis1=1, axis2=2)[:, :-1]
         beta, ident = solve_identifiable_many(pool_n, pool_r, pool_raw)
+        known = np.flatnonzero(ident[:, -1])
+        if known.size:
+            self._offset = float(beta[known[-1], -1])
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
         for k in np.flatnonzero(free > 0).tolist():
@@ -336,6 +350,7 @@ class FlankPool:
             Time added to the link encoder's stamps [s].
 
         """
+        self._offset -= delta_s
         pool = self._pool
         moments = pool['moments']
         moments[-1, :] -= delta_s * moments[-2, :]

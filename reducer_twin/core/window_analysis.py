@@ -297,7 +297,7 @@ class WindowAnalyzer:
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
         memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
         self._flanks = FlankPool(self.orders, self.edges, self.rated_torque, self.min_bins,
-                                 memory, total_ratio(g))
+                                 memory)
         self.centres = self._flanks.centres
         self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
         self._effort = EffortCheck(self.tables, self.takeup_torque)
@@ -792,8 +792,9 @@ class WindowAnalyzer:
         taken_up = (low > _HARMONIC_FIT_TORQUE * self.takeup_torque) & ~still[win]
         fit_stats = self._flanks.group_stats(z, torque, bins, win, starts, ends, ~taken_up)
         exposure = np.add.reduceat(dt, starts) * self.aging_factor
+        speed_mean = np.add.reduceat(speed, starts) / (ends - starts)
         beta, ident, noise, pooled = self._flanks.fit_harmonics(fit_stats, n_win, te_mean,
-                                                                exposure, taken)
+                                                                exposure, taken, speed_mean)
         torque_h, width, std, usable, odd = self._flanks.hysteresis(stats, beta, noise, pooled,
                                                                     self.flank_samples())
         if unknown is not None:

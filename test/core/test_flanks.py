@@ -52,10 +52,12 @@ def test_constant_speed_and_load_give_orders_but_no_lost_motion_or_time_offset()
 RATED = 784.0
 
 
-def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None):
+def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None, offset=0.0,
+                 speed_mean=None):
     """Flank samples in the pool after each window, by what the friction fit took out."""
     te_mean = np.zeros(windows) if te_mean is None else np.asarray(te_mean)
-    pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 1.0, 81.0)
+    pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 1.0)
+    pool._offset = offset       # as identified by earlier windows
     rng = np.random.default_rng(1)
     n = windows * samples
     theta = np.linspace(0.0, 12.0, n)
@@ -68,18 +70,23 @@ def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None):
     stats = pool.group_stats(z, torque, pool.bins(z, torque), win, starts, ends)
     own = stats['count'].reshape(windows, -1).sum(axis=1)
     *_, groups = pool.fit_harmonics(stats, windows, te_mean, np.zeros(windows),
-                                    friction_taken)
+                                    friction_taken, speed_mean)
     return groups['count'].sum(axis=1), own
 
 
-def test_the_pool_restarts_where_a_lost_motor_turn_moves_the_te_not_where_the_speed_does():
-    # A motor turn count lost across a gap moves the TE's constant by 2 pi / i (4.4 deg at
-    # i = 81); a time offset of 10 ms between the encoders moves the windows' means by tens
-    # of arcminutes with the speed, and must not keep the offset from being learnt.
-    pooled, own = _pool_counts(None, te_mean=[0.0, 0.013, -0.013])
+def test_the_pool_restarts_where_the_te_steps_not_where_the_speed_moves_it():
+    # A motor turn count lost, a link encoder re-homed: the TE's constant steps and the
+    # pool starts afresh. A time offset between the encoders moves the windows' means with
+    # their mean speed (the regressors' speed is 0.5 rad/s here): once the pool has
+    # identified the offset, that share is not a step (10 ms: 5 mrad a window).
+    for step in (0.005, 0.02):
+        pooled, own = _pool_counts(None, te_mean=[0.0, step, step])
+        np.testing.assert_allclose(pooled, [own[0], own[1], own[1] + own[2]])
+    pooled, own = _pool_counts(None, te_mean=[0.0, 0.001, -0.001])    # windup, play: kept
     np.testing.assert_allclose(pooled, np.cumsum(own))
-    pooled, own = _pool_counts(None, te_mean=[0.0, 2.0 * np.pi / 81.0, 2.0 * np.pi / 81.0])
-    np.testing.assert_allclose(pooled, [own[0], own[1], own[1] + own[2]])
+    pooled, own = _pool_counts(None, te_mean=[0.0, 0.02, 0.04], offset=0.04,
+                               speed_mean=[0.0, 0.5, 1.0])
+    np.testing.assert_allclose(pooled, np.cumsum(own))
 
 
 def test_the_pool_keeps_windows_whose_load_differs_under_the_same_friction_and_efficiency():
@@ -132,7 +139,7 @@ def test_retiming_the_pool_equals_pooling_the_retimed_te():
     win = np.repeat(np.arange(windows), samples)
 
     def pooled(te):
-        pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 0.9, 81.0)
+        pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 0.9)
         z = pool.regressors(pool.harmonics(theta), speed, te)
         stats = pool.group_stats(z, torque, pool.bins(z, torque), win, starts,
                                  starts + samples)

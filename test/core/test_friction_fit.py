@@ -104,7 +104,7 @@ def test_the_friction_taken_out_is_the_map_from_effort_to_torque_not_a_loss_at_e
     ends = np.append(starts[1:], b.t.size)
     win = np.repeat(np.arange(starts.size), ends - starts)
     stream = compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO, max_gap_s=0.05)
-    pool = FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), 784.0, 2, 1.0, 81.0)
+    pool = FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), 784.0, 2, 1.0)
     fit = FrictionFit(PARAMS.rating.rated_torque, 20.0)
     _, _, _, taken, _ = fit.fit(effort, stream.t, pool.harmonics(stream.output_angle),
                                 b.link_velocity, win, starts, ends, 5)
