@@ -225,7 +225,7 @@ def test_an_effort_held_between_slower_updates_reads_like_the_fresh_one(tmp_path
 
 @pytest.fixture(scope='module')
 def split_1khz(tmp_path_factory):
-    """A split recording of three joints at 1 kHz, 2 % effort noise; its truth and topics."""
+    """Write a split recording of three joints at 1 kHz, 2 % effort noise; its truth, topics."""
     root = tmp_path_factory.mktemp('split')
     spec = gen.Spec(seed=1, hours=150.0 / 3600.0, start_fraction=0.4, effort_noise_pct=2.0,
                     layout='split', rate_hz=1000.0)
