@@ -55,9 +55,8 @@ encoder re-homed or its offset changed. The pool refers each window to one level
 its mean, which does not carry its flank lines over such a step: a link re-homed by
 0.005 rad (17 arcmin) halfway through a recording read a forearm's lost motion 24 % high
 (independent generator), with or without a gap at the step, while the threshold was
-0.01 rad; from 3 mrad (10 arcmin) it reads within 0.3 %. A window's mean moves with the
-windup under its mean load (4 arcmin at rated torque) and the growth of the play over a
-life (1 mrad), within that.
+0.01 rad; from 3 mrad (10 arcmin) it reads within 0.3 %. The play's growth over a life
+moves a window's mean by less (1 mrad).
 
 A time offset ``delta`` between the encoders adds ``omega·delta`` to the TE, so the
 windows' means also follow their mean speed: at 10 ms a base's moved by 50 arcmin from one
@@ -65,7 +64,10 @@ window to the next. Taken for new constants, they restarted the pool on every wi
 window alone could tell the offset from the flanks, and the offset was never learnt: the
 joint was refused as "the effort has the opposite sign" (independent generator, link and
 motor topics stamped 10 ms apart). The latest offset the pool identified, times each
-window's mean speed, is taken out of the mean before it is compared.
+window's mean speed, is taken out of the mean before it is compared, as is the windup
+under the window's mean load at the model's stiffness (4 arcmin at rated torque: windows
+under loads of opposite signs differ by twice that; without it, a few windows of the
+model's simulator restarted the pool, its NEES 0.15 moved to 0.14).
 """
 
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
@@ -231,7 +233,8 @@ class FlankPool:
             'dof': inside - group_params.reshape(n_win, -1).sum(axis=1),
         }
 
-    def fit_harmonics(self, stats, n_win, te_mean, exposure, friction_taken, speed_mean=None):
+    def fit_harmonics(self, stats, n_win, te_mean, exposure, friction_taken, speed_mean=None,
+                      windup_mean=None):
         """
         Pooled least squares of the harmonics and time offset.
 
@@ -243,9 +246,10 @@ class FlankPool:
         own flank lines. ``friction_taken`` (per window ``(Coulomb, viscous,
         RMS speed, efficiency, RMS load)`` of what :meth:`.friction_fit.FrictionFit.fit`
         took out of the effort, or None) restarts the pool where it changed
-        (:data:`_POOL_FRICTION_JUMP`). ``speed_mean`` [rad/s] per window (None: 0)
-        takes the identified time offset's share out of ``te_mean`` where a jump of the
-        TE's constant is looked for (:data:`_POOL_JUMP`).
+        (:data:`_POOL_FRICTION_JUMP`). Where a jump of the TE's constant is looked for
+        (:data:`_POOL_JUMP`), ``te_mean`` is taken without the identified time offset's
+        share (times ``speed_mean`` [rad/s] per window) and ``windup_mean`` [rad], the
+        windup the window's mean load gives (None: 0 for either).
 
         Returns
         -------
@@ -282,6 +286,7 @@ class FlankPool:
                      + abs(fv - fv0) * speed)
             level = te_mean[k] - (0.0 if speed_mean is None
                                   else self._offset * float(speed_mean[k]))
+            level -= 0.0 if windup_mean is None else float(windup_mean[k])
             if self._te_ref is None or abs(level - self._level_ref) > _POOL_JUMP or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref, self._level_ref = te_mean[k], level

@@ -793,8 +793,11 @@ class WindowAnalyzer:
         fit_stats = self._flanks.group_stats(z, torque, bins, win, starts, ends, ~taken_up)
         exposure = np.add.reduceat(dt, starts) * self.aging_factor
         speed_mean = np.add.reduceat(speed, starts) / (ends - starts)
-        beta, ident, noise, pooled = self._flanks.fit_harmonics(fit_stats, n_win, te_mean,
-                                                                exposure, taken, speed_mean)
+        # The TE lags the load: a window's mean moves with its mean load, not a new constant.
+        windup_mean = (-np.add.reduceat(torque, starts) / (ends - starts)
+                       / self.tables.series_stiffness)
+        beta, ident, noise, pooled = self._flanks.fit_harmonics(
+            fit_stats, n_win, te_mean, exposure, taken, speed_mean, windup_mean)
         torque_h, width, std, usable, odd = self._flanks.hysteresis(stats, beta, noise, pooled,
                                                                     self.flank_samples())
         if unknown is not None:

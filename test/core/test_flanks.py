@@ -53,7 +53,7 @@ RATED = 784.0
 
 
 def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None, offset=0.0,
-                 speed_mean=None):
+                 speed_mean=None, windup_mean=None):
     """Flank samples in the pool after each window, by what the friction fit took out."""
     te_mean = np.zeros(windows) if te_mean is None else np.asarray(te_mean)
     pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 1.0)
@@ -70,7 +70,7 @@ def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None, offset=0
     stats = pool.group_stats(z, torque, pool.bins(z, torque), win, starts, ends)
     own = stats['count'].reshape(windows, -1).sum(axis=1)
     *_, groups = pool.fit_harmonics(stats, windows, te_mean, np.zeros(windows),
-                                    friction_taken, speed_mean)
+                                    friction_taken, speed_mean, windup_mean)
     return groups['count'].sum(axis=1), own
 
 
@@ -87,6 +87,12 @@ def test_the_pool_restarts_where_the_te_steps_not_where_the_speed_moves_it():
     pooled, own = _pool_counts(None, te_mean=[0.0, 0.02, 0.04], offset=0.04,
                                speed_mean=[0.0, 0.5, 1.0])
     np.testing.assert_allclose(pooled, np.cumsum(own))
+    # Nor is the windup under a window's mean load (loads of opposite signs beyond rated).
+    swing = [-0.002, 0.002, -0.002]
+    pooled, own = _pool_counts(None, te_mean=swing, windup_mean=swing)
+    np.testing.assert_allclose(pooled, np.cumsum(own))
+    pooled, own = _pool_counts(None, te_mean=swing)
+    np.testing.assert_allclose(pooled, own)
 
 
 def test_the_pool_keeps_windows_whose_load_differs_under_the_same_friction_and_efficiency():
