@@ -48,7 +48,7 @@ alone, at about every other window: 8 of its 153 windows read a lost motion, cou
 
 _POOL_JUMP = 0.003
 """
-Change of a window's mean TE [rad], less the time offset's share, taken for a new TE constant.
+Change of a window's mean TE [rad], less the offset's and windup's shares: a new TE constant.
 
 The pooled fit restarts there: a motor turn count lost across a gap (``2·pi/i``), a link
 encoder re-homed or its offset changed. The pool refers each window to one level through

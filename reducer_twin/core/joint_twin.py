@@ -414,7 +414,7 @@ class TwinFront:
         correlated over samples; ``'encoders'``: an encoder reading held so; ``'steps'``:
         an encoder that reports the output angle coarsely (:mod:`.encoder_steps`);
         ``'ratio'``: a motor that turns another number of times than the configured
-        ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped a millisecond or
+        ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped 3 ms or
         more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
