@@ -105,7 +105,8 @@ class FlankPool:
         n_groups = 2 * self.torque_bins
         self._te_ref = None
         self._level_ref = None      # the restart window's mean less its offset's share
-        self._offset = 0.0          # the latest time offset identified [s]
+        self._offset = None         # the latest time offset identified [s]
+        self.steps = []             # (window of the last batch, step [rad]) of the TE's constant
         self._pool_friction = np.array([0.0, 0.0, 1.0])   # Coulomb, viscous, efficiency
         self._pool = {'moments': np.zeros((n_par + 1, n_par + 1)), 'count': np.zeros(n_groups),
                       'su': np.zeros(n_groups), 'suu': np.zeros(n_groups),
@@ -249,7 +250,8 @@ class FlankPool:
         (:data:`_POOL_FRICTION_JUMP`). Where a jump of the TE's constant is looked for
         (:data:`_POOL_JUMP`), ``te_mean`` is taken without the identified time offset's
         share (times ``speed_mean`` [rad/s] per window) and ``windup_mean`` [rad], the
-        windup the window's mean load gives (None: 0 for either).
+        windup the window's mean load gives (None: 0 for either); :attr:`steps` lists
+        the windows of this batch where it jumped.
 
         Returns
         -------
@@ -268,6 +270,7 @@ class FlankPool:
                'su': stats['su'].reshape(shape), 'suu': stats['suu'].reshape(shape),
                's0': stats['s0'].reshape(shape + (-1,)), 's1': stats['s1'].reshape(shape + (-1,))}
         pool = self._pool
+        self.steps = []
         # The pool after each window; its flank lines are projected out of all at once.
         after = {key: np.empty((n_win,) + value.shape) for key, value in pool.items()}
         groups = {key: after[key] for key in ('count', 'su', 'suu', 's0', 's1')}
@@ -284,10 +287,14 @@ class FlankPool:
             fc0, fv0, eta0 = self._pool_friction
             moved = (abs(fc - fc0 + 0.5 * ((1.0 / eta - eta) - (1.0 / eta0 - eta0)) * load)
                      + abs(fv - fv0) * speed)
-            level = te_mean[k] - (0.0 if speed_mean is None
+            level = te_mean[k] - (0.0 if speed_mean is None or self._offset is None
                                   else self._offset * float(speed_mean[k]))
             level -= 0.0 if windup_mean is None else float(windup_mean[k])
-            if self._te_ref is None or abs(level - self._level_ref) > _POOL_JUMP or \
+            stepped = self._te_ref is not None and abs(level - self._level_ref) > _POOL_JUMP
+            if stepped and (self._offset is not None or speed_mean is None):
+                # Before an offset is identified, a mean that follows the speed is no step.
+                self.steps.append((k, level - self._level_ref))
+            if self._te_ref is None or stepped or \
                     moved > _POOL_FRICTION_JUMP * self.rated_torque:
                 self._te_ref, self._level_ref = te_mean[k], level
                 self._pool_friction = np.array([fc, fv, eta])
@@ -355,7 +362,8 @@ class FlankPool:
             Time added to the link encoder's stamps [s].
 
         """
-        self._offset -= delta_s
+        if self._offset is not None:
+            self._offset -= delta_s
         pool = self._pool
         moments = pool['moments']
         moments[-1, :] -= delta_s * moments[-2, :]

@@ -415,7 +415,8 @@ class TwinFront:
         an encoder that reports the output angle coarsely (:mod:`.encoder_steps`);
         ``'ratio'``: a motor that turns another number of times than the configured
         ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped 3 ms or
-        more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`).
+        more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`); ``'te_step'``: the TE's
+        constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('held', self.analyzer.effort_held),
@@ -423,7 +424,8 @@ class TwinFront:
                  ('encoders', self.extractor.held_reason),
                  ('steps', self.extractor.step_reason),
                  ('ratio', self.extractor.ratio_reason),
-                 ('time_offset', self.calibration.reason))
+                 ('time_offset', self.calibration.reason),
+                 ('te_step', self.analyzer.te_stepped))
         return {kind: line for kind, line in found if line is not None}
 
     def refusal(self, reason):

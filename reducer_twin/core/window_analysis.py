@@ -47,6 +47,7 @@ from .kinematics import total_ratio
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .torque_smoothing import nominal_step, TorqueSmoothing
 from .transmission_error import model_tables
+from .units import rad_to_arcmin
 from .velocity_check import VelocityCheck
 from .wear_fit import LostMotionFit
 from .window_cut import cut_windows, WINDOW_MODES
@@ -330,11 +331,13 @@ class WindowAnalyzer:
         self.largest_te_span = 0.0
         self.windows_reversed = 0       # with bins enough for a lost motion
         self.largest_reversed_te_span = 0.0  # of those [rad]
+        self.te_steps = []              # (stamp [s], step [rad]) of the TE's constant
         self.gaps = 0                   # holes longer than max_gap_s between samples
         self.gap_time_s = 0.0           # the stream time they span [s]
         self.windows_effort_fault = 0
         self.last_observed_t = None     # end of the last window with a lost motion [s]
         self.latest_t = None            # latest stamp fed [s]
+        self.first_t = None             # first stamp fed [s]
         self._since = dict.fromkeys(_SINCE, 0)
         self._recent_t = (_EMPTY, _EMPTY)  # fresh and effortless stamps of the last update
         self._period_s = None
@@ -395,6 +398,8 @@ class WindowAnalyzer:
         self.samples_seen += n_fresh
         self._since['seen'] += n_fresh
         if n_fresh:
+            if self.first_t is None:
+                self.first_t = float(np.min(stream.t[fresh]))
             latest = float(np.max(stream.t[fresh]))
             self.latest_t = latest if self.latest_t is None else max(self.latest_t, latest)
         self._recent_t = (stream.t[fresh], _EMPTY)
@@ -527,6 +532,26 @@ class WindowAnalyzer:
                 'load by about the time constant, which puts samples of each torque reversal '
                 'on the wrong flank (an unloaded joint read half its lost motion through a '
                 "50 ms filter): set twin.effort_lag_s to the drive's filter time constant")
+
+    @property
+    def te_stepped(self):
+        """
+        Say where the TE's constant stepped between windows, else None.
+
+        A step of :data:`.flanks._POOL_JUMP` or more in a window's mean, less what the
+        time offset and the windup under its mean load give it, is an encoder re-homed or
+        whose offset changed, or a motor turn count lost across a gap (``2·pi/i``); the
+        flank pool starts afresh there, so the readings hold, but the step is said.
+        """
+        if not self.te_steps:
+            return None
+        t, step = self.te_steps[0]
+        more = len(self.te_steps) - 1
+        also = f' (and {more} more)' if more else ''
+        return (f"the transmission error's constant stepped by about "
+                f'{rad_to_arcmin(step):+.0f} arcmin {t - self.first_t:.1f} s into the '
+                f'stream{also}: an encoder re-homed or its offset changed, or a motor turn '
+                'count lost across a gap; the windows after a step are read afresh')
 
     @property
     def velocity_scale(self):
@@ -798,6 +823,7 @@ class WindowAnalyzer:
                        / self.tables.series_stiffness)
         beta, ident, noise, pooled = self._flanks.fit_harmonics(
             fit_stats, n_win, te_mean, exposure, taken, speed_mean, windup_mean)
+        self.te_steps += [(float(t[starts[k]]), step) for k, step in self._flanks.steps]
         torque_h, width, std, usable, odd = self._flanks.hysteresis(stats, beta, noise, pooled,
                                                                     self.flank_samples())
         if unknown is not None:

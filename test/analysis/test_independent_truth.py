@@ -255,7 +255,13 @@ def test_a_link_encoder_re_homed_halfway_reads_like_one_that_was_not(tmp_path, s
         '/joint_states': JointStateBatch(link.stamps_ns, link.names, position, link.velocity,
                                          link.effort),
         '/motor_states': js['/motor_states']})
-    _assert_within_5_percent(truth, analyze_bag(tmp_path / 'rehomed', tmp_path / 'out'))
+    got = analyze_bag(tmp_path / 'rehomed', tmp_path / 'out')
+    _assert_within_5_percent(truth, got)
+    # The step is said: at the link of every joint, seen in the windows' means.
+    said = [w.message for w in got.warnings if "transmission error's constant stepped" in
+            w.message]
+    assert len(said) == len(truth['joints']), said
+    assert all('s into the stream' in line for line in said)
 
 
 def test_a_motor_topic_stamped_10_ms_late_is_learnt_and_said(tmp_path, split_1khz):
@@ -273,6 +279,7 @@ def test_a_motor_topic_stamped_10_ms_late_is_learnt_and_said(tmp_path, split_1kh
     got = analyze_bag(tmp_path / 'late', tmp_path / 'out')
     said = '\n'.join(w.message for w in got.warnings)
     _assert_within_5_percent(truth, got)
+    assert 'constant stepped' not in said      # the means follow the speed: no step
     for name in truth['joints']:
         (apart,) = re.findall(rf'{name}: the link and motor encoders are stamped ([0-9.]+) ms '
                               'apart', said)

@@ -53,7 +53,7 @@ RATED = 784.0
 
 
 def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None, offset=0.0,
-                 speed_mean=None, windup_mean=None):
+                 speed_mean=None, windup_mean=None, steps=None):
     """Flank samples in the pool after each window, by what the friction fit took out."""
     te_mean = np.zeros(windows) if te_mean is None else np.asarray(te_mean)
     pool = flanks.FlankPool((1, 2), np.geomspace(20.0, 800.0, 13), RATED, 2, 1.0)
@@ -71,6 +71,8 @@ def _pool_counts(friction_taken, windows=3, samples=2000, te_mean=None, offset=0
     own = stats['count'].reshape(windows, -1).sum(axis=1)
     *_, groups = pool.fit_harmonics(stats, windows, te_mean, np.zeros(windows),
                                     friction_taken, speed_mean, windup_mean)
+    if steps is not None:
+        steps += pool.steps
     return groups['count'].sum(axis=1), own
 
 
@@ -80,8 +82,10 @@ def test_the_pool_restarts_where_the_te_steps_not_where_the_speed_moves_it():
     # their mean speed (the regressors' speed is 0.5 rad/s here): once the pool has
     # identified the offset, that share is not a step (10 ms: 5 mrad a window).
     for step in (0.005, 0.02):
-        pooled, own = _pool_counts(None, te_mean=[0.0, step, step])
+        said = []
+        pooled, own = _pool_counts(None, te_mean=[0.0, step, step], steps=said)
         np.testing.assert_allclose(pooled, [own[0], own[1], own[1] + own[2]])
+        assert said == [(1, pytest.approx(step))]      # window 1 of the batch, the step
     pooled, own = _pool_counts(None, te_mean=[0.0, 0.001, -0.001])    # windup, play: kept
     np.testing.assert_allclose(pooled, np.cumsum(own))
     pooled, own = _pool_counts(None, te_mean=[0.0, 0.02, 0.04], offset=0.04,
