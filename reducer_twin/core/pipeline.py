@@ -161,9 +161,9 @@ class TimeOffsetCalibration:
         The offset applied, or before that the largest of the windows' estimates.
         """
         offsets = [self.applied] if self.applied is not None else self.estimates
-        if not offsets or abs(max(offsets, key=abs)) < TIME_OFFSET_SAID_S:
+        offset = max(offsets, key=abs, default=0.0)
+        if abs(offset) < TIME_OFFSET_SAID_S:
             return None
-        offset = max(offsets, key=abs)
         how = ('learnt from the first windows and removed from then on' if self.applied
                is not None else 'read by the first windows, not yet removed')
         return (f'the link and motor encoders are stamped {1e3 * abs(offset):.1f} ms apart '

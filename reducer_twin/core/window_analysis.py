@@ -331,7 +331,8 @@ class WindowAnalyzer:
         self.largest_te_span = 0.0
         self.windows_reversed = 0       # with bins enough for a lost motion
         self.largest_reversed_te_span = 0.0  # of those [rad]
-        self.te_steps = []              # (stamp [s], step [rad]) of the TE's constant
+        self.te_step = None             # (stamp [s], step [rad]) of the TE constant's first step
+        self.te_steps = 0               # steps of the TE's constant
         self.gaps = 0                   # holes longer than max_gap_s between samples
         self.gap_time_s = 0.0           # the stream time they span [s]
         self.windows_effort_fault = 0
@@ -543,10 +544,10 @@ class WindowAnalyzer:
         whose offset changed, or a motor turn count lost across a gap (``2·pi/i``); the
         flank pool starts afresh there, so the readings hold, but the step is said.
         """
-        if not self.te_steps:
+        if self.te_step is None:
             return None
-        t, step = self.te_steps[0]
-        more = len(self.te_steps) - 1
+        t, step = self.te_step
+        more = self.te_steps - 1
         also = f' (and {more} more)' if more else ''
         return (f"the transmission error's constant stepped by about "
                 f'{rad_to_arcmin(step):+.0f} arcmin {t - self.first_t:.1f} s into the '
@@ -823,7 +824,11 @@ class WindowAnalyzer:
                        / self.tables.series_stiffness)
         beta, ident, noise, pooled = self._flanks.fit_harmonics(
             fit_stats, n_win, te_mean, exposure, taken, speed_mean, windup_mean)
-        self.te_steps += [(float(t[starts[k]]), step) for k, step in self._flanks.steps]
+        if self._flanks.steps:
+            if self.te_step is None:
+                k, step = self._flanks.steps[0]
+                self.te_step = (float(t[starts[k]]), step)
+            self.te_steps += len(self._flanks.steps)
         torque_h, width, std, usable, odd = self._flanks.hysteresis(stats, beta, noise, pooled,
                                                                     self.flank_samples())
         if unknown is not None:
