@@ -111,37 +111,36 @@ class JointFront:
         if self.period_ns is None and t_ns.size > 16:
             self.period_ns = float(np.median(np.diff(t_ns[:4096])))
         self.samples += t_ns.size
-        n = t_ns.size
         t_s = t_ns * 1e-9
-        windows, te_parts, start = [], [], 0
-        if self._calibrating():
-            if not _cut_free(t_ns, motor, link):
-                return self._feed_pieces(t_ns, t_s, motor, link, effort, velocity)
+        windows, te_parts, start, stream = [], [], 0, None
+        if self._calibrating() and not _cut_free(t_ns, motor, link):
+            return self._feed_pieces(t_ns, t_s, motor, link, effort, velocity)
+        while self._calibrating():
             # Until the offset is learnt the TE of a piece does not depend on where the
             # pieces are cut (see _cut_free): computed once, it is fed to the window
             # analysis in pieces of CALIBRATION_PIECE_S.
             piece = self._piece()
             reference = self.extractor.last_te
+            offset = self.extractor.link_time_offset_s
             stream = self.twin.te(t_s, motor, link)
-            while start < n and self._calibrating():
+            n, start = t_ns.size, 0
+            while start < n and self._calibrating() and \
+                    self.extractor.link_time_offset_s == offset:
                 windows += self._analyze(stream.part(slice(start, start + piece)),
                                          effort[start:start + piece],
                                          velocity[start:start + piece])
                 start += piece
-            if start < n and self.calibration.applied is not None:
-                # Learnt: the offset applies from the next piece on, with the TE kept
-                # continuous with the last one before it.
-                valid = np.flatnonzero(stream.valid[:start])
-                self.extractor.last_te = float(stream.te[valid[-1]]) if valid.size \
-                    else reference
-                te_parts.append(_te_rows(t_ns[:start], stream.part(slice(0, start)),
-                                         effort[:start]))
-                t_ns, t_s, motor, link, effort, velocity = (
-                    a[start:] for a in (t_ns, t_s, motor, link, effort, velocity))
-                start = 0
-                stream = None
-        else:
-            stream = None
+            if start >= n or self.extractor.link_time_offset_s == offset:
+                break
+            # Learnt (or refined): the offset applies from the next piece on, with the TE
+            # kept continuous with the last one before it.
+            valid = np.flatnonzero(stream.valid[:start])
+            self.extractor.last_te = float(stream.te[valid[-1]]) if valid.size else reference
+            te_parts.append(_te_rows(t_ns[:start], stream.part(slice(0, start)),
+                                     effort[:start]))
+            t_ns, t_s, motor, link, effort, velocity = (
+                a[start:] for a in (t_ns, t_s, motor, link, effort, velocity))
+            start, stream = 0, None
         if stream is None:
             stream = self.twin.te(t_s, motor, link)
         if start < t_ns.size:
@@ -196,8 +195,8 @@ class JointFront:
                            [stamp_ns(f.t_end) for f in windows], values)
 
     def _calibrating(self):
-        """Whether the stream still goes in calibration pieces (time offset not learnt)."""
-        return self.calibration.applied is None and self.windows < CALIBRATION_WINDOWS and \
+        """Whether the stream still goes in calibration pieces (time offset not settled)."""
+        return not self.calibration.settled and self.windows < CALIBRATION_WINDOWS and \
             bool(self.period_ns)
 
     def _piece(self):

@@ -142,6 +142,12 @@ class EffortCheck:
         self._effort_checks = []        # (width [rad], slope ratio, 1x share) of the latest
         self._offset_checks = []        # (near, far [rad], step [N·m]) of the latest
 
+    def restart(self):
+        """Judge afresh from the next window (the windows judged read a TE since found wrong)."""
+        self.effort_fault = None
+        self._effort_checks = []
+        self._offset_checks = []
+
     def check(self, torque_b, width, std, usable, odd):
         """
         Check, window by window, that the effort is the output torque in N·m.

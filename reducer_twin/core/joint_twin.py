@@ -401,7 +401,7 @@ class TwinFront:
         found = self.analyzer.update(stream, effort, velocity)
         for f in found:
             if self.calibration.observe(f):
-                self.analyzer.retime(self.calibration.applied)
+                self.analyzer.retime(self.calibration.delta)
         self.windows += len(found)
         return found
 

@@ -113,6 +113,13 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 'on the motor entry, taken for a motor torque and multiplied by the '
                 'ratio: motor_effort_units joint; or other units: effort_scale, '
                 'twin.effort_scale in --config)')
+    if analyzer.windows_offset_unremoved:
+        return (f'the link and motor encoders are stamped up to '
+                f'{1e3 * analyzer.largest_unremoved_offset_s:.3g} ms apart: '
+                f'{analyzer.windows_offset_unremoved} of {analyzer.windows_emitted} windows had '
+                'torque reversals, but their transmission error carried that offset, which '
+                'is removed once learnt from 5 windows that find it; no lost motion is read '
+                'before (stamp both encoders on one clock)')
     if analyzer.windows_friction_unknown:
         return (f'the friction in the effort could not yet be told from the load: '
                 f'{analyzer.windows_friction_unknown} of {analyzer.windows_emitted} windows had '

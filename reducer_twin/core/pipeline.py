@@ -19,6 +19,7 @@ import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .estimator import EstimatorConfig, lognormal_sd
+from .flanks import TIME_OFFSET_LINEAR_S
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
@@ -86,20 +87,25 @@ def duty_to_record(duty):
             for k, v in _DUTY_KEYS.items()}
 
 
+TIME_OFFSET_REFINEMENTS = 3
+"""Times a learnt offset beyond a linear term of the TE is refined by later windows."""
+
+
 TIME_OFFSET_SAID_S = 3e-3
 """
 Time offset between the encoders [s] from which it is said (:attr:`TimeOffsetCalibration.reason`).
 
-The calibration removes an offset once learnt, but the windows before it read the lost
-motion with it, and the flank pool carries them for several windows after. Measured with
-the motor's stamps shifted (link and motor on two topics, 1 kHz): on the independent
-generator the base read -2 % at 2 ms and within 1 % at 10-20 ms, at 50 ms it was refused
-(the effort "not the output torque"); on the model's simulator an unloaded joint read
-+42 % at 10 ms and was refused at 20 ms, a gravity-loaded one +1.5 % and +7 %. An offset
-of 0.05 ms (an encoder's latency) reads within 0.3 %. At 1 ms, a base of the third
-generator at 100 Hz was said to be stamped apart where its truth has no offset (a tenth of
-its sample period, read by a window fit of another physics): 3 ms is above that and below
-the offsets that move a reading by more than a few %.
+The calibration removes an offset once learnt; windows whose fit finds one beyond
+:data:`.flanks.TIME_OFFSET_LINEAR_S` before that give no lost motion, and those the fit
+cannot tell it in still read one with it. Measured with the motor's stamps shifted (link
+and motor on two topics, 1 kHz): on the independent generator (two truths, three joints
+each) every joint reads within 0.7 % at -20 to 50 ms, one base -2.3 % at 2 ms; on the
+model's simulator an unloaded and a gravity-loaded joint within 0.6 % at 5-20 ms (before the
+window-withholding and the refinement: a base refused at 50 ms, an unloaded joint +42 % at
+10 ms and refused at 20 ms). An offset of 0.05 ms (an encoder's latency) reads within
+0.3 %. At 1 ms, a base of the third generator at 100 Hz was said to be stamped apart where
+its truth has no offset (a tenth of its sample period, read by a window fit of another
+physics): 3 ms is above that.
 """
 
 
@@ -114,12 +120,30 @@ class TimeOffsetCalibration:
     Feeding back every window would over-correct: the window fit pools
     recent windows, part of them still uncompensated.
 
+    An offset beyond :data:`.flanks.TIME_OFFSET_LINEAR_S` (milliseconds: two clocks,
+    a topic stamped a control cycle late) is read less exactly by windows whose TE
+    carries it, the term being linear only in the encoders' common motion: the first
+    median can miss by more than that (a shoulder of the independent generator at
+    20 ms: 18.8 ms learnt, its later windows then withheld for the 1.2 ms left). The
+    median of the next ``windows`` estimates is then added in turn while it lies
+    beyond that (at most :data:`TIME_OFFSET_REFINEMENTS` times); the calibration is
+    :attr:`settled` once an offset within it is learnt or left.
+
     Parameters
     ----------
     extractor : TEExtractor
         The TE extractor whose ``link_time_offset_s`` is set.
     windows : int
         Estimates to collect before applying.
+
+    Attributes
+    ----------
+    applied : float or None
+        The offset added to the extractor so far [s] (None until learnt).
+    delta : float or None
+        What the latest application added [s] (the window analysis refers its TE by it).
+    settled : bool
+        No more is learnt (until :meth:`restart`).
 
     """
 
@@ -128,6 +152,9 @@ class TimeOffsetCalibration:
         self.windows = windows
         self.estimates = []
         self.applied = None
+        self.delta = None
+        self.settled = False
+        self._refinements = 0
 
     def observe(self, features):
         """
@@ -141,16 +168,28 @@ class TimeOffsetCalibration:
         Returns
         -------
         bool
-            True when this call applied the calibration.
+            True when this call changed the extractor's offset (by :attr:`delta`).
 
         """
-        if self.applied is not None or not np.isfinite(features.time_offset_s):
+        if self.settled or not np.isfinite(features.time_offset_s):
             return False
         self.estimates.append(float(features.time_offset_s))
         if len(self.estimates) < self.windows:
             return False
-        self.applied = float(np.median(self.estimates))
-        self.extractor.link_time_offset_s += self.applied
+        median = float(np.median(self.estimates))
+        if self.applied is not None and (abs(median) <= TIME_OFFSET_LINEAR_S
+                                         or self._refinements >= TIME_OFFSET_REFINEMENTS):
+            self.settled = True
+            return False
+        if self.applied is None:
+            self.applied = median
+        else:
+            self._refinements += 1
+            self.applied += median
+        self.settled = abs(self.applied) <= TIME_OFFSET_LINEAR_S and not self._refinements
+        self.delta = median
+        self.estimates = []
+        self.extractor.link_time_offset_s += median
         return True
 
     @property
@@ -168,15 +207,16 @@ class TimeOffsetCalibration:
                is not None else 'read by the first windows, not yet removed')
         return (f'the link and motor encoders are stamped {1e3 * abs(offset):.1f} ms apart '
                 '(two clocks, or one topic stamped on arrival or a control cycle late): '
-                f'{how}; the windows before that read the lost motion with it, and those '
-                'pooled with them for several windows after (an unloaded joint read 40 % high '
-                'at 10 ms, or was refused at 20 ms): stamp both encoders on one clock')
+                f'{how}; windows whose transmission error still carries it give no lost '
+                'motion where their fit finds it: stamp both encoders on one clock')
 
     def restart(self):
         """Learn again from the next windows, undoing an offset learnt from a TE found wrong."""
         if self.applied is not None:
             self.extractor.link_time_offset_s -= self.applied
-        self.applied = None
+        self.applied = self.delta = None
+        self.settled = False
+        self._refinements = 0
         self.estimates = []
 
 

@@ -40,7 +40,7 @@ import numpy as np
 from .duty_summary import duty_summaries, DutySummary
 from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
-from .flanks import FlankPool
+from .flanks import FlankPool, TIME_OFFSET_LINEAR_S
 from .friction_fit import FrictionFit
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
@@ -326,6 +326,8 @@ class WindowAnalyzer:
         self.windows_observed = 0
         self.windows_censored = 0       # of those, fits on the table's lower bound
         self.windows_friction_unknown = 0
+        self.windows_offset_unremoved = 0   # withheld: a time offset not yet removed
+        self.largest_unremoved_offset_s = 0.0
         self.windows_implausible = 0
         self.windows_still = 0          # the joint stood still: no lost motion (STILL_SPAN_RAD)
         self.largest_te_span = 0.0
@@ -645,7 +647,10 @@ class WindowAnalyzer:
 
         The TE of the buffered samples and of the pooled windows was extracted
         before: both are referred to the new stamps (:meth:`.flanks.FlankPool.retime`),
-        so the next windows' fits see one offset.
+        so the next windows' fits see one offset. An offset beyond
+        :data:`.flanks.TIME_OFFSET_LINEAR_S` is not a linear term of that TE: the partial
+        window is dropped, the pool starts afresh (:meth:`discard_buffer`) and the effort
+        is judged afresh (a verdict on windows that carried such an offset included).
 
         Parameters
         ----------
@@ -653,9 +658,12 @@ class WindowAnalyzer:
             Time added to the link encoder's stamps [s].
 
         """
-        if self._buf['te'].size:
-            self._buf['te'] = self._buf['te'] - delta_s * self._buf['speed']
         self._flanks.retime(delta_s)
+        if abs(delta_s) > TIME_OFFSET_LINEAR_S:
+            self.discard_buffer()
+            self._effort.restart()
+        elif self._buf['te'].size:
+            self._buf['te'] = self._buf['te'] - delta_s * self._buf['speed']
 
     def flush(self):
         """
@@ -843,6 +851,16 @@ class WindowAnalyzer:
             withheld = unknown & (usable.sum(axis=1) >= self.min_bins)
             self.windows_friction_unknown += int(withheld.sum())
             usable &= ~unknown[:, None]
+        # A time offset beyond a linear term of the TE, not yet removed (learnt from the
+        # first windows, :class:`.pipeline.TimeOffsetCalibration`): no lost motion is read.
+        offset = np.where(ident[:, -1], beta[:, -1], np.nan)
+        unremoved = np.abs(offset) > TIME_OFFSET_LINEAR_S
+        if unremoved.any():
+            self.windows_offset_unremoved += int(
+                (unremoved & (usable.sum(axis=1) >= self.min_bins)).sum())
+            self.largest_unremoved_offset_s = max(self.largest_unremoved_offset_s,
+                                                  float(np.max(np.abs(offset[unremoved]))))
+            usable &= ~unremoved[:, None]
         te_max = np.maximum.reduceat(y, starts)
         te_min = np.minimum.reduceat(y, starts)
         implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
@@ -883,7 +901,6 @@ class WindowAnalyzer:
         n_ord = len(self.orders)
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
-        offset = np.where(ident[:, -1], beta[:, -1], np.nan)
         out = []
         for k in range(n_win):
             use = usable[k]

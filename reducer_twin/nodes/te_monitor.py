@@ -155,7 +155,7 @@ class TEMonitor(Node):
                                          *rows.T)
         if not ok:
             return
-        if learnt is None and self.twin.calibration.applied is not None:
+        if self.twin.calibration.applied not in (None, learnt):
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
         say_faults(self.get_logger(), self.joint, self.twin, self._said)

@@ -29,6 +29,19 @@ def test_a_joint_that_never_reverses_under_load_is_reported_as_such():
     assert 'no torque reversal' in analyzer.not_observed_reason()
 
 
+def test_a_recording_too_short_to_learn_an_offset_of_milliseconds_says_so():
+    # The motor stamped 20 ms late, four windows: the offset is not learnt (five windows
+    # that find it are needed) and no window read with it gives a lost motion.
+    _, b = simulated(samples=8000)
+    stream = compute_te(b.t + 0.02, b.motor_angle, b.t, b.link_angle, RATIO)
+    analyzer = WindowAnalyzer(PARAMS)
+    feats = analyzer.update(stream, b.effort, b.link_velocity) + analyzer.flush()
+    assert feats and not np.isfinite([f.lost_motion for f in feats]).any()
+    reason = analyzer.not_observed_reason()
+    assert reason.startswith('the link and motor encoders are stamped up to 2')
+    assert 'stamp both encoders on one clock' in reason
+
+
 @pytest.mark.parametrize('rate_hz', [1000, 200])
 def test_an_effort_filled_with_zeros_is_named_as_such_at_any_rate(rate_hz):
     # A controller without an effort interface that fills zeros: at 200 Hz the joint was

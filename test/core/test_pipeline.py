@@ -23,6 +23,7 @@ from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
+from reducer_twin.core.pipeline import TIME_OFFSET_REFINEMENTS
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -468,6 +469,43 @@ def test_the_time_offset_is_learnt_once_from_the_first_windows_and_can_be_learnt
     calibration.restart()
     assert calibration.applied is None and extractor.link_time_offset_s == pytest.approx(10e-6)
     assert [calibration.observe(f) for f in fits] == [False, False, False, True]
+
+
+def test_an_offset_of_milliseconds_is_refined_by_later_windows_until_what_is_left_is_linear():
+    # Windows whose TE carries milliseconds read them less exactly (a shoulder at 20 ms:
+    # its first five fits gave a median of 18.8 ms, and the 1.2 ms left withheld every
+    # later window). The next windows' median is added while beyond TIME_OFFSET_LINEAR_S.
+    extractor = SimpleNamespace(link_time_offset_s=0.0)
+    calibration = TimeOffsetCalibration(extractor, windows=5)
+    first = [8.96e-3, 19.70e-3, 10.32e-3, 18.84e-3, 19.27e-3]
+    assert [calibration.observe(SimpleNamespace(time_offset_s=v)) for v in first] == \
+        [False] * 4 + [True]
+    assert calibration.delta == pytest.approx(18.84e-3) and not calibration.settled
+    left = [SimpleNamespace(time_offset_s=v) for v in (1.18e-3, 1.14e-3, 1.16e-3, 1.2e-3, 1.1e-3)]
+    assert [calibration.observe(f) for f in left] == [False] * 4 + [True]
+    assert calibration.delta == pytest.approx(1.16e-3)
+    assert extractor.link_time_offset_s == pytest.approx(20.0e-3)
+    assert calibration.applied == pytest.approx(20.0e-3) and not calibration.settled
+    small = [SimpleNamespace(time_offset_s=v) for v in (2e-5, -1e-5, 0.0, 1e-5, 3e-5)]
+    assert not any(calibration.observe(f) for f in small)
+    assert calibration.settled and extractor.link_time_offset_s == pytest.approx(20.0e-3)
+    assert not calibration.observe(left[0])         # settled: nothing more is learnt
+
+
+def test_a_refinement_stops_after_a_few_even_if_the_windows_keep_finding_milliseconds():
+    extractor = SimpleNamespace(link_time_offset_s=0.0)
+    calibration = TimeOffsetCalibration(extractor, windows=1)
+    changes = [calibration.observe(SimpleNamespace(time_offset_s=5e-3)) for _ in range(10)]
+    refined = 1 + TIME_OFFSET_REFINEMENTS
+    assert changes == [True] * refined + [False] * (10 - refined)
+    assert calibration.settled
+
+
+def test_a_microsecond_offset_is_learnt_once_and_settled():
+    calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
+    for v in (50e-6, 52e-6):
+        calibration.observe(SimpleNamespace(time_offset_s=v))
+    assert calibration.settled and calibration.delta == pytest.approx(51e-6)
 
 
 def test_encoders_stamped_milliseconds_apart_are_said_before_and_after_the_offset_is_learnt():
