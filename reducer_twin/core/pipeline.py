@@ -101,7 +101,7 @@ cannot tell it in still read one with it. Measured with the motor's stamps shift
 and motor on two topics, 1 kHz): on the independent generator (two truths, three joints
 each) every joint reads within 0.7 % at -20 to 50 ms, one base -2.3 % at 2 ms; on the
 model's simulator an unloaded and a gravity-loaded joint within 0.6 % at 5-20 ms (before the
-window-withholding and the refinement: a base refused at 50 ms, an unloaded joint +42 % at
+window-withholding and the refinement: a base refused at 50 ms, an unloaded joint +41 % at
 10 ms and refused at 20 ms). An offset of 0.05 ms (an encoder's latency) reads within
 0.3 %. At 1 ms, a base of the third generator at 100 Hz was said to be stamped apart where
 its truth has no offset (a tenth of its sample period, read by a window fit of another
