@@ -333,7 +333,7 @@ class WindowAnalyzer:
         self.largest_te_span = 0.0
         self.windows_reversed = 0       # with bins enough for a lost motion
         self.largest_reversed_te_span = 0.0  # of those [rad]
-        self.te_step = None             # (stamp [s], step [rad]) of the TE constant's first step
+        self.te_step = None             # (stream time [s], step [rad]) of the first step
         self.te_steps = 0               # steps of the TE's constant
         self.gaps = 0                   # holes longer than max_gap_s between samples
         self.gap_time_s = 0.0           # the stream time they span [s]
@@ -341,6 +341,8 @@ class WindowAnalyzer:
         self.last_observed_t = None     # end of the last window with a lost motion [s]
         self.latest_t = None            # latest stamp fed [s]
         self.first_t = None             # first stamp fed [s]
+        self._segment = None            # (first stamp since the last clock reset [s], stream
+        self._segment_origin_s = 0.0    # time before it [s]): stream time across resets
         self._since = dict.fromkeys(_SINCE, 0)
         self._recent_t = (_EMPTY, _EMPTY)  # fresh and effortless stamps of the last update
         self._period_s = None
@@ -388,6 +390,9 @@ class WindowAnalyzer:
             for k, sl in enumerate(cut_pieces(stream.t.size, resets)):
                 if k:
                     found += self._emit(final=True)
+                    if self._segment is not None and self._last_t is not None:
+                        self._segment_origin_s += self._last_t - self._segment
+                    self._segment = None
                     self._last_t = None
                     self.clock_resets += 1
                 found += self._update(stream_slice(stream, sl), effort[sl], velocity[sl])
@@ -403,6 +408,8 @@ class WindowAnalyzer:
         if n_fresh:
             if self.first_t is None:
                 self.first_t = float(np.min(stream.t[fresh]))
+            if self._segment is None:
+                self._segment = float(np.min(stream.t[fresh]))
             latest = float(np.max(stream.t[fresh]))
             self.latest_t = latest if self.latest_t is None else max(self.latest_t, latest)
         self._recent_t = (stream.t[fresh], _EMPTY)
@@ -548,13 +555,17 @@ class WindowAnalyzer:
         """
         if self.te_step is None:
             return None
-        t, step = self.te_step
+        into, step = self.te_step
         more = self.te_steps - 1
         also = f' (and {more} more)' if more else ''
         return (f"the transmission error's constant stepped by about "
-                f'{rad_to_arcmin(step):+.0f} arcmin {t - self.first_t:.1f} s into the '
+                f'{rad_to_arcmin(step):+.0f} arcmin {into:.1f} s into the '
                 f'stream{also}: an encoder re-homed or its offset changed, or a motor turn '
                 'count lost across a gap; the windows after a step are read afresh')
+
+    def _stream_s(self, t):
+        """Return the stream time [s] at stamp ``t`` of the current clock (counted over resets)."""
+        return self._segment_origin_s + t - self._segment
 
     @property
     def velocity_scale(self):
@@ -835,7 +846,7 @@ class WindowAnalyzer:
         if self._flanks.steps:
             if self.te_step is None:
                 k, step = self._flanks.steps[0]
-                self.te_step = (float(t[starts[k]]), step)
+                self.te_step = (self._stream_s(float(t[starts[k]])), step)
             self.te_steps += len(self._flanks.steps)
         torque_h, width, std, usable, odd = self._flanks.hysteresis(stats, beta, noise, pooled,
                                                                     self.flank_samples())

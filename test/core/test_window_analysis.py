@@ -1,5 +1,6 @@
 """The window features of a TE stream, checked against the joint simulator."""
 
+import re
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -192,6 +193,22 @@ def test_an_effort_lag_gives_the_same_windows_however_the_stream_is_chunked(chun
     assert [(f.t_start, f.samples) for f in pieces] == [(f.t_start, f.samples) for f in whole]
     np.testing.assert_allclose([f.lost_motion for f in pieces], [f.lost_motion for f in whole],
                                rtol=1e-9)
+
+
+def test_a_te_step_after_a_clock_reset_is_said_at_its_time_into_the_stream():
+    # The clock is set back an hour at 20 s (an NTP step), the link re-homed at 30 s of
+    # stream. Counted from the first stamp, the step read -3570 s into the stream.
+    _, b = simulated(samples=80000)
+    t, link = b.t.copy(), b.link_angle.copy()
+    t[t >= 20.0] -= 3600.0
+    link[b.t >= 30.0] += 0.005
+    analyzer = WindowAnalyzer(PARAMS)
+    for part in (b.t < 20.0, b.t >= 20.0):
+        stream = compute_te(t[part], b.motor_angle[part], t[part], link[part], RATIO)
+        analyzer.update(stream, b.effort[part], b.link_velocity[part])
+    assert analyzer.clock_resets == 1
+    (into,) = re.findall(r'([-0-9.]+) s into the stream', analyzer.te_stepped)
+    assert 30.0 <= float(into) <= 34.0      # the first window after the step
 
 
 @pytest.mark.parametrize('rate_hz', [200.0, 1000.0])
