@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from .te_extraction import TWO_PI
+from .te_extraction import TIME_OFFSET_LINEAR_S, TWO_PI
 from .window_ops import solve_identifiable_many
 
 _MODEL_SIGMA = 3e-6
@@ -70,21 +70,6 @@ under loads of opposite signs differ by twice that; without it, a few windows of
 model's simulator restarted the pool, its NEES 0.15 moved to 0.14).
 """
 
-TIME_OFFSET_LINEAR_S = 1e-3
-"""
-Largest time offset between the encoders [s] that is read as the TE's linear term ``omega·delta``.
-
-An offset ``delta`` pairs each link sample with the motor ``delta`` away: the TE gains the
-motor's travel over ``delta`` less the link's, ``omega·delta`` only while both move alike.
-Through the play the motor moves and the link does not, and the TE's own change over
-``delta`` enters the reversals that the lost motion is read from; the acceleration adds
-``delta^2·alpha/2``. On the model's simulator (an unloaded joint, 60 s at 1 kHz, 2 %
-effort noise, two seeds) the windows' pooled TE referred to the learnt offset by the linear
-map read the lost motion within 0.2 % to 1 ms, +1.6 % at 2 ms, +5 % at 3 ms, +17 % at 5 ms,
-+69 % at 10 ms. Beyond this the TE read before the offset was removed is not used: its
-windows give no lost motion, the pool and the partial window are dropped when the offset is
-learnt, and a jump of a window's mean is not said to be a step of the TE's constant.
-"""
 
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
 """``friction_taken`` of a window from which no friction is taken out."""

@@ -31,7 +31,7 @@ from .kinematics import total_ratio
 from .params import _Validated, spec
 from .pipeline import EstimatorStage, features_from_record, features_record, LifeConfig
 from .pipeline import LifeStage, TimeOffsetCalibration
-from .te_extraction import TEExtractor
+from .te_extraction import TEExtractor, TIME_OFFSET_LINEAR_S
 from .units import HOUR, m_to_um, rad_to_arcmin
 from .window_analysis import WindowAnalyzer
 
@@ -376,6 +376,7 @@ class TwinFront:
         self.extractor = TEExtractor(self.ratio, max_gap_s=config.max_gap_s)
         self.calibration = TimeOffsetCalibration(self.extractor)
         self._restarted_for_held = False
+        self._waiting = None    # (t, motor, link, effort, velocity) of samples awaiting motor
         self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
                                        aging_factor=config.aging_factor,
                                        friction=bool(config.friction_in_effort),
@@ -445,14 +446,52 @@ class TwinFront:
         return '; '.join([reason] + [line for line in said if line is not None])
 
     def update(self, t_s, motor, link, effort, velocity):
-        """TE and windows of paired samples; return the completed windows."""
-        return self.analyze(self.te(t_s, motor, link), effort, velocity)
+        """
+        TE and windows of paired samples; return the completed windows.
+
+        A link read ``delta`` after its stamp (a learnt ``link_time_offset_s`` beyond
+        :data:`.te_extraction.TIME_OFFSET_LINEAR_S`) needs the motor angle ``delta``
+        after it, which for the chunk's last samples comes with the next chunk: they
+        wait for it (taken again then) rather than extrapolate the motor along its last
+        segment. Extrapolated, a joint of the model's simulator whose link was read
+        20 ms late read +8 % in 0.5 s chunks (``te_monitor``'s period) and +16 % in
+        0.1 s ones against the whole recording.
+        """
+        rows = (t_s, motor, link, effort, velocity)
+        if self._waiting is not None:
+            rows = tuple(np.concatenate([w, np.asarray(r, dtype=float)])
+                         for w, r in zip(self._waiting, rows))
+            self._waiting = None
+        cut = self._ready(rows[0])
+        if cut is None:
+            return self.analyze(self.te(*rows[:3]), *rows[3:])
+        stream = self.te(*rows[:3])
+        self._waiting = tuple(np.array(r[cut:], dtype=float) for r in rows)
+        valid = np.flatnonzero(stream.valid[:cut])
+        if valid.size:      # the next chunk's TE continues from the last one used
+            self.extractor.last_te = float(stream.te[valid[-1]])
+        return self.analyze(stream.part(slice(0, cut)), *(r[:cut] for r in rows[3:]))
+
+    def _ready(self, t_s):
+        """Return how many leading samples have their motor angle ``delta`` on, or None: all."""
+        delta = self.extractor.link_time_offset_s
+        if not delta > TIME_OFFSET_LINEAR_S:
+            return None
+        t = np.asarray(t_s, dtype=float)
+        if t.ndim != 1 or t.size < 2 or not np.all(np.diff(t) > 0.0):
+            return None     # a clock reset or disordered stamps: as before
+        cut = int(np.searchsorted(t, t[-1] - delta, side='right'))
+        return cut if cut < t.size else None
 
     def flush(self):
-        """Close the last, partial window."""
-        found = self.analyzer.flush()
-        self.windows += len(found)
-        return found
+        """Close the last, partial window (samples still waiting for motor angles included)."""
+        found = []
+        if self._waiting is not None:
+            rows, self._waiting = self._waiting, None
+            found += self.analyze(self.te(*rows[:3]), *rows[3:])
+        end = self.analyzer.flush()
+        self.windows += len(end)
+        return found + end
 
     def record(self, features):
         """Return the ``te_features`` record of a window (SI)."""

@@ -19,11 +19,11 @@ import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .estimator import EstimatorConfig, lognormal_sd
-from .flanks import TIME_OFFSET_LINEAR_S
 from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
 from .service_time import service_note
+from .te_extraction import TIME_OFFSET_LINEAR_S
 from .trend_score import SCORE_AFTER, SCORE_LAG
 from .units import HOUR
 
@@ -96,7 +96,7 @@ TIME_OFFSET_SAID_S = 3e-3
 Time offset between the encoders [s] from which it is said (:attr:`TimeOffsetCalibration.reason`).
 
 The calibration removes an offset once learnt; windows whose fit finds one beyond
-:data:`.flanks.TIME_OFFSET_LINEAR_S` before that give no lost motion, and those the fit
+:data:`.te_extraction.TIME_OFFSET_LINEAR_S` before that give no lost motion, and those the fit
 cannot tell it in still read one with it. Measured with the motor's stamps shifted (link
 and motor on two topics, 1 kHz): on the independent generator (two truths, three joints
 each) every joint reads within 0.7 % at -20 to 50 ms, one base -2.3 % at 2 ms; on the
@@ -120,7 +120,7 @@ class TimeOffsetCalibration:
     Feeding back every window would over-correct: the window fit pools
     recent windows, part of them still uncompensated.
 
-    An offset beyond :data:`.flanks.TIME_OFFSET_LINEAR_S` (milliseconds: two clocks,
+    An offset beyond :data:`.te_extraction.TIME_OFFSET_LINEAR_S` (milliseconds: two clocks,
     a topic stamped a control cycle late) is read less exactly by windows whose TE
     carries it, the term being linear only in the encoders' common motion: the first
     median can miss by more than that (a shoulder of the independent generator at

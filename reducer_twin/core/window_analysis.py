@@ -40,11 +40,12 @@ import numpy as np
 from .duty_summary import duty_summaries, DutySummary
 from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
-from .flanks import FlankPool, TIME_OFFSET_LINEAR_S
+from .flanks import FlankPool
 from .friction_fit import FrictionFit
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
+from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step, TorqueSmoothing
 from .transmission_error import model_tables
 from .units import rad_to_arcmin
@@ -659,7 +660,7 @@ class WindowAnalyzer:
         The TE of the buffered samples and of the pooled windows was extracted
         before: both are referred to the new stamps (:meth:`.flanks.FlankPool.retime`),
         so the next windows' fits see one offset. An offset beyond
-        :data:`.flanks.TIME_OFFSET_LINEAR_S` is not a linear term of that TE: the partial
+        :data:`.te_extraction.TIME_OFFSET_LINEAR_S` is not a linear term of that TE: the partial
         window is dropped, the pool starts afresh (:meth:`discard_buffer`) and the effort
         is judged afresh (a verdict on windows that carried such an offset included).
 

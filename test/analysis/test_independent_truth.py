@@ -21,9 +21,8 @@ import pytest
 from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY
-from reducer_twin.core.flanks import TIME_OFFSET_LINEAR_S
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.te_extraction import compute_te
+from reducer_twin.core.te_extraction import compute_te, TIME_OFFSET_LINEAR_S
 from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.io.bag import open_bag, write_bag_dir
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateBatch
