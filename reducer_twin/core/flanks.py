@@ -70,7 +70,6 @@ under loads of opposite signs differ by twice that; without it, a few windows of
 model's simulator restarted the pool, its NEES 0.15 moved to 0.14).
 """
 
-
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
 """``friction_taken`` of a window from which no friction is taken out."""
 
