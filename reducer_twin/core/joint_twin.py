@@ -403,6 +403,7 @@ class TwinFront:
         for f in found:
             if self.calibration.observe(f):
                 self.analyzer.retime(self.calibration.delta)
+        self.analyzer.offset_removed = self.calibration.settled
         self.windows += len(found)
         return found
 
