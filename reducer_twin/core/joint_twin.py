@@ -384,14 +384,26 @@ class TwinFront:
         self.windows = 0
 
     def te(self, t_s, motor, link):
-        """Return the TE stream of paired samples (stamps [s], motor and link angles [rad])."""
+        """
+        Return the TE stream of paired samples (stamps [s], motor and link angles [rad]).
+
+        Where the encoders' clocks drift apart (:attr:`.pipeline.TimeOffsetCalibration.drift`),
+        the offset is first moved along the drift to the chunk's middle, and the TE
+        already pooled and buffered referred to it.
+        """
+        t = np.asarray(t_s, dtype=float)
+        if t.ndim == 1 and t.size and self.calibration.drift is not None:
+            delta = self.calibration.follow(float(0.5 * (t[0] + t[-1])))
+            if delta:
+                self.analyzer.retime(delta)
         return self.extractor.update(t_s, motor, t_s, link)
 
     def analyze(self, stream, effort, velocity):
         """
         Take a TE stream into the window analysis; return the windows it completed.
 
-        Each window's fitted time offset feeds the calibration (applied once learnt).
+        Each window's fitted time offset feeds the calibration (applied once learnt,
+        then followed); the windows of this batch after a change were read before it.
         """
         held = self.extractor.held
         if held is not None and not self._restarted_for_held and any(held.held.values()):
@@ -401,8 +413,10 @@ class TwinFront:
             self.calibration.restart()
         found = self.analyzer.update(stream, effort, velocity)
         for f in found:
+            # The windows after a change in this batch were read before it: not taken.
             if self.calibration.observe(f):
                 self.analyzer.retime(self.calibration.delta)
+                break
         self.analyzer.offset_removed = self.calibration.settled
         self.windows += len(found)
         return found

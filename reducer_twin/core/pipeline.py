@@ -87,8 +87,13 @@ def duty_to_record(duty):
             for k, v in _DUTY_KEYS.items()}
 
 
-TIME_OFFSET_REFINEMENTS = 3
-"""Times a learnt offset beyond a linear term of the TE is refined by later windows."""
+TIME_OFFSET_TRACK_S = 0.5e-3
+"""
+Median of the next windows' time offsets [s] from which a learnt offset is corrected again.
+
+Half the linear term (:data:`.te_extraction.TIME_OFFSET_LINEAR_S`), so that a clock drifting
+by up to 50 ppm is corrected, by the linear map, before the 2-s windows find more than it.
+"""
 
 
 TIME_OFFSET_SAID_S = 3e-3
@@ -111,23 +116,29 @@ physics): 3 ms is above that.
 
 class TimeOffsetCalibration:
     """
-    Learn the link encoder's time offset from the first windows, then apply it.
+    Learn the link encoder's time offset from the first windows, apply it and follow it.
 
     A time offset ``delta`` between the encoders adds ``omega·delta`` to the
-    TE (16 arcsec at 90 deg/s for 50 µs). The window analysis fits it; it is a
-    hardware constant, so the median of the first ``windows`` finite
-    estimates is added once to the extractor's ``link_time_offset_s``.
-    Feeding back every window would over-correct: the window fit pools
-    recent windows, part of them still uncompensated.
+    TE (16 arcsec at 90 deg/s for 50 µs). The window analysis fits it; for an
+    encoder's latency it is a hardware constant, so the median of the first
+    ``windows`` finite estimates is added to the extractor's ``link_time_offset_s``.
+    Feeding back every window would over-correct: the window fit pools recent
+    windows, part of them still uncompensated; the next ``windows`` estimates are
+    taken after each change.
 
     An offset beyond :data:`.te_extraction.TIME_OFFSET_LINEAR_S` (milliseconds: two clocks,
     a topic stamped a control cycle late) is read less exactly by windows whose TE
     carries it, the term being linear only in the encoders' common motion: the first
     median can miss by more than that (a shoulder of the independent generator at
-    20 ms: 18.8 ms learnt, its later windows then withheld for the 1.2 ms left). The
-    median of the next ``windows`` estimates is then added in turn while it lies
-    beyond that (at most :data:`TIME_OFFSET_REFINEMENTS` times); the calibration is
-    :attr:`settled` once an offset within it is learnt or left.
+    20 ms: 18.8 ms learnt, its later windows then withheld for the 1.2 ms left). Two
+    clocks that are not synchronised drift apart besides (a crystal's 20-100 ppm:
+    3-15 ms over 150 s; the independent generator's base read +30 % at 50 ppm and was
+    refused at 100 ppm with the offset learnt once). So the median of every next
+    ``windows`` estimates is added in turn where it exceeds :data:`TIME_OFFSET_TRACK_S`
+    and they agree (their spread within the median's size: a third-generator shoulder's
+    windows found -0.1, 0, 2.2, 1.6, 1.6 ms through a change of its load, where its
+    offset is -0.6 ms); the calibration is :attr:`settled` while what is left lies
+    within the linear term.
 
     Parameters
     ----------
@@ -143,7 +154,8 @@ class TimeOffsetCalibration:
     delta : float or None
         What the latest application added [s] (the window analysis refers its TE by it).
     settled : bool
-        No more is learnt (until :meth:`restart`).
+        What is left of the offset lies within the linear term (until a later median
+        says otherwise, or :meth:`restart`).
 
     """
 
@@ -154,7 +166,7 @@ class TimeOffsetCalibration:
         self.applied = None
         self.delta = None
         self.settled = False
-        self._refinements = 0
+        self._changes = []      # (stream stamp [s], offset applied after it [s])
 
     def observe(self, features):
         """
@@ -171,38 +183,78 @@ class TimeOffsetCalibration:
             True when this call changed the extractor's offset (by :attr:`delta`).
 
         """
-        if self.settled or not np.isfinite(features.time_offset_s):
+        if not np.isfinite(features.time_offset_s):
             return False
         self.estimates.append(float(features.time_offset_s))
         if len(self.estimates) < self.windows:
             return False
         median = float(np.median(self.estimates))
-        if self.applied is not None and (abs(median) <= TIME_OFFSET_LINEAR_S
-                                         or self._refinements >= TIME_OFFSET_REFINEMENTS):
+        spread = float(np.ptp(self.estimates))
+        self.estimates = []
+        if self.applied is not None and abs(median) <= TIME_OFFSET_TRACK_S:
             self.settled = True
             return False
-        if self.applied is None:
-            self.applied = median
-        else:
-            self._refinements += 1
-            self.applied += median
-        self.settled = abs(self.applied) <= TIME_OFFSET_LINEAR_S and not self._refinements
+        if self.applied is not None and spread > abs(median):
+            return False    # windows that disagree (a transient of the load): no evidence
+        self.applied = median if self.applied is None else self.applied + median
+        self.settled = abs(median) <= TIME_OFFSET_LINEAR_S
         self.delta = median
-        self.estimates = []
+        self._changes.append((float(features.t_end), self.applied))
         self.extractor.link_time_offset_s += median
         return True
+
+    def follow(self, t_s):
+        """
+        Move the offset along its :attr:`drift` to stream stamp ``t_s`` [s]; return the change.
+
+        Between the windows' corrections the offset follows the drift last measured, so
+        that what the windows find stays within the linear term.
+        """
+        rate = self.drift
+        if rate is None or not np.isfinite(t_s):
+            return 0.0
+        t0, a0 = self._changes[-1]
+        delta = a0 + rate * max(t_s - t0, 0.0) - self.applied
+        self.applied += delta
+        self.extractor.link_time_offset_s += delta
+        return delta
+
+    @property
+    def drift(self):
+        """
+        Return how fast the offset drifts [s per s], or None while it does not.
+
+        Said from the corrections after the first: at least two, all the same way.
+        """
+        if len(self._changes) < 3:
+            return None
+        (t0, a0), (t1, a1) = self._changes[0], self._changes[-1]
+        steps = np.diff([a for _, a in self._changes])
+        if t1 <= t0 or not (np.all(steps > 0.0) or np.all(steps < 0.0)):
+            return None
+        return (a1 - a0) / (t1 - t0)
 
     @property
     def reason(self):
         """
         Say when the encoders' stamps lie :data:`TIME_OFFSET_SAID_S` or more apart, else None.
 
-        The offset applied, or before that the largest of the windows' estimates.
+        The offset applied, or before that the largest of the windows' estimates; and
+        how fast it drifts where later windows kept finding more (:attr:`drift`).
         """
         offsets = [self.applied] if self.applied is not None else self.estimates
         offset = max(offsets, key=abs, default=0.0)
-        if abs(offset) < TIME_OFFSET_SAID_S:
+        drift = self.drift
+        if abs(offset) < TIME_OFFSET_SAID_S and drift is None:
             return None
+        if drift is not None:
+            return (f'the link and motor encoders are stamped {1e3 * abs(offset):.1f} ms '
+                    f'apart and drift by {6e4 * abs(drift):.2g} ms a minute '
+                    f'({1e6 * abs(drift):.0f} ppm: two clocks that are not synchronised): '
+                    'followed from the windows and removed as it goes; windows whose '
+                    'transmission error still carries more than '
+                    f'{1e3 * TIME_OFFSET_LINEAR_S:g} ms of it give no lost motion: '
+                    'synchronise the clocks or stamp both encoders on one')
         how = ('learnt from the first windows and removed from then on' if self.applied
                is not None else 'read by the first windows, not yet removed')
         return (f'the link and motor encoders are stamped {1e3 * abs(offset):.1f} ms apart '
@@ -216,7 +268,7 @@ class TimeOffsetCalibration:
             self.extractor.link_time_offset_s -= self.applied
         self.applied = self.delta = None
         self.settled = False
-        self._refinements = 0
+        self._changes = []
         self.estimates = []
 
 

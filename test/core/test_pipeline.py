@@ -23,7 +23,6 @@ from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
-from reducer_twin.core.pipeline import TIME_OFFSET_REFINEMENTS
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -456,12 +455,18 @@ def test_a_non_finite_wear_record_raises_invalid_input(worn_record):
         LifeStage(PARAMS).process({**worn_record, 'wear_m': math.inf})
 
 
+def _fits(offsets_s, start_s=0.0, window_s=2.0):
+    """Windows' fitted time offsets, one window every ``window_s`` from ``start_s``."""
+    return [SimpleNamespace(time_offset_s=v, t_end=start_s + window_s * (k + 1))
+            for k, v in enumerate(offsets_s)]
+
+
 def test_the_time_offset_is_learnt_once_from_the_first_windows_and_can_be_learnt_again():
     # The median of the first windows' fits goes into the link stamps once. Learnt from a
     # TE later found wrong (an encoder found held), it is taken back and learnt again.
     extractor = SimpleNamespace(link_time_offset_s=10e-6)
     calibration = TimeOffsetCalibration(extractor, windows=3)
-    fits = [SimpleNamespace(time_offset_s=v) for v in (40e-6, math.nan, 60e-6, 50e-6)]
+    fits = _fits([40e-6, math.nan, 60e-6, 50e-6])
     assert [calibration.observe(f) for f in fits] == [False, False, False, True]
     assert calibration.applied == pytest.approx(50e-6)
     assert extractor.link_time_offset_s == pytest.approx(60e-6)
@@ -477,47 +482,68 @@ def test_an_offset_of_milliseconds_is_refined_by_later_windows_until_what_is_lef
     # later window). The next windows' median is added while beyond TIME_OFFSET_LINEAR_S.
     extractor = SimpleNamespace(link_time_offset_s=0.0)
     calibration = TimeOffsetCalibration(extractor, windows=5)
-    first = [8.96e-3, 19.70e-3, 10.32e-3, 18.84e-3, 19.27e-3]
-    assert [calibration.observe(SimpleNamespace(time_offset_s=v)) for v in first] == \
-        [False] * 4 + [True]
+    first = _fits([8.96e-3, 19.70e-3, 10.32e-3, 18.84e-3, 19.27e-3])
+    assert [calibration.observe(f) for f in first] == [False] * 4 + [True]
     assert calibration.delta == pytest.approx(18.84e-3) and not calibration.settled
-    left = [SimpleNamespace(time_offset_s=v) for v in (1.18e-3, 1.14e-3, 1.16e-3, 1.2e-3, 1.1e-3)]
+    left = _fits([1.18e-3, 1.14e-3, 1.16e-3, 1.2e-3, 1.1e-3], 10.0)
     assert [calibration.observe(f) for f in left] == [False] * 4 + [True]
     assert calibration.delta == pytest.approx(1.16e-3)
     assert extractor.link_time_offset_s == pytest.approx(20.0e-3)
     assert calibration.applied == pytest.approx(20.0e-3) and not calibration.settled
-    small = [SimpleNamespace(time_offset_s=v) for v in (2e-5, -1e-5, 0.0, 1e-5, 3e-5)]
+    small = _fits([2e-5, -1e-5, 0.0, 1e-5, 3e-5], 20.0)
     assert not any(calibration.observe(f) for f in small)
     assert calibration.settled and extractor.link_time_offset_s == pytest.approx(20.0e-3)
-    assert not calibration.observe(left[0])         # settled: nothing more is learnt
+    assert calibration.drift is None and 'drift' not in calibration.reason
 
 
-def test_a_refinement_stops_after_a_few_even_if_the_windows_keep_finding_milliseconds():
+def test_windows_that_disagree_through_a_change_of_load_do_not_move_a_learnt_offset():
+    # A third-generator shoulder (offset -0.6 ms) found -0.1, 0, 2.2, 1.6, 1.6 ms through
+    # a change of its load: taken, their median sent the offset 1.6 ms off and back.
     extractor = SimpleNamespace(link_time_offset_s=0.0)
-    calibration = TimeOffsetCalibration(extractor, windows=1)
-    changes = [calibration.observe(SimpleNamespace(time_offset_s=5e-3)) for _ in range(10)]
-    refined = 1 + TIME_OFFSET_REFINEMENTS
-    assert changes == [True] * refined + [False] * (10 - refined)
-    assert calibration.settled
+    calibration = TimeOffsetCalibration(extractor, windows=5)
+    for f in _fits([-0.58e-3, -0.55e-3, -0.41e-3, -0.63e-3, -0.63e-3]):
+        calibration.observe(f)
+    assert calibration.applied == pytest.approx(-0.58e-3) and calibration.settled
+    transient = _fits([-0.09e-3, -0.02e-3, 2.15e-3, 1.56e-3, 1.6e-3], 10.0)
+    assert not any(calibration.observe(f) for f in transient)
+    assert calibration.applied == pytest.approx(-0.58e-3) and calibration.settled
+
+
+def test_a_drifting_clock_is_followed_between_the_windows_and_said():
+    # Two clocks 100 ppm apart: every five 2-s windows find 1 ms more. Once three
+    # corrections agree, the offset follows the drift between them, and it is said.
+    extractor = SimpleNamespace(link_time_offset_s=0.0)
+    calibration = TimeOffsetCalibration(extractor, windows=5)
+    t = 0.0
+    for group in range(4):
+        for f in _fits([0.9e-3, 1.0e-3, 1.0e-3, 1.1e-3, 1.0e-3], t):
+            calibration.observe(f)
+        t += 10.0
+    assert calibration.drift == pytest.approx(1e-4, rel=0.01)
+    assert extractor.link_time_offset_s == pytest.approx(4e-3)
+    delta = calibration.follow(t + 5.0)     # 5 s after the last correction: 0.5 ms more
+    assert delta == pytest.approx(0.5e-3, rel=0.02)
+    assert extractor.link_time_offset_s == pytest.approx(4.5e-3, rel=0.01)
+    assert 'drift by 6 ms a minute (100 ppm' in calibration.reason
 
 
 def test_a_microsecond_offset_is_learnt_once_and_settled():
     calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
-    for v in (50e-6, 52e-6):
-        calibration.observe(SimpleNamespace(time_offset_s=v))
+    for f in _fits([50e-6, 52e-6]):
+        calibration.observe(f)
     assert calibration.settled and calibration.delta == pytest.approx(51e-6)
 
 
 def test_encoders_stamped_milliseconds_apart_are_said_before_and_after_the_offset_is_learnt():
     calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
-    calibration.observe(SimpleNamespace(time_offset_s=2.5e-3))
+    calibration.observe(_fits([2.5e-3])[0])
     assert calibration.reason is None               # within what a window fit reads wrong
     calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
-    for offset in (-10.1e-3, -10.3e-3):
-        calibration.observe(SimpleNamespace(time_offset_s=offset))
+    for f in _fits([-10.1e-3, -10.3e-3]):
+        calibration.observe(f)
     assert 'stamped 10.2 ms apart' in calibration.reason
     assert 'removed from then on' in calibration.reason
     assert calibration.reason.endswith('stamp both encoders on one clock')
     pending = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=5)
-    pending.observe(SimpleNamespace(time_offset_s=30e-3))
+    pending.observe(_fits([30e-3])[0])
     assert 'stamped 30.0 ms apart' in pending.reason and 'not yet removed' in pending.reason
