@@ -203,6 +203,11 @@ class TimeOffsetCalibration:
         self.extractor.link_time_offset_s += median
         return True
 
+    @property
+    def corrections(self):
+        """Return how many times the windows changed the offset (following a drift is not one)."""
+        return len(self._changes)
+
     def follow(self, t_s):
         """
         Move the offset along its :attr:`drift` to stream stamp ``t_s`` [s]; return the change.

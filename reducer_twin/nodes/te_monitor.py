@@ -150,12 +150,12 @@ class TEMonitor(Node):
 
     def _analyze_rows(self, rows):
         """Run the joint's TE extraction and window analysis; publish the windows (worker)."""
-        learnt = self.twin.calibration.applied
+        learnt = self.twin.calibration.corrections
         ok, windows = self.rejects.guard('analysis', 'bad_samples', self.twin.update,
                                          *rows.T)
         if not ok:
             return
-        if self.twin.calibration.applied not in (None, learnt):
+        if self.twin.calibration.corrections > learnt:
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
         say_faults(self.get_logger(), self.joint, self.twin, self._said)
