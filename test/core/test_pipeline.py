@@ -521,7 +521,8 @@ def test_a_drifting_clock_is_followed_between_the_windows_and_said():
         t += 10.0
     assert calibration.drift == pytest.approx(1e-4, rel=0.01)
     assert extractor.link_time_offset_s == pytest.approx(4e-3)
-    delta = calibration.follow(t + 5.0)     # 5 s after the last correction: 0.5 ms more
+    # The last correction holds at the middle of its windows (36 s): 5 s on, 0.5 ms more.
+    delta = calibration.follow(t - 4.0 + 5.0)
     assert delta == pytest.approx(0.5e-3, rel=0.02)
     assert extractor.link_time_offset_s == pytest.approx(4.5e-3, rel=0.01)
     assert 'drift by 6 ms a minute (100 ppm' in calibration.reason
