@@ -425,7 +425,8 @@ class TwinFront:
         """
         Return how the inputs are read otherwise than published, kind to line (only those found).
 
-        ``'velocity'``: a velocity field that is not the link angle's rate; ``'held'``: an
+        ``'velocity'``: a velocity field that is not the link angle's rate;
+        ``'velocity_leads'``: one that leads it (a link reading latched late); ``'held'``: an
         effort held between slower updates; ``'correlated'``: an effort whose noise is
         correlated over samples; ``'encoders'``: an encoder reading held so; ``'steps'``:
         an encoder that reports the output angle coarsely (:mod:`.encoder_steps`);
@@ -435,6 +436,7 @@ class TwinFront:
         constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
+                 ('velocity_leads', self.analyzer.velocity_leads),
                  ('held', self.analyzer.effort_held),
                  ('correlated', self.analyzer.effort_correlated),
                  ('encoders', self.extractor.held_reason),

@@ -505,6 +505,11 @@ class WindowAnalyzer:
         return self._velocity.fault
 
     @property
+    def velocity_leads(self):
+        """Say when the velocity field leads the link angle (``VelocityCheck.leads``)."""
+        return self._velocity.leads
+
+    @property
     def effort_held(self):
         """
         Say when the effort is held between updates slower than the stream, else None.

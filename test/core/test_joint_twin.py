@@ -277,6 +277,27 @@ def test_a_link_read_milliseconds_off_its_stamp_reads_the_same_in_small_chunks_a
     np.testing.assert_allclose(lm[0], lm[1], rtol=1e-3)   # the learnt µs: chunk-timed
 
 
+@pytest.mark.parametrize('late_ms', [0, 20])
+def test_a_link_reading_latched_late_in_its_message_is_said_by_its_velocity(late_ms):
+    # The link angle older than its velocity and effort: the calibration removes the
+    # encoders' offset, but the effort then stays that far from the TE (not corrected).
+    sim = JointSimulator(PARAMS, SimConfig(initial_wear_m=8e-6, seed=3))
+    b = sim.step(40000)
+    shift = int(round(late_ms * 1e-3 / np.median(np.diff(b.t))))
+    link = np.concatenate([np.full(shift, b.link_angle[0]), b.link_angle[:b.t.size - shift]])
+    front = TwinFront(PARAMS)
+    for k in range(0, b.t.size, 500):
+        piece = slice(k, k + 500)
+        front.update(b.t[piece], b.motor_angle[piece], link[piece], b.effort[piece],
+                     b.link_velocity[piece])
+    said = front.input_warnings().get('velocity_leads')
+    if not late_ms:
+        assert said is None
+    else:
+        (lead,) = re.findall(r'leads the link angle.s rate by ([0-9.]+) ms', said)
+        assert float(lead) == pytest.approx(late_ms, abs=2.0)
+
+
 def _held_link_windows(judge=True, motor_too=False, wear=8e-6):
     """Return the front and lost motions of a link (and motor) read every 4th sample at 1 kHz."""
     sim = JointSimulator(PARAMS, SimConfig(initial_wear_m=wear, seed=4))
