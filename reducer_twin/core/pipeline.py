@@ -91,8 +91,10 @@ TIME_OFFSET_TRACK_S = 0.5e-3
 """
 Median of the next windows' time offsets [s] from which a learnt offset is corrected again.
 
-Half the linear term (:data:`.te_extraction.TIME_OFFSET_LINEAR_S`), so that a clock drifting
-by up to 50 ppm is corrected, by the linear map, before the 2-s windows find more than it.
+Half the linear term (:data:`.te_extraction.TIME_OFFSET_LINEAR_S`): a clock drifting by
+50 ppm moves 0.5 ms in the ten seconds of five 2-s windows, so its corrections stay within
+the linear map. Measured on the independent generator: 20 ppm every joint within 2.5 %,
+100 ppm within 3.7 %, 50 ppm one base +30 % (README, two clocks that drift apart).
 """
 
 
