@@ -391,9 +391,10 @@ class TwinFront:
         the offset is first moved along the drift to the chunk's middle, and the TE
         already pooled and buffered referred to it.
         """
-        t = np.asarray(t_s, dtype=float)
-        if t.ndim == 1 and t.size and self.calibration.drift is not None:
-            delta = self.calibration.follow(float(0.5 * (t[0] + t[-1])))
+        if self.calibration.drift is not None:
+            t = np.asarray(t_s, dtype=float)
+            delta = self.calibration.follow(float(0.5 * (t[0] + t[-1]))) \
+                if t.ndim == 1 and t.size else 0.0
             if delta:
                 self.analyzer.retime(delta)
         return self.extractor.update(t_s, motor, t_s, link)

@@ -155,6 +155,8 @@ class TimeOffsetCalibration:
         The offset added to the extractor so far [s] (None until learnt).
     delta : float or None
         What the latest application added [s] (the window analysis refers its TE by it).
+    drift : float or None
+        How fast the offset drifts [s per s] (:meth:`_drift`), None while it does not.
     settled : bool
         What is left of the offset lies within the linear term (until a later median
         says otherwise, or :meth:`restart`).
@@ -168,6 +170,7 @@ class TimeOffsetCalibration:
         self.applied = None
         self.delta = None
         self.settled = False
+        self.drift = None
         self._times = []        # the estimates' window ends [s]
         self._changes = []      # (mid-stamp of its windows [s], offset after it [s])
 
@@ -205,6 +208,7 @@ class TimeOffsetCalibration:
         self.settled = abs(median) <= TIME_OFFSET_LINEAR_S
         self.delta = median
         self._changes.append((middle, self.applied))
+        self.drift = self._drift()
         self.extractor.link_time_offset_s += median
         return True
 
@@ -220,17 +224,15 @@ class TimeOffsetCalibration:
         Between the windows' corrections the offset follows the drift last measured, so
         that what the windows find stays within the linear term.
         """
-        rate = self.drift
-        if rate is None or not np.isfinite(t_s):
+        if self.drift is None or not np.isfinite(t_s):
             return 0.0
         t0, a0 = self._changes[-1]
-        delta = a0 + rate * max(t_s - t0, 0.0) - self.applied
+        delta = a0 + self.drift * max(t_s - t0, 0.0) - self.applied
         self.applied += delta
         self.extractor.link_time_offset_s += delta
         return delta
 
-    @property
-    def drift(self):
+    def _drift(self):
         """
         Return how fast the offset drifts [s per s], or None while it does not.
 
@@ -281,6 +283,7 @@ class TimeOffsetCalibration:
             self.extractor.link_time_offset_s -= self.applied
         self.applied = self.delta = None
         self.settled = False
+        self.drift = None
         self._changes = []
         self.estimates, self._times = [], []
 

@@ -342,7 +342,6 @@ class WindowAnalyzer:
         self.windows_effort_fault = 0
         self.last_observed_t = None     # end of the last window with a lost motion [s]
         self.latest_t = None            # latest stamp fed [s]
-        self.first_t = None             # first stamp fed [s]
         self._segment = None            # (first stamp since the last clock reset [s], stream
         self._segment_origin_s = 0.0    # time before it [s]): stream time across resets
         self._since = dict.fromkeys(_SINCE, 0)
@@ -408,8 +407,6 @@ class WindowAnalyzer:
         self.samples_seen += n_fresh
         self._since['seen'] += n_fresh
         if n_fresh:
-            if self.first_t is None:
-                self.first_t = float(np.min(stream.t[fresh]))
             if self._segment is None:
                 self._segment = float(np.min(stream.t[fresh]))
             latest = float(np.max(stream.t[fresh]))
@@ -871,8 +868,8 @@ class WindowAnalyzer:
             usable &= ~unknown[:, None]
         # A time offset beyond a linear term of the TE, not yet removed (learnt from the
         # first windows, :class:`.pipeline.TimeOffsetCalibration`): no lost motion is read.
-        # Once removed, what is left is within it: a window's fit beyond is its noise (at
-        # 100 Hz 1 ms is a tenth of the sample period; 7 of 1 808 third-generator windows).
+        # Once removed, what is left is within it: a window's fit beyond it is then its
+        # noise (at 100 Hz 1 ms is a tenth of the sample period).
         offset = np.where(ident[:, -1], beta[:, -1], np.nan)
         unremoved = (np.abs(offset) > TIME_OFFSET_LINEAR_S) & (not self.offset_removed)
         if unremoved.any():
