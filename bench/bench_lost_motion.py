@@ -29,6 +29,7 @@ Usage::
     .venv/bin/python bench/bench_lost_motion.py [--runs 24] [--noise 2,1] [--duration-s 150]
         [--stamp-jitter-us 300 --layout combined --rate-hz 1000] [--generator third]
         [--effort-filter-ms 50 [--effort-lag-ms 50]]
+        [--motor-stamp-offset-ms 20] [--motor-clock-ppm 100]
 
 ``--generator third`` runs the same on ``bench/third_generator.py`` (a catalogue-style
 torsional curve whose play may still open beyond the test torque, its own effort noise
@@ -36,6 +37,8 @@ and controller).
 ``--effort-filter-ms 50`` passes the independent generator's effort through a drive's
 first-order torque filter; ``--effort-lag-ms 50`` tells ``analyze`` so
 (``twin.effort_lag_s`` in ``--config``).
+``--motor-stamp-offset-ms`` and ``--motor-clock-ppm`` stamp the independent generator's
+motor topic by another clock: later by an offset, drifting by parts per million.
 """
 
 import argparse
@@ -94,7 +97,8 @@ def window_lost_motion(derived, joints):
 
 
 def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen,
-            layout='split', rate_hz=None, band_hz=None, effort_filter_s=None, told_lag_s=None):
+            layout='split', rate_hz=None, band_hz=None, effort_filter_s=None, told_lag_s=None,
+            motor_clock=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -127,6 +131,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
         constant [s] (a drive's filtered torque); None: unfiltered.
     told_lag_s : float, optional
         The ``twin.effort_lag_s`` given to ``analyze`` (by ``--config``); None: none.
+    motor_clock : dict, optional
+        The independent generator's ``motor_stamp_offset_s`` and ``motor_clock_ppm``.
 
     Returns
     -------
@@ -141,7 +147,8 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
                        effort_noise_pct=noise_pct, layout=layout, rate_hz=rate_hz,
                        stamp_jitter_us=stamp_jitter_us,
                        **({} if band_hz is None else {'effort_noise_band_hz': band_hz}),
-                       **({} if effort_filter_s is None else {'effort_filter_s': effort_filter_s}))
+                       **({} if effort_filter_s is None else {'effort_filter_s': effort_filter_s}),
+                       **(motor_clock or {}))
     bag = tmp / f'bag-{seed}-{noise_pct}'
     derived = tmp / f'out-{seed}-{noise_pct}'
     truth = source.generate_bag(spec, bag)
@@ -277,13 +284,26 @@ def main(argv=None):
     parser.add_argument('--effort-lag-ms', type=float, metavar='MS',
                         help='tell analyze the filter: twin.effort_lag_s of MS ms (default '
                         'not told)')
+    parser.add_argument('--motor-stamp-offset-ms', type=float, metavar='MS',
+                        help='motor topic stamped MS ms later than the link topic (independent '
+                        'generator, split layout)')
+    parser.add_argument('--motor-clock-ppm', type=float, metavar='PPM',
+                        help="motor topic's clock drifting from the link's by PPM (independent "
+                        'generator, split layout)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
     if args.effort_noise_band is not None and (args.generator != 'independent'
                                                or args.rate_hz is None):
         parser.error('--effort-noise-band: give --generator independent and --rate-hz')
-    if args.effort_filter_ms is not None and args.generator != 'independent':
-        parser.error('--effort-filter-ms: give --generator independent')
+    for option, value in (('--effort-filter-ms', args.effort_filter_ms),
+                          ('--motor-stamp-offset-ms', args.motor_stamp_offset_ms),
+                          ('--motor-clock-ppm', args.motor_clock_ppm)):
+        if value is not None and args.generator != 'independent':
+            parser.error(f'{option}: give --generator independent')
+    motor_clock = {key: value for key, value in (
+        ('motor_stamp_offset_s', None if args.motor_stamp_offset_ms is None
+         else 1e-3 * args.motor_stamp_offset_ms),
+        ('motor_clock_ppm', args.motor_clock_ppm)) if value is not None}
     source = gen if args.generator == 'independent' else third_generator
     levels = [float(x) for x in args.noise.split(',')] if source is gen else [None]
     kinds = tuple(k.strip() for k in args.kinds.split(','))
@@ -299,7 +319,8 @@ def main(argv=None):
                               args.effort_noise_band,
                               None if args.effort_filter_ms is None
                               else 1e-3 * args.effort_filter_ms,
-                              None if args.effort_lag_ms is None else 1e-3 * args.effort_lag_ms)
+                              None if args.effort_lag_ms is None else 1e-3 * args.effort_lag_ms,
+                              motor_clock)
                 results[level].append(run)
                 if args.quiet:
                     continue

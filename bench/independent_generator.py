@@ -580,6 +580,10 @@ class Spec:
         Names.
     stamp_jitter_us : float or None
         Standard deviation of the stamp jitter; None: drawn in 10-50 us.
+    motor_stamp_offset_s, motor_clock_ppm : float or None
+        The motor topic's stamps later than the link's by this much [s], and drifting
+        from them by this many parts per million (two clocks; ``'split'`` layout only);
+        None: on the link's clock.
 
     """
 
@@ -594,6 +598,8 @@ class Spec:
     effort_noise_band_hz: tuple = None
     velocity_filter_s: float = None
     effort_filter_s: float = None
+    motor_stamp_offset_s: float = None
+    motor_clock_ppm: float = None
     law: str = None
     layout: str = 'split'
     motor_angles: str = 'raw'
@@ -647,6 +653,12 @@ class Spec:
             bad('--effort-filter-ms', 1e3 * self.effort_filter_s, 'in [0, 1000] ms')
         if self.stamp_jitter_us is not None and not (0.0 <= self.stamp_jitter_us <= 1000.0):
             bad('--stamp-jitter-us', self.stamp_jitter_us, 'in [0, 1000] us')
+        for name, value, scale in (('--motor-stamp-offset-ms', self.motor_stamp_offset_s, 1e3),
+                                   ('--motor-clock-ppm', self.motor_clock_ppm, 1.0)):
+            if value is not None and not abs(value * scale) <= 1000.0:
+                bad(name, value * scale, 'in [-1000, 1000]')
+            if value is not None and self.layout != 'split':
+                bad(name, value * scale, 'given with --layout split (one message, one stamp)')
         for name, value, allowed in (('--law', self.law, LAWS + (None,)),
                                      ('--layout', self.layout, LAYOUTS),
                                      ('--motor-angles', self.motor_angles, ('raw', 'output')),
@@ -793,6 +805,8 @@ class Stream(Recording):
                                          else list(self.spec.effort_noise_band_hz)),
                 'velocity_filter_s': self.spec.velocity_filter_s,
                 'effort_filter_s': self.spec.effort_filter_s,
+                'motor_stamp_offset_s': self.spec.motor_stamp_offset_s,
+                'motor_clock_ppm': self.spec.motor_clock_ppm,
                 'lost_motion_limit_arcmin': LIMIT_ARCMIN, 'ratio': RATIO, 'joints': out}
 
 
@@ -843,6 +857,11 @@ def clock(spec, drawn_rate, drawn_jitter, delays, noise):
     link_stamp, motor_stamp = stamps(), stamps()
     link_log = _log_times(noise, link_stamp, delays[0][0], delays[1][0])
     motor_log = _log_times(noise, motor_stamp, delays[0][1], delays[1][1])
+    # The motor topic stamped by another clock: later by an offset, drifting by ppm
+    # (the recorder logs it on arrival, by its own clock).
+    shift = (spec.motor_stamp_offset_s or 0.0) + 1e-6 * (spec.motor_clock_ppm or 0.0) * t
+    if np.any(shift):
+        motor_stamp = motor_stamp + np.round(shift * 1e9).astype(np.int64)
     return {'rate_hz': rate, 'jitter_s': jitter, 't': t, 'link_stamp_ns': link_stamp,
             'motor_stamp_ns': motor_stamp, 'link_log_ns': link_log, 'motor_log_ns': motor_log}
 
@@ -1238,6 +1257,10 @@ def _parser():
     p.add_argument('--effort-filter-ms', type=float, metavar='MS',
                    help="effort through a first-order filter of MS ms (a drive's filtered "
                    'torque estimate; default unfiltered)')
+    p.add_argument('--motor-stamp-offset-ms', type=float, metavar='MS',
+                   help='motor topic stamped MS ms later than the link topic (--layout split)')
+    p.add_argument('--motor-clock-ppm', type=float, metavar='PPM',
+                   help="motor topic's clock drifting from the link's by PPM (--layout split)")
     p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
@@ -1272,7 +1295,10 @@ def main(argv=None):
                 velocity_filter_s=(None if args.velocity_filter_ms is None
                                    else 1e-3 * args.velocity_filter_ms),
                 effort_filter_s=(None if args.effort_filter_ms is None
-                                 else 1e-3 * args.effort_filter_ms), law=args.law)
+                                 else 1e-3 * args.effort_filter_ms),
+                motor_stamp_offset_s=(None if args.motor_stamp_offset_ms is None
+                                      else 1e-3 * args.motor_stamp_offset_ms),
+                motor_clock_ppm=args.motor_clock_ppm, law=args.law)
     return cli_run(args, spec)
 
 

@@ -219,6 +219,20 @@ def test_a_filtered_effort_lags_the_load_by_its_time_constant():
         gen.Spec(**SHORT, effort_filter_s=2.0).check()
 
 
+def test_a_motor_topic_on_another_clock_is_stamped_late_and_drifts():
+    # Two clocks: the motor's stamps later by the offset plus the drift's share; nothing
+    # else about the recording moves.
+    short = {**SHORT, 'rate_hz': 1000.0, 'hours': 10.0 / 3600.0}
+    other = gen.generate(gen.Spec(**short, motor_stamp_offset_s=0.02, motor_clock_ppm=100.0))
+    fresh = gen.generate(gen.Spec(**short))
+    late = (other.motor_stamp_ns - fresh.motor_stamp_ns) * 1e-9
+    np.testing.assert_allclose(late, 0.02 + 1e-4 * fresh.t, atol=1e-9)
+    np.testing.assert_array_equal(other.link_stamp_ns, fresh.link_stamp_ns)
+    np.testing.assert_array_equal(other.motor, fresh.motor)
+    with pytest.raises(gen.GeneratorError, match='--motor-clock-ppm'):
+        gen.Spec(**{**SHORT, 'layout': 'combined'}, motor_clock_ppm=50.0).check()
+
+
 def test_effort_carries_friction_the_reducer_does_not_transmit(split_bag):
     _, stream, _ = split_bag
     for i, j in enumerate(stream.joints):
