@@ -41,11 +41,13 @@ motor's travel over ``delta`` less the link's, ``omega·delta`` only while both 
 Through the play the motor moves and the link does not, and the TE's own change over
 ``delta`` enters the reversals that the lost motion is read from; the acceleration adds
 ``delta^2·alpha/2``. On the model's simulator (an unloaded joint, 60 s at 1 kHz, 2 %
-effort noise, two seeds) the windows' pooled TE referred to the learnt offset by the linear
-map read the lost motion within 0.2 % to 1 ms, +1.6 % at 2 ms, +5 % at 3 ms, +17 % at 5 ms,
-+69 % at 10 ms. Beyond this the TE read before the offset was removed is not used: its
-windows give no lost motion, the pool and the partial window are dropped when the offset is
-learnt, and a jump of a window's mean is not said to be a step of the TE's constant.
+effort noise, two seeds; a one-off sweep, the 10-20 ms cases kept in
+``test/core/test_joint_twin.py``) the windows' pooled TE referred to the learnt offset by
+the linear map read the lost motion within 0.2 % to 1 ms, +1.6 % at 2 ms, +5 % at 3 ms,
++17 % at 5 ms, +69 % at 10 ms. Beyond this the TE read before the offset was removed is
+not used: its windows give no lost motion, the pool and the partial window are dropped when
+the offset is learnt, and a jump of a window's mean is not said to be a step of the TE's
+constant.
 """
 
 
