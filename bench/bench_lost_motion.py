@@ -97,8 +97,7 @@ def window_lost_motion(derived, joints):
 
 
 def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, source=gen,
-            layout='split', rate_hz=None, band_hz=None, effort_filter_s=None, told_lag_s=None,
-            motor_clock=None):
+            layout='split', rate_hz=None, band_hz=None, told_lag_s=None, chain=None):
     """
     Generate one recording, analyse it with the CLI, and compare.
 
@@ -126,13 +125,11 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
         Sample rate [Hz]; drawn in 100-1000 Hz when None.
     band_hz : tuple of float, optional
         The independent generator's effort noise band-limited to it [Hz]; None: white.
-    effort_filter_s : float, optional
-        The independent generator's effort through a first-order filter of this time
-        constant [s] (a drive's filtered torque); None: unfiltered.
     told_lag_s : float, optional
         The ``twin.effort_lag_s`` given to ``analyze`` (by ``--config``); None: none.
-    motor_clock : dict, optional
-        The independent generator's ``motor_stamp_offset_s`` and ``motor_clock_ppm``.
+    chain : dict, optional
+        The independent generator's effort filter and motor clock
+        (``independent_generator.signal_chain_spec``); None: none.
 
     Returns
     -------
@@ -147,8 +144,7 @@ def run_one(tmp, seed, noise_pct, duration_s, kinds, stamp_jitter_us=None, sourc
                        effort_noise_pct=noise_pct, layout=layout, rate_hz=rate_hz,
                        stamp_jitter_us=stamp_jitter_us,
                        **({} if band_hz is None else {'effort_noise_band_hz': band_hz}),
-                       **({} if effort_filter_s is None else {'effort_filter_s': effort_filter_s}),
-                       **(motor_clock or {}))
+                       **(chain or {}))
     bag = tmp / f'bag-{seed}-{noise_pct}'
     derived = tmp / f'out-{seed}-{noise_pct}'
     truth = source.generate_bag(spec, bag)
@@ -278,32 +274,19 @@ def main(argv=None):
     parser.add_argument('--effort-noise-band', type=gen.band_hz, metavar='LOW-HIGH',
                         help='effort noise band-limited to LOW-HIGH Hz (independent generator '
                         'with --rate-hz above twice HIGH; default white)')
-    parser.add_argument('--effort-filter-ms', type=float, metavar='MS',
-                        help="effort through a first-order filter of MS ms (a drive's filtered "
-                        'torque; independent generator; default unfiltered)')
+    gen.add_signal_chain_options(parser)     # the independent generator's
     parser.add_argument('--effort-lag-ms', type=float, metavar='MS',
                         help='tell analyze the filter: twin.effort_lag_s of MS ms (default '
                         'not told)')
-    parser.add_argument('--motor-stamp-offset-ms', type=float, metavar='MS',
-                        help='motor topic stamped MS ms later than the link topic (independent '
-                        'generator, split layout)')
-    parser.add_argument('--motor-clock-ppm', type=float, metavar='PPM',
-                        help="motor topic's clock drifting from the link's by PPM (independent "
-                        'generator, split layout)')
     parser.add_argument('--quiet', action='store_true', help='no line per recording')
     args = parser.parse_args(argv)
     if args.effort_noise_band is not None and (args.generator != 'independent'
                                                or args.rate_hz is None):
         parser.error('--effort-noise-band: give --generator independent and --rate-hz')
-    for option, value in (('--effort-filter-ms', args.effort_filter_ms),
-                          ('--motor-stamp-offset-ms', args.motor_stamp_offset_ms),
-                          ('--motor-clock-ppm', args.motor_clock_ppm)):
+    chain = gen.signal_chain_spec(args)
+    for option, value in zip(gen.SIGNAL_CHAIN_OPTIONS, chain.values()):
         if value is not None and args.generator != 'independent':
             parser.error(f'{option}: give --generator independent')
-    motor_clock = {key: value for key, value in (
-        ('motor_stamp_offset_s', None if args.motor_stamp_offset_ms is None
-         else 1e-3 * args.motor_stamp_offset_ms),
-        ('motor_clock_ppm', args.motor_clock_ppm)) if value is not None}
     source = gen if args.generator == 'independent' else third_generator
     levels = [float(x) for x in args.noise.split(',')] if source is gen else [None]
     kinds = tuple(k.strip() for k in args.kinds.split(','))
@@ -317,10 +300,8 @@ def main(argv=None):
                 run = run_one(Path(tmp), seed, level, args.duration_s, kinds,
                               args.stamp_jitter_us, source, args.layout, args.rate_hz,
                               args.effort_noise_band,
-                              None if args.effort_filter_ms is None
-                              else 1e-3 * args.effort_filter_ms,
                               None if args.effort_lag_ms is None else 1e-3 * args.effort_lag_ms,
-                              motor_clock)
+                              chain if source is gen else None)
                 results[level].append(run)
                 if args.quiet:
                     continue

@@ -1243,6 +1243,30 @@ def cli_run(args, spec, generate_bag=generate_bag):
     return 0
 
 
+SIGNAL_CHAIN_OPTIONS = ('--effort-filter-ms', '--motor-stamp-offset-ms', '--motor-clock-ppm')
+"""Options of :func:`add_signal_chain_options` (the generator's, and ``bench_lost_motion``'s)."""
+
+
+def add_signal_chain_options(p):
+    """Add the effort's filter and the motor topic's clock (:func:`signal_chain_spec`)."""
+    p.add_argument('--effort-filter-ms', type=float, metavar='MS',
+                   help="effort through a first-order filter of MS ms (a drive's filtered "
+                   'torque estimate; default unfiltered)')
+    p.add_argument('--motor-stamp-offset-ms', type=float, metavar='MS',
+                   help='motor topic stamped MS ms later than the link topic (--layout split)')
+    p.add_argument('--motor-clock-ppm', type=float, metavar='PPM',
+                   help="motor topic's clock drifting from the link's by PPM (--layout split)")
+
+
+def signal_chain_spec(args):
+    """Return the :class:`Spec` keywords of :func:`add_signal_chain_options` (SI)."""
+    def seconds(ms):
+        return None if ms is None else 1e-3 * ms
+    return {'effort_filter_s': seconds(args.effort_filter_ms),
+            'motor_stamp_offset_s': seconds(args.motor_stamp_offset_ms),
+            'motor_clock_ppm': args.motor_clock_ppm}
+
+
 def _parser():
     p = cli_parser('independent_generator.py',
                    'Write a rosbag2 MCAP recording of RV-80E joints from a model independent '
@@ -1254,13 +1278,7 @@ def _parser():
     p.add_argument('--velocity-filter-ms', type=float, metavar='MS',
                    help="velocity field through a first-order filter of MS ms (a drive's "
                    'filtered velocity; default unfiltered)')
-    p.add_argument('--effort-filter-ms', type=float, metavar='MS',
-                   help="effort through a first-order filter of MS ms (a drive's filtered "
-                   'torque estimate; default unfiltered)')
-    p.add_argument('--motor-stamp-offset-ms', type=float, metavar='MS',
-                   help='motor topic stamped MS ms later than the link topic (--layout split)')
-    p.add_argument('--motor-clock-ppm', type=float, metavar='PPM',
-                   help="motor topic's clock drifting from the link's by PPM (--layout split)")
+    add_signal_chain_options(p)
     p.add_argument('--law', choices=LAWS, help='force the lost-motion growth law')
     return p
 
@@ -1294,11 +1312,7 @@ def main(argv=None):
                 effort_noise_band_hz=args.effort_noise_band,
                 velocity_filter_s=(None if args.velocity_filter_ms is None
                                    else 1e-3 * args.velocity_filter_ms),
-                effort_filter_s=(None if args.effort_filter_ms is None
-                                 else 1e-3 * args.effort_filter_ms),
-                motor_stamp_offset_s=(None if args.motor_stamp_offset_ms is None
-                                      else 1e-3 * args.motor_stamp_offset_ms),
-                motor_clock_ppm=args.motor_clock_ppm, law=args.law)
+                **signal_chain_spec(args), law=args.law)
     return cli_run(args, spec)
 
 
