@@ -434,7 +434,8 @@ class TwinFront:
         ``'ratio'``: a motor that turns another number of times than the configured
         ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped 3 ms or
         more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`); ``'te_step'``: the TE's
-        constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`).
+        constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`);
+        ``'soft_zone'``: a play still being taken up at the test torque (:mod:`.soft_zone`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('velocity_leads', self.analyzer.velocity_leads),
@@ -444,7 +445,8 @@ class TwinFront:
                  ('steps', self.extractor.step_reason),
                  ('ratio', self.extractor.ratio_reason),
                  ('time_offset', self.calibration.reason),
-                 ('te_step', self.analyzer.te_stepped))
+                 ('te_step', self.analyzer.te_stepped),
+                 ('soft_zone', self.analyzer.soft_zone))
         return {kind: line for kind, line in found if line is not None}
 
     def refusal(self, reason):

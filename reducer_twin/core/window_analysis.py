@@ -44,6 +44,7 @@ from .flanks import FlankPool
 from .friction_fit import FrictionFit
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
+from .soft_zone import SoftZoneCheck
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step, TorqueSmoothing
@@ -312,6 +313,7 @@ class WindowAnalyzer:
         self._rate_held = None
         self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
                                               self.compliance_prior, self.min_bins)
+        self._soft_zone = SoftZoneCheck(self.takeup_torque, self.tables.series_stiffness)
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._lag_head = None   # (stamps, effort) just before the buffer (effort_lag_s)
         self._last_t = None
@@ -505,6 +507,11 @@ class WindowAnalyzer:
     def velocity_leads(self):
         """Say when the velocity field leads the link angle (``VelocityCheck.leads``)."""
         return self._velocity.leads
+
+    @property
+    def soft_zone(self):
+        """Say when the play is still being taken up at the test torque (:mod:`.soft_zone`)."""
+        return self._soft_zone.reason
 
     @property
     def effort_held(self):
@@ -894,6 +901,7 @@ class WindowAnalyzer:
                                     odd * ~self._flanks.first_order(ident)[:, None, :])
         usable &= ~faulty[:, None]
         self.windows_effort_fault += int(faulty.sum())
+        self._soft_zone.observe(torque_h, width, std, usable)
         fit = self._lost_motion_fit.fit(torque_h, width, std, usable)
         # A lost motion no reducer has is an encoder or configuration fault.
         beyond = fit[2] > PLAUSIBLE_LOST_MOTION_RAD

@@ -81,3 +81,24 @@ def test_a_forearm_whose_angle_error_follows_its_gravity_torque_is_not_refused_f
     joint = json.loads(done.stdout)['joints']['joint_3']
     assert joint['observed'] and joint['reason'] is None, joint['reason']
     assert joint['lost_motion_arcmin'] > 0.0
+
+
+@pytest.mark.slow
+def test_a_play_still_taken_up_beyond_the_test_torque_is_said_with_its_width_there(tmp_path):
+    # The forearm's soft zone reaches to 6.0 % of rated, twice the 3 % test torque: its
+    # lost motion (the catalogue's width at the test torque) is about half the play the
+    # loaded flanks give, which is what the twin reads. It says so, with the width at the
+    # test torque; the shoulder, whose knee is at 2.6 %, is read right and says nothing.
+    spec = gen.Spec(seed=7, kinds=('base', 'shoulder', 'forearm'), hours=300.0,
+                    aging_factor=3600.0, rate_hz=1000.0, start_fraction=0.4)
+    truth = gen.generate_bag(spec, tmp_path / 'bag')['joints']
+    assert truth['joint_3']['knee_torque_pct'] > 5.5 > 3.0 > truth['joint_2']['knee_torque_pct']
+    done = analyze_process(tmp_path / 'bag', tmp_path / 'd', '--report', tmp_path / 'report')
+    assert done.returncode == 0, done.stderr[-500:]
+    said = [line for line in done.stderr.splitlines() if 'narrower than the flanks' in line]
+    assert len(said) == 1 and ': joint_3: ' in said[0], said
+    width = float(said[0].split('is about ')[1].split(';')[0])
+    assert width == pytest.approx(truth['joint_3']['lost_motion_end_arcmin'], rel=0.15)
+    reported = json.loads(done.stdout)['joints']['joint_3']['lost_motion_arcmin']
+    assert reported > 1.5 * truth['joint_3']['lost_motion_end_arcmin']   # not corrected
+    assert 'narrower than the flanks' in (tmp_path / 'report' / 'index.html').read_text()
