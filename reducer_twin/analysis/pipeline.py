@@ -689,9 +689,11 @@ class _Run:
              'high and its remaining life short by up to that share')
 
     def _inputs_said(self, joint, front):
-        """Say how the inputs are read otherwise than published (``TwinFront.input_warnings``)."""
-        for said in front.twin.input_warnings().values():
-            warn(self.bag, f'{joint}: {said}')
+        """Say how the inputs are read otherwise than published; return the lines said."""
+        said = list(front.twin.input_warnings().values())
+        for line in said:
+            warn(self.bag, f'{joint}: {line}')
+        return said
 
     def _rate_said(self, joint, res):
         """Say when an observed joint's remaining life is the model's wear rate, not its own."""
@@ -833,7 +835,7 @@ class _Run:
                 front.twin.refusal(self._not_observed(joint, front, counts, sides)))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
-            self._inputs_said(joint, front)
+            res.inputs = self._inputs_said(joint, front)
             self._rate_said(joint, res)
             self._service_said(joint, res, outputs)
             self._note_gaps(joint, front)

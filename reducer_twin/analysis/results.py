@@ -56,6 +56,7 @@ class JointResult:
     partial: str = None
     velocity: str = None
     service: dict = None
+    inputs: list = field(default_factory=list)
 
     @property
     def observed(self):
@@ -77,7 +78,10 @@ class JointResult:
             link and motor samples were paired, and why) and ``velocity`` (``'field'``:
             the velocity field, found to be the link angle's rate; ``'link_angle'``: the
             rate of the link angle, where the field is missing or is not that rate; None
-            without samples) and ``rate_resolved`` (whether the remaining life rests on
+            without samples), ``inputs`` (how the inputs are read otherwise than published:
+            the lines of the joint's input ``WARNING`` s,
+            :meth:`.joint_twin.TwinFront.input_warnings`; empty when none) and
+            ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
             law rather than the wear model's curve: its ``probability``, its ``weight`` in
@@ -105,6 +109,7 @@ class JointResult:
         out['partial'] = self.partial if observed else None
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
+        out['inputs'] = list(self.inputs)
         out.update(life_basis(wear, life, observed))
         out['service'] = self.service
         return out
@@ -165,7 +170,7 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            **life_basis({}, {}, False), 'service': None}
+                            **life_basis({}, {}, False), 'service': None, 'inputs': []}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

@@ -99,6 +99,10 @@ def test_a_play_still_taken_up_beyond_the_test_torque_is_said_with_its_width_the
     assert len(said) == 1 and ': joint_3: ' in said[0], said
     width = float(said[0].split('is about ')[1].split(';')[0])
     assert width == pytest.approx(truth['joint_3']['lost_motion_end_arcmin'], rel=0.15)
-    reported = json.loads(done.stdout)['joints']['joint_3']['lost_motion_arcmin']
+    joints = json.loads(done.stdout)['joints']
+    assert [line for line in joints['joint_3']['inputs'] if 'narrower' in line] \
+        == [said[0].split(': joint_3: ', 1)[1]]
+    assert not any('narrower' in line for line in joints['joint_2']['inputs'])
+    reported = joints['joint_3']['lost_motion_arcmin']
     assert reported > 1.5 * truth['joint_3']['lost_motion_end_arcmin']   # not corrected
     assert 'narrower than the flanks' in (tmp_path / 'report' / 'index.html').read_text()
