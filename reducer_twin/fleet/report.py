@@ -236,8 +236,11 @@ def write_fleet_report(store, rows, out_dir):
         image = _png(trend_figure(store.trend(reducer.row_id), title,
                                   reducer.lost_motion_limit_rad,
                                   observed=row['verdict'] != 'NOT OBSERVED'))
+        said = ''.join(f'<li>{html.escape(line)}</li>' for line in row.get('inputs') or ())
+        said = f'<p class="rule">Its inputs, as the latest analysis read them:</p><ul ' \
+               f'class="rule">{said}</ul>' if said else ''
         sections.append(f'<h3>{html.escape(title)}</h3><p class="rule">'
-                        f'{html.escape(row["reason"])}</p><img alt="{html.escape(title)}" '
+                        f'{html.escape(row["reason"])}</p>{said}<img alt="{html.escape(title)}" '
                         f'src="data:image/png;base64,{image}">')
     counts = {}
     for row in rows:

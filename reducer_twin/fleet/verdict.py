@@ -117,7 +117,9 @@ def fleet_row(reducer, params):
         (how far the wear model's curve carries the remaining life beyond the span its
         shape was compared over, as ``analyze --json`` gives it; None otherwise) and
         ``service_hours`` (the operating time it had before the twin first saw it, where
-        the configuration gave one and it was taken; else None).
+        the configuration gave one and it was taken; else None) and ``inputs`` (how the
+        latest analysis read its inputs otherwise than published, as ``analyze --json``
+        gives them: encoders stamped apart, a play still taken up at the test torque, ...).
 
     """
     r = reducer
@@ -135,6 +137,7 @@ def fleet_row(reducer, params):
     row['rate_resolved'] = summary.get('rate_resolved')
     row['growth_law'] = summary.get('growth_law')
     row['curve_extrapolation'] = summary.get('curve_extrapolation')
+    row['inputs'] = list(summary.get('inputs') or [])
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
         if verdict is not None and verdict[0] else None

@@ -48,6 +48,8 @@ def test_the_page_is_self_contained_with_the_ranked_table_rules_and_trends(fleet
     rows = json.loads(out)['reducers']
     assert rows[0]['verdict'] in ('REPLACE', 'PLAN', 'OK')
     assert [r['verdict'] for r in rows[1:]] == ['NOT OBSERVED', 'RETIRED']
+    # The model's simulator publishes what the twin reads as published: nothing to say.
+    assert all(r['inputs'] == [] for r in rows) and 'Its inputs' not in page
     positions = [page.index(f'<b>{r["verdict"]}</b>') for r in rows]
     assert positions == sorted(positions)
     for rule in ('REPLACE', 'PLAN', 'OK', 'NOT OBSERVED'):

@@ -142,3 +142,14 @@ def test_a_unit_known_since_new_is_only_told_to_be_watched_longer():
     reducer = dataclasses.replace(_reducer(24000.0), installed_ns=10 ** 18)
     reducer.summary['rate_resolved'] = False
     assert fleet_row(reducer, PARAMS)['reason'].endswith('not yet resolved (watch it longer)')
+
+
+def test_the_row_carries_how_the_latest_analysis_read_the_inputs():
+    # A reducer whose play is still taken up at the test torque reads pessimistic: the
+    # line the analysis gave it stays with its row, where a fleet view ranks it.
+    reducer = _reducer(5000.0)
+    assert fleet_row(reducer, PARAMS)['inputs'] == []
+    line = ("the transmission error's hysteresis at the lost-motion test torque (23.5 N·m) "
+            'is 1.48 arcmin narrower than the flanks of higher loads give (7 windows): ...')
+    reducer.summary['inputs'] = [line]
+    assert fleet_row(reducer, PARAMS)['inputs'] == [line]
