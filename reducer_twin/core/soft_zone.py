@@ -10,15 +10,17 @@ of rated) is narrower there than that: on the third generator
 (``bench/third_generator.py``) such units read their full soft zone, 0.5-1.6 arcmin more
 than their lost motion at the test torque, the bins at the test torque showing it.
 
-:class:`SoftZoneCheck` compares, in each window that has both, the hysteresis width in
-the bin at the test torque with the straight line through the bins of loads beyond
-:data:`FAR_LOADS` times it, and pools the shortfall over the stream. The estimate is not
+:class:`SoftZoneCheck` compares the hysteresis width in a window's bin at the test torque
+with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
+over recent windows, and pools the shortfall over the stream. The estimate is not
 changed by it; it is said (:attr:`SoftZoneCheck.reason`). Measured per joint (one-off
-survey, 300 h recordings at 1 kHz): third-generator units with knees at 4.0-6.0 % of
-rated fell 0.5-1.6 arcmin (33-83 %) short at the test torque; knees at 2.2-3.4 % 0-0.23
-arcmin (at most 14 %, the generator's friction loop still opening there); the independent
-generator's units within 0.02 arcmin; the model's simulator within 0.01 arcmin on used
-units and 0.06 arcmin (14 %) on new ones, whose contact curve bends most.
+survey, 300-h recordings at 1 kHz): third-generator units with knees at 4.0-6.0 % of
+rated fell 0.55-2.2 arcmin (26-73 %) short at the test torque; knees at 2.2-3.4 % -0.3
+to +0.19 arcmin (at most 10 %, the generator's friction loop still opening there); the
+independent generator's units within 0.02 arcmin; the model's simulator 0.03 arcmin on
+used units and 0.13 arcmin (21 %) on new ones, whose contact curve bends most (below the
+0.2-arcmin floor). ``bench/bench_lost_motion.py --generator third`` prints how many
+joints it is said of, by where their knee lies.
 """
 
 import math
@@ -34,7 +36,17 @@ FAR_LOADS = 2.5
 """Bins of loads from this multiple of the test torque on give the straight flanks."""
 
 FAR_BINS = 3
-"""Bins beyond :data:`FAR_LOADS` a window needs for its straight line."""
+"""Bins beyond :data:`FAR_LOADS` a window needs to add to the straight line."""
+
+FAR_MEMORY = 10.0
+"""
+Windows with those bins over which the pooled straight line fades.
+
+A window with a bin at the test torque seldom has bins far beyond it as well (3-6 of 50
+windows have the one, 3-22 the others, on 150-s recordings of the third generator at
+400-500 Hz; 0-1 both): it is compared with the line of recent windows. The play grows by
+a few hundredths of an arcminute over tens of windows.
+"""
 
 SHORTFALL_RAD = 0.2 * ARCMIN
 """Pooled shortfall (0.2 arcmin) from which the soft zone is said ..."""
@@ -72,13 +84,20 @@ class SoftZoneCheck:
         self.takeup_torque = float(takeup_torque)
         self.series_stiffness = float(series_stiffness)
         self.windows = 0
+        self._line = np.zeros(5)   # pooled Σw, Σw·T, Σw·T², Σw·h, Σw·T·h of the far bins
+        self._memory = math.exp(-1.0 / FAR_MEMORY)
         self._weight = 0.0      # sum of 1/sd^2 of the windows' shortfalls
         self._shortfall = 0.0   # their weighted sum [rad]
         self._play = 0.0        # the weighted sum of the play read at the test torque [rad]
 
     def observe(self, torque_b, width_b, std_b, usable):
         """
-        Add the windows of one batch.
+        Add the windows of one batch, in stream order.
+
+        A window with :data:`FAR_BINS` bins beyond :data:`FAR_LOADS` times the test torque
+        adds them to the straight line pooled over recent such windows (it fades by
+        :data:`FAR_MEMORY` of them); a window with a bin at the test torque is compared
+        with that line.
 
         Parameters
         ----------
@@ -91,39 +110,34 @@ class SoftZoneCheck:
         tt = self.takeup_torque
         near = usable & (np.abs(torque_b - tt) <= NEAR_SHARE * tt)
         far = usable & (torque_b >= FAR_LOADS * tt)
-        rows = near.any(axis=1) & (far.sum(axis=1) >= FAR_BINS)
-        if not rows.any():
+        lined = far.sum(axis=1) >= FAR_BINS
+        for k in np.flatnonzero(lined | near.any(axis=1)):
+            if lined[k]:
+                t, h = torque_b[k, far[k]], width_b[k, far[k]]
+                w = 1.0 / std_b[k, far[k]] ** 2
+                self._line = self._memory * self._line + np.array(
+                    [w.sum(), w @ t, w @ t ** 2, w @ h, w @ (t * h)])
+            if near[k].any():
+                self._compare(torque_b[k, near[k]], width_b[k, near[k]], std_b[k, near[k]])
+
+    def _compare(self, torque, width, std):
+        """Add one window's bins at the test torque against the pooled straight line."""
+        s0, s1, s2, sy, sty = self._line
+        det = s0 * s2 - s1 * s1
+        if not det > 0.0:
             return
-        near, far = near[rows], far[rows]
-        # Unused bins may hold NaN: zero weight must not meet them.
-        kept = near | far
-        torque_b, width_b = (np.where(kept, v[rows], 0.0) for v in (torque_b, width_b))
-        std_b = np.where(kept, std_b[rows], 1.0)
-        # The straight line width = a + b·T through the far bins, weighted, per window.
-        w = np.where(far, 1.0 / std_b ** 2, 0.0)
-        s0, s1 = w.sum(axis=1), (w * torque_b).sum(axis=1)
-        s2 = (w * torque_b ** 2).sum(axis=1)
-        sy, sty = (w * width_b).sum(axis=1), (w * torque_b * width_b).sum(axis=1)
-        det = s0 * s2 - s1 ** 2
-        good = det > 0.0
-        if not good.any():
-            return
-        det = np.where(good, det, 1.0)
         a, b = (s2 * sy - s1 * sty) / det, (s0 * sty - s1 * sy) / det
-        # The near bins, averaged per window by their weights.
-        wn = np.where(near, 1.0 / std_b ** 2, 0.0)
-        wn_sum = np.maximum(wn.sum(axis=1), 1e-300)
-        t_near = (wn * torque_b).sum(axis=1) / wn_sum
-        h_near = (wn * width_b).sum(axis=1) / wn_sum
+        wn = 1.0 / std ** 2
+        t_near, h_near = float(wn @ torque / wn.sum()), float(wn @ width / wn.sum())
+        # The line's variance at t_near, plus the near bins'.
+        var = (s2 - 2.0 * t_near * s1 + t_near ** 2 * s0) / det + 1.0 / float(wn.sum())
+        if not var > 0.0:
+            return
         line = a + b * t_near
-        # Variance of the line at t_near, plus the near bins'.
-        var = (s2 - 2.0 * t_near * s1 + t_near ** 2 * s0) / det + 1.0 / wn_sum
-        weight = np.where(good & (var > 0.0), 1.0 / np.where(var > 0.0, var, 1.0), 0.0)
-        self.windows += int(np.count_nonzero(weight))
-        self._weight += float(weight.sum())
-        self._shortfall += float((weight * (line - h_near)).sum())
-        play = line - 2.0 * t_near / self.series_stiffness
-        self._play += float((weight * play).sum())
+        self.windows += 1
+        self._weight += 1.0 / var
+        self._shortfall += (line - h_near) / var
+        self._play += (line - 2.0 * t_near / self.series_stiffness) / var
 
     @property
     def shortfall(self):

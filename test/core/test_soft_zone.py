@@ -68,14 +68,18 @@ def test_one_window_or_a_small_zone_is_not_enough():
     assert _checked(*_catalogue_bins(0.3, 0.06)).reason is None
 
 
-def test_unused_bins_may_hold_nan_and_windows_without_both_ends_are_skipped():
-    torque, width, std, usable = _catalogue_bins(2.0, 0.05)
+def test_a_window_at_the_test_torque_is_compared_with_the_line_of_recent_windows():
+    # A window with loads at the test torque seldom has loads far beyond it too: it is
+    # compared with the straight line the windows before it pooled. Unused bins may hold
+    # NaN; a window with nothing at the test torque only adds to the line.
+    torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=5)
     torque[:, -3:] = width[:, -3:] = np.nan
     usable[:, -3:] = False
-    usable[1] = CENTRES > 2.0 * TEST_TORQUE      # no bin at the test torque
-    usable[2] = CENTRES < 2.0 * TEST_TORQUE      # nothing beyond it
+    usable[0] = CENTRES < 2.0 * TEST_TORQUE      # no line yet: not compared
+    usable[2] = CENTRES > 2.0 * TEST_TORQUE      # nothing at the test torque
+    usable[3] = CENTRES < 2.0 * TEST_TORQUE      # compared with windows 1 and 2
     check = _checked(torque, width, std, usable)
-    assert check.windows == 2
+    assert check.windows == 3
     assert check.shortfall[0] == pytest.approx(0.8 * ARCMIN, rel=0.05)
 
 
