@@ -297,12 +297,15 @@ def test_a_velocity_field_in_another_form_reads_as_no_field_and_is_said(
                                capsys, out='d1')
     assert code == 0
     expected.pop('messages_per_s'), got.pop('messages_per_s')
+    inputs = {joint: res.pop('inputs') for joint, res in got['joints'].items()}
+    assert all(res.pop('inputs') == [] for res in expected['joints'].values())
     assert got == expected      # every number, as if the field were not there
     for joint, res in got['joints'].items():
         assert res['observed'] and res['velocity'] == 'link_angle'
         (line,) = [x for x in err.splitlines() if f'{joint}: the velocity field' in x]
         assert line.startswith('WARNING: ') and said in line, line
         assert line.endswith('the rate of the link angle is used instead')
+        assert line.split(f'{joint}: ', 1)[1] in inputs[joint]     # and in --json
 
 
 def test_an_effort_held_between_slower_updates_is_read_like_a_fresh_one_and_said(
