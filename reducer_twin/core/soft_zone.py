@@ -76,7 +76,7 @@ class SoftZoneCheck:
     Attributes
     ----------
     windows : int
-        Windows that had a bin at the test torque and the bins beyond.
+        Windows whose bin at the test torque was compared with the pooled straight line.
 
     """
 
