@@ -11,11 +11,14 @@ measure the same motion". :class:`TravelRatio` measures the ratio the encoders s
 itself, the slope of the motor's moves (the link's less the TE's) on the link's over
 :data:`BASELINE_S` (weighted by the link's move, so that the play taken up at a reversal,
 a motor move the link does not follow, weighs nothing; a TE step of a turn count restored
-at a wrap, far beyond any move, is left out), and says when it differs from the
-configured one by more than :data:`RATIO_TOLERANCE`.
+at a wrap, far beyond any move, is left out; the link's noise, in the regressor, is taken off
+its moves' squares), and says when it differs from the configured one by more than
+:data:`RATIO_TOLERANCE`.
 """
 
 import numpy as np
+
+from .velocity_check import angle_noise
 
 BASELINE_S = 0.01
 """Span [s] of the moves compared (a few samples at 100 Hz-1 kHz, quiet of encoder noise)."""
@@ -87,7 +90,10 @@ class TravelRatio:
         with np.errstate(invalid='ignore'):
             ok = np.abs(d_te) <= 0.5 * np.abs(d_link) + _PLAY_RAD    # NaN: not valid
         d_link, d_motor = d_link[ok], d_link[ok] - d_te[ok]     # the motor's, over i
-        self._sums += [d_link @ d_motor, d_link @ d_link, np.abs(d_link).sum() / k]
+        # The link's noise is in the regressor: its variance (twice the samples') is taken
+        # off the moves' squares, or a noisy link encoder reads a ratio too low.
+        noise = 2.0 * angle_noise(link_angle) ** 2 * d_link.size
+        self._sums += [d_link @ d_motor, d_link @ d_link - noise, np.abs(d_link).sum() / k]
         if self._sums[2] >= JUDGE_TRAVEL_RAD and self._sums[1] > 0.0:
             self.measured = float(self.ratio * self._sums[0] / self._sums[1])
 

@@ -116,6 +116,54 @@ Over 10 ms the noise is ten times smaller at 2 kHz and the same at 100 Hz (one s
 """
 
 
+ANGLE_NOISE_SIGMAS = 4.0
+"""
+Standard deviations of the angle's rate noise a sample's rate must pass to count as turning.
+
+Where the link encoder is noisy, the rate over :data:`VELOCITY_CHECK_BASELINE_S` of a
+standing joint passes ``min_speed`` too: 20 arcsec rms of link noise at 1 kHz gives it 0.014
+rad/s. Those samples' field is near zero, and they outnumbered the moving ones: a true field
+read 0.33-0.47 times the rate and was replaced as "other units, or another quantity"
+(independent generator, one-off probe). The noise is read from the angle's third
+differences (:func:`angle_noise`); with the encoders of the generators and the model's
+simulator (below 1 arcsec), ``min_speed`` is the larger. The rate asked is at most
+:data:`TURNING_SPEED_CAP` times ``min_speed``: a link reading held between slower updates
+(said and left out of the TE elsewhere, :mod:`.held_encoders`) has steps that read as 2 mrad
+of noise, which would ask 1 rad/s.
+"""
+
+TURNING_SPEED_CAP = 10.0
+"""The most, in ``min_speed``, that the angle's noise may raise the turning speed to."""
+
+
+def angle_noise(theta):
+    """
+    Sample noise of an angle [rad], from its third differences.
+
+    ``theta[i+2] - 3·theta[i+1] + 3·theta[i] - theta[i-1]`` removes motion up to its
+    acceleration and carries 20 times the samples' noise variance; the median absolute
+    value (1.4826 of it is the sd of normal noise) ignores the few samples of a jerk.
+
+    Parameters
+    ----------
+    theta : ndarray
+        An angle's samples [rad], in stamp order.
+
+    Returns
+    -------
+    float
+        Its noise sd [rad]; 0 with fewer than four samples.
+
+    """
+    if theta.size < 4:
+        return 0.0
+    third = theta[3:] - 3.0 * theta[2:-1] + 3.0 * theta[1:-2] - theta[:-3]
+    third = third[np.isfinite(third)]
+    if not third.size:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(third))) / math.sqrt(20.0)
+
+
 def baseline_rate(t, theta, baseline_s=VELOCITY_CHECK_BASELINE_S):
     """
     Rate of an angle from differences centred over about ``baseline_s`` [rad/s].
@@ -255,16 +303,17 @@ class VelocityCheck:
         if self.decided:
             return self.replaced
         t = np.asarray(t, dtype=float)
-        rate = baseline_rate(t, np.asarray(theta, dtype=float))
+        theta = np.asarray(theta, dtype=float)
+        rate = baseline_rate(t, theta)
         with np.errstate(invalid='ignore'):
-            both = np.isfinite(field) & (np.abs(rate) >= self.min_speed)
+            both = np.isfinite(field) & (np.abs(rate) >= self._turning_speed(t, theta))
         n = int(np.count_nonzero(both))
         if n:
             self._ratios.append(field[both] / rate[both])
             self.turning += n
             self._scale = None
             self._pool_lag(t, rate, field, both)
-            self._pool_noise(t, np.asarray(theta, dtype=float), field, both)
+            self._pool_noise(t, theta, field, both)
         if self.turning < VELOCITY_CHECK_SAMPLES:
             return False
         scale = self.scale
@@ -280,6 +329,17 @@ class VelocityCheck:
                     f'{self.turning} turning samples ({self._form(scale)})')
         self.fault = f'the velocity field {seen}: the rate of the link angle is used instead'
         return True
+
+    def _turning_speed(self, t, theta):
+        """Return the rate a sample must reach to count as turning [rad/s] (see the constants)."""
+        noise = angle_noise(theta)
+        if noise <= 0.0:
+            return self.min_speed
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        k = max(1, int(round(0.5 * VELOCITY_CHECK_BASELINE_S / step))) if step > 0.0 else 1
+        rate_noise = math.sqrt(2.0) * noise / (2 * k * step) if step > 0.0 else 0.0
+        return min(max(self.min_speed, ANGLE_NOISE_SIGMAS * rate_noise),
+                   TURNING_SPEED_CAP * self.min_speed)
 
     def _pool_lag(self, t, rate, field, both):
         """Add a chunk's turning samples to the regression of the rate on the field, its rate."""

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 from reducer_twin.core.te_extraction import compute_te
-from reducer_twin.core.velocity_check import VELOCITY_CHECK_SAMPLES, VelocityCheck
+from reducer_twin.core.velocity_check import angle_noise, VELOCITY_CHECK_SAMPLES, VelocityCheck
 from reducer_twin.core.window_analysis import WindowAnalyzer
 from te_streams import PARAMS, RATIO, simulated
 
@@ -117,6 +117,30 @@ def test_a_true_field_of_a_joint_that_mostly_stands_is_trusted_at_2_khz():
     one_step = np.gradient(angle, t)
     moving = np.abs(one_step) >= 0.01
     assert np.median(speed[moving] / one_step[moving]) < 0.5    # what one step gave
+
+
+@pytest.mark.parametrize('field, replaced', [(None, False), ('degrees', True)],
+                         ids=['true field', 'degrees per second'])
+def test_a_noisy_link_encoder_standing_still_is_no_turning_joint(field, replaced):
+    # 20 arcsec rms on the link angle: over 10 ms its rate at rest passes min_speed (0.014
+    # rad/s of noise), the field there is near zero, and a true field read 0.33-0.47 times
+    # the rate, replaced as "other units". The angle's noise (its third differences) now
+    # raises the speed a sample must reach to count as turning.
+    t = np.arange(40_000) * 1e-3
+    speed = np.where((t % 4.0) < 1.0, np.sin(2.0 * math.pi * t), 0.0)     # moves 1/4
+    angle = np.cumsum(speed) * 1e-3 + RNG.normal(0.0, 20.0 * 4.848e-6, t.size)
+    check, replace = _verdict(speed if field is None else np.degrees(speed), t=t,
+                              theta=angle)
+    assert replace is replaced and check.decided
+    assert check.scale == pytest.approx(1.0 if field is None else 57.3, rel=0.1)
+
+
+def test_an_angles_noise_is_read_from_its_third_differences():
+    noise = 20.0 * 4.848e-6
+    angle = ANGLE + RNG.normal(0.0, noise, ANGLE.size)
+    assert angle_noise(angle) == pytest.approx(noise, rel=0.1)
+    assert angle_noise(ANGLE) < 0.01 * noise      # the swing itself is no noise
+    assert angle_noise(ANGLE[:3]) == 0.0
 
 
 def test_nothing_is_decided_until_the_joint_has_turned_enough():
