@@ -70,18 +70,6 @@ under loads of opposite signs differ by twice that; without it, a few windows of
 model's simulator restarted the pool, its NEES 0.15 moved to 0.14).
 """
 
-_OFFSET_KNOWN_S = 0.5 * TIME_OFFSET_LINEAR_S
-"""
-Standard error [s] within which a window's pooled time offset is taken for the pool's levels.
-
-A joint that hardly moves identifies its offset poorly: with 50 arcsec rms of noise on the
-link angle a standing first window fitted -8.0 ± 0.95 ms (the next ones 0.3 ± 0.2 ms), the
-level of the next window was taken less 8 ms of its speed, 11 arcmin, and a TE step was
-said where there is none (independent generator, one-off probe). The windows of the
-generators and the model's simulator identify it within 0.02 ms, 0.4 ms with 20 arcsec of
-link noise.
-"""
-
 _NO_FRICTION = np.array([0.0, 0.0, 0.0, 1.0, 0.0])
 """``friction_taken`` of a window from which no friction is taken out."""
 
@@ -342,24 +330,15 @@ class FlankPool:
         pool_n, pool_r = red[:, :-1, :-1], red[:, :-1, -1]
         pool_raw = np.diagonal(after['moments'], axis1=1, axis2=2)[:, :-1]
         beta, ident = solve_identifiable_many(pool_n, pool_r, pool_raw)
+        known = np.flatnonzero(ident[:, -1])
+        if known.size:
+            self._offset = float(beta[known[-1], -1])
         noise = np.full(n_win, np.nan)
         free = dof - np.count_nonzero(ident, axis=1)
         for k in np.flatnonzero(free > 0).tolist():
             b = beta[k]
             rss = reduced[k, -1, -1] - 2.0 * b @ rhs[k] + b @ normal[k] @ b
             noise[k] = max(rss, 0.0) / free[k]
-        # The offset whose share the windows' levels lose (_POOL_JUMP): the latest one the
-        # pool identified to within _OFFSET_KNOWN_S.
-        for k in np.flatnonzero(ident[:, -1])[::-1].tolist():
-            idx = np.flatnonzero(ident[k])
-            with np.errstate(invalid='ignore'):
-                try:
-                    var = np.linalg.inv(pool_n[k][np.ix_(idx, idx)])[-1, -1] * noise[k]
-                except np.linalg.LinAlgError:
-                    continue
-            if var <= _OFFSET_KNOWN_S ** 2:
-                self._offset = float(beta[k, -1])
-                break
         return beta, ident, noise, groups
 
     def restart(self):
