@@ -168,6 +168,17 @@ def angle_noise(theta):
     return 1.4826 * float(np.median(np.abs(third))) / math.sqrt(20.0)
 
 
+def baseline_samples(t, baseline_s=VELOCITY_CHECK_BASELINE_S):
+    """
+    Return the stamps' median step [s] and the samples ``k`` either side over ``baseline_s``.
+
+    ``k`` is at least 1 (and 1 when the step is not positive); the step is 0 for fewer
+    than two stamps.
+    """
+    step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    return step, max(1, int(round(0.5 * baseline_s / step))) if step > 0.0 else 1
+
+
 def baseline_rate(t, theta, baseline_s=VELOCITY_CHECK_BASELINE_S):
     """
     Rate of an angle from differences centred over about ``baseline_s`` [rad/s].
@@ -189,8 +200,7 @@ def baseline_rate(t, theta, baseline_s=VELOCITY_CHECK_BASELINE_S):
     out = np.full(t.size, np.nan)
     if t.size < 3:
         return out
-    step = float(np.median(np.diff(t)))
-    k = max(1, int(round(0.5 * baseline_s / step))) if step > 0.0 else 1
+    _, k = baseline_samples(t, baseline_s)
     if t.size <= 2 * k:
         return out
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -339,8 +349,7 @@ class VelocityCheck:
         noise = angle_noise(theta)
         if noise <= 0.0:
             return self.min_speed
-        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
-        k = max(1, int(round(0.5 * VELOCITY_CHECK_BASELINE_S / step))) if step > 0.0 else 1
+        step, k = baseline_samples(t)
         rate_noise = math.sqrt(2.0) * noise / (2 * k * step) if step > 0.0 else 0.0
         return min(max(self.min_speed, ANGLE_NOISE_SIGMAS * rate_noise),
                    TURNING_SPEED_CAP * self.min_speed)
