@@ -836,6 +836,7 @@ class _Run:
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
             res.inputs = self._inputs_said(joint, front)
+            res.soft_zone = front.twin.soft_zone
             self._rate_said(joint, res)
             self._service_said(joint, res, outputs)
             self._note_gaps(joint, front)

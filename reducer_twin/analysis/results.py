@@ -8,6 +8,7 @@ import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
 from reducer_twin.core.pipeline import life_basis
+from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -56,6 +57,7 @@ class JointResult:
     partial: str = None
     velocity: str = None
     service: dict = None
+    soft_zone: dict = None
     inputs: list = field(default_factory=list)
 
     @property
@@ -80,7 +82,11 @@ class JointResult:
             rate of the link angle, where the field is missing or is not that rate; None
             without samples), ``inputs`` (how the inputs are read otherwise than published:
             the lines of the joint's input ``WARNING`` s,
-            :meth:`.joint_twin.TwinFront.input_warnings`; empty when none) and
+            :meth:`.joint_twin.TwinFront.input_warnings`; empty when none),
+            ``soft_zone`` (where the play is still being taken up at the lost-motion test
+            torque, :attr:`.joint_twin.TwinFront.soft_zone` in arcmin: ``width_arcmin``, the
+            catalogue's lost motion there, ``play_arcmin``, ``shortfall_arcmin``,
+            ``shortfall_sd_arcmin``, stream means, and ``windows``; else None) and
             ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
@@ -110,6 +116,7 @@ class JointResult:
         out['pairing'] = self.counts.get('pairing')
         out['velocity'] = self.velocity
         out['inputs'] = list(self.inputs)
+        out['soft_zone'] = soft_zone_numbers(self.soft_zone)
         out.update(life_basis(wear, life, observed))
         out['service'] = self.service
         return out
@@ -170,9 +177,34 @@ class BagResult:
             joints[name] = {**estimate_numbers({}, {}, False), 'messages': 0, 'rejected': 0,
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
-                            **life_basis({}, {}, False), 'service': None, 'inputs': []}
+                            **life_basis({}, {}, False), 'service': None, 'inputs': [],
+                            'soft_zone': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
+
+
+def soft_zone_numbers(said):
+    """
+    Return the soft zone's figures in edge units (``--json``), or None.
+
+    Parameters
+    ----------
+    said : dict or None
+        :attr:`.joint_twin.TwinFront.soft_zone` ([rad]).
+
+    Returns
+    -------
+    dict or None
+        ``width_arcmin``, ``play_arcmin``, ``shortfall_arcmin``, ``shortfall_sd_arcmin``
+        and ``windows``.
+
+    """
+    if said is None:
+        return None
+    out = {f'{key}_arcmin': rad_to_arcmin(float(said[key]))
+           for key in ('width', 'play', 'shortfall', 'shortfall_sd')}
+    out['windows'] = int(said['windows'])
+    return out
 
 
 def is_damage(warning):

@@ -449,6 +449,17 @@ class TwinFront:
                  ('soft_zone', self.analyzer.soft_zone))
         return {kind: line for kind, line in found if line is not None}
 
+    @property
+    def soft_zone(self):
+        """
+        Return the figures of a play still being taken up at the test torque, else None.
+
+        The stream means of :attr:`.soft_zone.SoftZoneCheck.said` once the soft zone is said
+        (``shortfall``, ``shortfall_sd``, ``play``, ``width`` [rad], ``windows``): the line of
+        :meth:`input_warnings` as numbers. The estimate is not changed by them.
+        """
+        return self.analyzer.soft_zone_said
+
     def refusal(self, reason):
         """
         Return why the joint is not observed, with what else the encoders show that explains it.

@@ -148,8 +148,19 @@ class SoftZoneCheck:
                 self._play / self._weight)
 
     @property
-    def reason(self):
-        """Say when the play is still being taken up at the test torque, else None."""
+    def said(self):
+        """
+        Return the pooled figures once the soft zone is said, else None.
+
+        Returns
+        -------
+        dict or None
+            ``shortfall`` and its standard error ``shortfall_sd``, the ``play`` the flanks
+            of higher loads give at the test torque and the ``width`` there (the
+            catalogue's lost motion, ``play - shortfall``), all stream means [rad], and the
+            ``windows`` compared.
+
+        """
         found = self.shortfall
         if found is None or self.windows < MIN_WINDOWS:
             return None
@@ -157,6 +168,16 @@ class SoftZoneCheck:
         if not (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play
                 and short >= SHORTFALL_SIGMAS * sd):
             return None
+        return {'shortfall': short, 'shortfall_sd': sd, 'play': play, 'width': play - short,
+                'windows': self.windows}
+
+    @property
+    def reason(self):
+        """Say when the play is still being taken up at the test torque, else None."""
+        said = self.said
+        if said is None:
+            return None
+        short, play = said['shortfall'], said['play']
         return (f"the transmission error's hysteresis at the lost-motion test torque "
                 f'({self.takeup_torque:.1f} N·m) is {short / ARCMIN:.2f} arcmin narrower than '
                 f'the flanks of higher loads give ({self.windows} windows): the play is still '

@@ -514,6 +514,11 @@ class WindowAnalyzer:
         return self._soft_zone.reason
 
     @property
+    def soft_zone_said(self):
+        """Return the soft zone's pooled figures once said, else None (``SoftZoneCheck.said``)."""
+        return self._soft_zone.said
+
+    @property
     def effort_held(self):
         """
         Say when the effort is held between updates slower than the stream, else None.

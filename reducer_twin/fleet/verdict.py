@@ -119,7 +119,9 @@ def fleet_row(reducer, params):
         ``service_hours`` (the operating time it had before the twin first saw it, where
         the configuration gave one and it was taken; else None) and ``inputs`` (how the
         latest analysis read its inputs otherwise than published, as ``analyze --json``
-        gives them: encoders stamped apart, a play still taken up at the test torque, ...).
+        gives them: encoders stamped apart, a play still taken up at the test torque, ...)
+        and ``soft_zone`` (the latest analysis's figures of such a play, as ``analyze
+        --json`` gives them; else None).
 
     """
     r = reducer
@@ -138,6 +140,7 @@ def fleet_row(reducer, params):
     row['growth_law'] = summary.get('growth_law')
     row['curve_extrapolation'] = summary.get('curve_extrapolation')
     row['inputs'] = list(summary.get('inputs') or [])
+    row['soft_zone'] = summary.get('soft_zone')
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
         if verdict is not None and verdict[0] else None

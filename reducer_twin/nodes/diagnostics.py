@@ -6,7 +6,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
 from reducer_twin.core.observability import derived_link_reason, link_from_motor
 from reducer_twin.core.service_time import service_note
-from reducer_twin.core.units import HOUR, m_to_um
+from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import diagnostics_qos
@@ -244,6 +244,10 @@ def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silen
     values['seconds_in_gaps'] = analyzer.gap_time_s
     if math.isfinite(analyzer.velocity_scale):
         values['velocity_scale'] = analyzer.velocity_scale
+    soft = twin.soft_zone
+    if soft is not None:     # the soft zone's line as numbers (analyze --json's soft_zone)
+        values['lost_motion_at_test_torque_arcmin'] = rad_to_arcmin(soft['width'])
+        values['soft_zone_play_arcmin'] = rad_to_arcmin(soft['play'])
     stale = analyzer.stale_reason(stale_after_s, topic)
     if reason is not None:
         fixed = analyzer.effort_fault is not None or link_from_motor(analyzer)

@@ -103,6 +103,11 @@ def test_a_play_still_taken_up_beyond_the_test_torque_is_said_with_its_width_the
     assert [line for line in joints['joint_3']['inputs'] if 'narrower' in line] \
         == [said[0].split(': joint_3: ', 1)[1]]
     assert not any('narrower' in line for line in joints['joint_2']['inputs'])
+    figures = joints['joint_3']['soft_zone']      # the line's numbers, for programs
+    assert figures['width_arcmin'] == pytest.approx(width, abs=0.006)
+    assert figures['play_arcmin'] - figures['shortfall_arcmin'] == pytest.approx(
+        figures['width_arcmin'])
+    assert joints['joint_2']['soft_zone'] is None and joints['joint_1']['soft_zone'] is None
     reported = joints['joint_3']['lost_motion_arcmin']
     assert reported > 1.5 * truth['joint_3']['lost_motion_end_arcmin']   # not corrected
     assert 'narrower than the flanks' in (tmp_path / 'report' / 'index.html').read_text()

@@ -1,7 +1,5 @@
 """A play still being taken up at the lost-motion test torque: found from the windows, and said."""
 
-import math
-
 import numpy as np
 import pytest
 from reducer_twin.core.soft_zone import SoftZoneCheck
@@ -9,7 +7,7 @@ from reducer_twin.core.te_extraction import TEStream
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
 from reducer_twin.core.window_analysis import WindowAnalyzer
-from te_streams import PARAMS, TWO_PI
+from te_streams import PARAMS, soft_zone_swing
 
 RATED = PARAMS.rating.rated_torque
 TEST_TORQUE = PARAMS.rating.lost_motion_torque_fraction * RATED
@@ -41,13 +39,17 @@ def test_a_knee_above_the_test_torque_is_said_with_the_width_there():
     assert short == pytest.approx(0.8 * ARCMIN, rel=0.05)
     assert 'narrower' in check.reason and 'knee lies above the test torque' in check.reason
     assert 'about 1.2' in check.reason     # 2 arcmin x 3/5
+    said = check.said       # the line's numbers
+    assert said['width'] == pytest.approx(1.2 * ARCMIN, rel=0.05)
+    assert said['play'] - said['shortfall'] == said['width'] and said['windows'] == 4
+    assert said['shortfall'] >= 5.0 * said['shortfall_sd']
 
 
 @pytest.mark.parametrize('knee', [0.01, 0.025])
 def test_a_play_taken_up_below_the_test_torque_is_not_said(knee):
     check = _checked(*_catalogue_bins(2.0, knee))
     assert abs(check.shortfall[0]) < 0.01 * ARCMIN
-    assert check.reason is None
+    assert check.reason is None and check.said is None
 
 
 @pytest.mark.parametrize('wear', [0.0, 2e-6, 10e-6])
@@ -64,6 +66,7 @@ def test_the_models_own_curve_new_or_worn_is_not_a_soft_zone(wear):
 
 def test_one_window_or_a_small_zone_is_not_enough():
     assert _checked(*_catalogue_bins(2.0, 0.05, windows=1)).reason is None
+    assert _checked(*_catalogue_bins(2.0, 0.05, windows=1)).said is None
     # A knee above the test torque on a small zone: short by 0.15 arcmin, below 0.2.
     assert _checked(*_catalogue_bins(0.3, 0.06)).reason is None
 
@@ -83,24 +86,11 @@ def test_a_window_at_the_test_torque_is_compared_with_the_line_of_recent_windows
     assert check.shortfall[0] == pytest.approx(0.8 * ARCMIN, rel=0.05)
 
 
-def _swinging_joint(zone_arcmin, knee_fraction, seed=0):
-    """
-    Windows of a joint swinging slowly through the vertical, its curve a soft zone to a knee.
-
-    Under 200 N*m of gravity and a 6-s swing its load passes the test torque at about
-    250 N*m/s: the bin there gets some 25 samples a crossing, and loads reach 180 N*m.
-    """
-    rng = np.random.default_rng(seed)
-    t = np.arange(60000) / 1000.0
-    theta = 0.5 * math.pi + 1.2 * np.sin(TWO_PI * t / 6.0)
-    omega = 1.2 * TWO_PI / 6.0 * np.cos(TWO_PI * t / 6.0)
-    torque = 200.0 * np.cos(theta)
-    knee = knee_fraction * RATED
-    te = (-0.5 * zone_arcmin * ARCMIN * np.clip(torque / knee, -1.0, 1.0) - torque / STIFFNESS
-          + rng.normal(0.0, 0.5 * ARCMIN / 60.0, t.size))
+def _swinging_joint(zone_arcmin, knee_fraction):
+    """Return the analyzer after :func:`te_streams.soft_zone_swing`, and its usable windows."""
+    t, theta, omega, te, effort = soft_zone_swing(zone_arcmin, knee_fraction)
     analyzer = WindowAnalyzer(PARAMS, friction=False)
     stream = TEStream(t, te, theta, np.ones(t.size, dtype=bool), 0.005)
-    effort = torque + rng.normal(0.0, 2.0, t.size)
     windows = analyzer.update(stream, effort, omega) + analyzer.flush()
     return analyzer, [w for w in windows if np.isfinite(w.lost_motion)]
 
@@ -113,8 +103,7 @@ def test_a_joint_whose_knee_lies_above_the_test_torque_says_so_and_one_below_doe
     analyzer, windows = _swinging_joint(1.5, 0.05)
     assert np.median([w.lost_motion for w in windows]) > 1.05 * 0.9 * ARCMIN
     assert analyzer.soft_zone is not None
-    short, _, play = analyzer._soft_zone.shortfall
-    assert play - short == pytest.approx(0.9 * ARCMIN, rel=0.15)
+    assert analyzer.soft_zone_said['width'] == pytest.approx(0.9 * ARCMIN, rel=0.15)
     analyzer, windows = _swinging_joint(1.5, 0.01)
     assert np.median([w.lost_motion for w in windows]) == pytest.approx(1.5 * ARCMIN, rel=0.05)
-    assert analyzer.soft_zone is None
+    assert analyzer.soft_zone is None and analyzer.soft_zone_said is None

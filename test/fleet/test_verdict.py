@@ -153,3 +153,14 @@ def test_the_row_carries_how_the_latest_analysis_read_the_inputs():
             'is 1.48 arcmin narrower than the flanks of higher loads give (7 windows): ...')
     reducer.summary['inputs'] = [line]
     assert fleet_row(reducer, PARAMS)['inputs'] == [line]
+
+
+def test_the_row_carries_the_soft_zones_figures_of_the_latest_analysis():
+    # The width at the test torque, the catalogue's lost motion, beside the play the twin
+    # reads: a fleet view can compare it with a limit stated at the test torque.
+    reducer = _reducer(5000.0)
+    assert fleet_row(reducer, PARAMS)['soft_zone'] is None
+    figures = {'width_arcmin': 1.59, 'play_arcmin': 2.99, 'shortfall_arcmin': 1.40,
+               'shortfall_sd_arcmin': 0.05, 'windows': 10}
+    reducer.summary['soft_zone'] = figures
+    assert fleet_row(reducer, PARAMS)['soft_zone'] == figures

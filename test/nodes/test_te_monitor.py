@@ -29,6 +29,7 @@ from reducer_twin.nodes.qos import encoder_qos
 from reducer_twin.nodes.te_monitor import TEMonitor
 from scipy.signal import butter, sosfiltfilt
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from te_streams import soft_zone_swing
 
 pytestmark = pytest.mark.timeout(60, method='thread')
 
@@ -405,6 +406,25 @@ def test_an_input_read_otherwise_than_published_turns_the_diagnostics_to_warn(
     status = monitor.status(lambda s: said in s.message)
     assert status.level == DiagnosticStatus.WARN
     logged = [x for x in capfd.readouterr().err.splitlines() if said in x]
+    assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
+def test_a_play_still_taken_up_at_the_test_torque_is_said_with_its_width_as_a_key_value(
+        ros, capfd):
+    # 1.5 arcmin of soft zone to a knee at 5 % of rated: 0.9 arcmin wide at the 3 % test
+    # torque, the catalogue's lost motion. The monitor says so (WARN, once on its log) and
+    # gives the width and the play as numbers; the effort is a torque sensor's.
+    t, theta, omega, te, effort = soft_zone_swing(1.5, 0.05)
+    rows = np.column_stack([float(time.time() // 1 - 70.0) + t, RATIO * (theta - te), theta,
+                            effort, omega])
+    monitor = Monitor(ros, [Parameter('friction_in_effort', value=0)])
+    monitor.feed(rows)
+    status = monitor.status(lambda s: 'narrower than the flanks' in s.message)
+    assert status.level == DiagnosticStatus.WARN
+    values = ros.key_values(status)
+    assert float(values['lost_motion_at_test_torque_arcmin']) == pytest.approx(0.9, rel=0.15)
+    assert float(values['soft_zone_play_arcmin']) == pytest.approx(1.5, rel=0.15)
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'narrower than the' in x]
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
 
 

@@ -8,6 +8,8 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.te_extraction import compute_te
+from reducer_twin.core.transmission_error import model_tables
+from reducer_twin.core.units import ARCMIN
 from reducer_twin.core.window_analysis import WindowAnalyzer
 
 PARAMS = ReducerParams()
@@ -45,3 +47,24 @@ def rms_without_offset(err):
     """RMS after removing the constant (the encoders' unknown zero offset)."""
     err = err[np.isfinite(err)]
     return float(np.sqrt(np.mean((err - err.mean()) ** 2)))
+
+
+def soft_zone_swing(zone_arcmin, knee_fraction, seed=0):
+    """
+    Return a joint swinging slowly through the vertical, its curve a soft zone to a knee.
+
+    Under 200 N*m of gravity and a 6-s swing its load passes the lost-motion test torque
+    at about 250 N*m/s: the bin there gets some 25 samples a crossing, and loads reach
+    180 N*m. Returns 60 s at 1 kHz: stamps [s], link angle [rad], its rate [rad/s],
+    TE [rad] and effort [N*m] (the load with 2 N*m of noise; no friction in it).
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(60000) / 1000.0
+    theta = 0.5 * math.pi + 1.2 * np.sin(TWO_PI * t / 6.0)
+    omega = 1.2 * TWO_PI / 6.0 * np.cos(TWO_PI * t / 6.0)
+    torque = 200.0 * np.cos(theta)
+    knee = knee_fraction * PARAMS.rating.rated_torque
+    stiffness = model_tables(PARAMS).series_stiffness
+    te = (-0.5 * zone_arcmin * ARCMIN * np.clip(torque / knee, -1.0, 1.0) - torque / stiffness
+          + rng.normal(0.0, 0.5 * ARCMIN / 60.0, t.size))
+    return t, theta, omega, te, torque + rng.normal(0.0, 2.0, t.size)
