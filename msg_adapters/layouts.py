@@ -56,8 +56,11 @@ TE_FEATURES = Layout('te_features', (
     'wear_fit_m', 'wear_fit_std_m', 'order1_rad', 'order2_rad', 'order_zc_rad',
     'order_zp_rad', 'time_offset_s', 'duration_s', 'exposure_s', 'archard_increment_m',
     'mean_abs_torque_nm', 'mean_abs_speed_rad_s', 'cubic_mean_torque_nm',
-    'mean_speed_rad_s', 'max_abs_torque_nm'))
-"""Per-window TE features and duty of one joint (paper Table 5 style)."""
+    'mean_speed_rad_s', 'max_abs_torque_nm', 'soft_zone_shortfall_rad'))
+"""
+Per-window TE features and duty of one joint (paper Table 5 style); ``lost_motion_rad`` is
+the play the loaded flanks give, the catalogue's lost motion ``soft_zone_shortfall_rad`` less.
+"""
 
 WEAR_ESTIMATE = Layout('wear', (
     'stamp_s', 'wear_m', 'wear_std_m', 'rate_scale', 'rate_scale_std', 'log_rate_scale',
@@ -67,12 +70,15 @@ WEAR_ESTIMATE = Layout('wear', (
     'lost_motion_std_rad', 'lost_motion_new_rad', 'duty_rate_rel_std', 'log_rate_drift_per_s',
     'archard_exposure_m', 'trend_probability', 'trend_new_rad', 'trend_growth_rad',
     'trend_exponent', 'var_trend_new_rad2', 'var_trend_growth_rad2', 'var_trend_exponent',
-    'cov_trend_new_growth_rad2', 'cov_trend_new_exponent_rad', 'cov_trend_growth_exponent_rad'))
+    'cov_trend_new_growth_rad2', 'cov_trend_new_exponent_rad', 'cov_trend_growth_exponent_rad',
+    'soft_zone_shortfall_rad'))
 """
 Estimate of one reducer: the wear model's state ``[w, ln s, b]`` (wear, rate scale, as-built
 offset) and its covariance, the estimated lost motion now and when new, the duty rate with its
 relative standard error, and the observed growth law ``z = β + k·(A/A_now)^g`` in the Archard
-exposure ``A`` with its covariance and the probability that it holds.
+exposure ``A`` with its covariance and the probability that it holds. ``lost_motion_rad`` is
+at the test torque: the play the loaded flanks give (``lost_motion_obs_rad``, the growth law)
+less ``soft_zone_shortfall_rad`` where a soft zone reaches beyond the test torque.
 """
 
 REMAINING_LIFE = Layout('remaining_life', (

@@ -54,8 +54,8 @@ def features_from_record(record):
     -------
     types.SimpleNamespace
         With ``t_start``, ``t_end``, ``lost_motion``, ``lost_motion_std``,
-        ``wear_fit``, ``wear_fit_std`` and ``duty`` (a namespace with the
-        duty fields), what the estimator reads.
+        ``wear_fit``, ``wear_fit_std``, ``duty`` (a namespace with the
+        duty fields) and ``soft_zone_shortfall``, what the estimator stage reads.
 
     """
     duty = SimpleNamespace(**{k: float(record[v]) for k, v in _DUTY_KEYS.items()})
@@ -64,7 +64,7 @@ def features_from_record(record):
         lost_motion=float(record['lost_motion_rad']),
         lost_motion_std=float(record['lost_motion_std_rad']),
         wear_fit=float(record['wear_fit_m']), wear_fit_std=float(record['wear_fit_std_m']),
-        duty=duty)
+        duty=duty, soft_zone_shortfall=float(record.get('soft_zone_shortfall_rad', 0.0)))
 
 
 def duty_to_record(duty):
@@ -318,7 +318,8 @@ def features_record(f, params):
         'wear_fit_m': f.wear_fit, 'wear_fit_std_m': f.wear_fit_std,
         'order1_rad': orders.get(1, np.nan), 'order2_rad': orders.get(2, np.nan),
         'order_zc_rad': orders.get(g.z_cycloid, np.nan),
-        'order_zp_rad': orders.get(g.z_pins, np.nan), 'time_offset_s': f.time_offset_s}
+        'order_zp_rad': orders.get(g.z_pins, np.nan), 'time_offset_s': f.time_offset_s,
+        'soft_zone_shortfall_rad': f.soft_zone_shortfall}
     rec.update(duty_to_record(f.duty))
     return rec
 
@@ -355,6 +356,7 @@ class EstimatorStage:
         self.store = store
         self.log = log or (lambda text: None)
         self.last_observation = float('nan')
+        self.soft_zone_shortfall = 0.0
         self.skipped_replays = 0
         self.restored_from = None
         self.service_said = None
@@ -403,6 +405,9 @@ class EstimatorStage:
         said = self.estimator.service_verdict
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
+        shortfall = float(getattr(features, 'soft_zone_shortfall', 0.0))
+        self.soft_zone_shortfall = shortfall if math.isfinite(shortfall) and shortfall > 0.0 \
+            else 0.0
         if said is None and self.estimator.service_verdict is not None:
             self.service_said = service_note(self.estimator.service_verdict,
                                              self.estimator.config.service_time_s)
@@ -444,7 +449,11 @@ class EstimatorStage:
         far both models' predictions eight windows ahead fell short of what they
         claimed), its correlations kept; the wear, the lost motion and the growth law
         are the estimator's (the law's samples are not widened: how far its exponent
-        should be is not measured).
+        should be is not measured). The lost motion is given at the test torque: the play
+        the estimator follows less the latest window's ``soft_zone_shortfall`` (0 unless
+        a soft zone reaching beyond the test torque is said, :mod:`.soft_zone`), which
+        the record carries; the remaining life meets the limit where the play reaches
+        the limit plus it (:func:`play_limit`).
 
         Parameters
         ----------
@@ -467,13 +476,14 @@ class EstimatorStage:
         rec = {
             'stamp_s': stamp_s, 'wear_m': est.wear, 'wear_std_m': est.wear_std,
             'rate_scale': est.rate_scale, 'rate_scale_std': lognormal_sd(x[1], P[1, 1]),
-            'duty_rate_m_per_s': est.duty_rate, 'lost_motion_rad': lm,
+            'duty_rate_m_per_s': est.duty_rate, 'lost_motion_rad': lm - self.soft_zone_shortfall,
             'lost_motion_obs_rad': self.last_observation,
             'exposure_s': est.exposure_s, 'updates': est.updates, 'rejected': est.rejected,
             'baseline_m': float(x[2]), 'log_rate_scale': float(x[1]),
             'lost_motion_std_rad': lm_std, 'lost_motion_new_rad': est.lost_motion_new,
             'duty_rate_rel_std': est.duty_rate_rel_std,
-            'log_rate_drift_per_s': est.config.log_rate_scale_noise_density}
+            'log_rate_drift_per_s': est.config.log_rate_scale_noise_density,
+            'soft_zone_shortfall_rad': self.soft_zone_shortfall}
         for (i, j), key in _COVARIANCE_KEYS.items():
             rec[key] = float(P[i, j])
         probability, mean, cov, exposure = trend
@@ -666,9 +676,18 @@ class LifeStage:
         queries = [self._query(r, law_weight) for r in wear_records]
         if self._draws is None:
             self._draws = LifeDraws.draw(self.n_samples, np.random.default_rng(0))
-        return remaining_lives(queries, self.params, limit=self.limit, horizon_s=self.horizon_s,
-                               n_samples=self.n_samples, draws=self._draws,
-                               keep_samples=keep_samples)
+        # The play the estimator follows meets the limit at the test torque where it
+        # reaches the limit plus the record's soft-zone shortfall (0 for almost all).
+        limits = [play_limit(r, self.limit) for r in wear_records]
+        out = [None] * len(queries)
+        for limit in dict.fromkeys(limits):
+            rows = [i for i, x in enumerate(limits) if x == limit]
+            found = remaining_lives([queries[i] for i in rows], self.params, limit=limit,
+                                    horizon_s=self.horizon_s, n_samples=self.n_samples,
+                                    draws=self._draws, keep_samples=keep_samples)
+            for i, pred in zip(rows, found):
+                out[i] = pred
+        return out
 
     def _query(self, wear_record, law_weight=None):
         """Return the :class:`~reducer_twin.core.life.LifeQuery` of a ``wear`` record."""
@@ -891,8 +910,22 @@ def _scored_span(wear_record):
     return max(float(wear_record.get('updates', 0.0)), SCORED_FROM) / SCORED_FROM
 
 
+def play_limit(wear_record, limit):
+    """
+    Return the play [rad] at which the lost motion at the test torque meets ``limit``.
+
+    The estimator and the growth law follow the play the loaded flanks give; where a soft
+    zone reaches beyond the test torque (:mod:`.soft_zone`), the lost motion at the test
+    torque is that play less the record's ``soft_zone_shortfall_rad``, so the limit is met
+    where the play reaches ``limit`` plus it. ``limit`` itself where the record has none.
+    """
+    shortfall = float(wear_record.get('soft_zone_shortfall_rad', 0.0))
+    return limit + shortfall if math.isfinite(shortfall) and shortfall > 0.0 else limit
+
+
 def _law_reach(wear_record, limit):
     """Return how many times the exposure seen the law's mean meets ``limit`` at (None: never)."""
+    limit = None if limit is None else play_limit(wear_record, limit)
     g = float(wear_record.get('trend_exponent', math.nan))
     beta = float(wear_record.get('trend_new_rad', math.nan))
     k = float(wear_record.get('trend_growth_rad', math.nan))

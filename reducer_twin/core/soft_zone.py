@@ -12,15 +12,19 @@ than their lost motion at the test torque, the bins at the test torque showing i
 
 :class:`SoftZoneCheck` compares the hysteresis width in a window's bin at the test torque
 with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
-over recent windows, and pools the shortfall over the stream. The estimate is not
-changed by it; it is said (:attr:`SoftZoneCheck.reason`). Measured per joint (one-off
-survey, 300-h recordings at 1 kHz): third-generator units with knees at 4.0-6.0 % of
-rated fell 0.55-2.2 arcmin (26-73 %) short at the test torque; knees at 2.2-3.4 % -0.3
-to +0.19 arcmin (at most 10 %, the generator's friction loop still opening there); the
-independent generator's units within 0.02 arcmin; the model's simulator 0.03 arcmin on
-used units and 0.13 arcmin (21 %) on new ones, whose contact curve bends most (below the
-0.2-arcmin floor). ``bench/bench_lost_motion.py --generator third`` prints how many
-joints it is said of, by where their knee lies.
+over recent windows, and pools the shortfall over the stream. Once it is said
+(:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
+(``WindowFeatures.soft_zone_shortfall``): the estimator still follows the play its windows
+read, and the lost motion it gives is that play less the shortfall, the remaining life the
+time to the play reaching the limit plus it (:func:`.pipeline.play_limit`).
+
+Measured per joint (one-off survey, 300-h recordings at 1 kHz): third-generator units
+with knees at 4.0-6.0 % of rated fell 0.55-2.2 arcmin (26-73 %) short at the test torque;
+knees at 2.2-3.4 % -0.3 to +0.19 arcmin (at most 10 %, the generator's friction loop
+still opening there); the independent generator's units within 0.02 arcmin; the model's
+simulator 0.03 arcmin on used units and 0.13 arcmin (21 %) on new ones, whose contact
+curve bends most (below the 0.2-arcmin floor). ``bench/bench_lost_motion.py --generator
+third`` prints how many joints it is said of, by where their knee lies.
 """
 
 import math
@@ -184,6 +188,6 @@ class SoftZoneCheck:
                 'being taken up there (a soft zone whose knee lies above the test torque). '
                 f'Those flanks give {play / ARCMIN:.2f} arcmin of play, the width at the test '
                 f"torque (the catalogue's lost motion) is about {(play - short) / ARCMIN:.2f}; "
-                'the lost motion read lies between the two, nearer the play in windows without '
-                'loads at the test torque, so the wear and remaining life are pessimistic '
-                'against a limit stated at the test torque (not corrected)')
+                'the lost motion and remaining life are given at the test torque from here on '
+                '(the play the estimate follows, less this shortfall); the wear is that of '
+                'the play')

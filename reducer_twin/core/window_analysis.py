@@ -130,6 +130,11 @@ class WindowFeatures:
     implausible : bool
         The encoders did not measure the same motion in it (no lost motion read:
         :data:`PLAUSIBLE_TE_SPAN_RAD`, :data:`PLAUSIBLE_LOST_MOTION_RAD`).
+    soft_zone_shortfall : float
+        How much narrower the hysteresis is at the test torque than the flanks of higher
+        loads give, pooled over the stream up to this window, where the soft zone is said
+        (:attr:`.soft_zone.SoftZoneCheck.said`), else 0 [rad]. ``lost_motion`` is the
+        play those flanks give; the catalogue's lost motion is this much less.
 
     """
 
@@ -154,6 +159,7 @@ class WindowFeatures:
     hysteresis_std: np.ndarray = field(repr=False)
     duty: DutySummary = None
     implausible: bool = False
+    soft_zone_shortfall: float = 0.0
 
 
 class WindowAnalyzer:
@@ -931,6 +937,8 @@ class WindowAnalyzer:
         n_ord = len(self.orders)
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
+        soft = self._soft_zone.said
+        shortfall = 0.0 if soft is None else float(soft['shortfall'])
         out = []
         for k in range(n_win):
             use = usable[k]
@@ -946,7 +954,8 @@ class WindowAnalyzer:
                 lost_motion_std=fit[3][k], compliance_fit=fit[4][k],
                 hysteresis_torque=torque_h[k, use], hysteresis=width[k, use],
                 hysteresis_std=std[k, use],
-                duty=duty[k], implausible=bool(implausible[k])))
+                duty=duty[k], implausible=bool(implausible[k]),
+                soft_zone_shortfall=shortfall))
         return out
 
     def flank_samples(self):

@@ -253,6 +253,31 @@ def test_predictions_are_repeatable_for_the_same_record(windows, worn_record):
     assert stage.process(worn_record) == stage.process(worn_record)
 
 
+def test_a_soft_zone_gives_the_lost_motion_at_the_test_torque_and_the_limit_met_later(windows):
+    # Windows that carry a soft zone's shortfall (its play taken up beyond the test
+    # torque): the estimate follows the play as before; the lost motion is given at the
+    # test torque, and the limit stated there is met where the play exceeds it by that much.
+    shortfall = 0.5 * ARCMIN
+    plain, soft = EstimatorStage(PARAMS), EstimatorStage(PARAMS)
+    run(plain, windows)
+    run(soft, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall})
+               for w in windows])
+    before, after = (stage.record(windows[-1].t_end) for stage in (plain, soft))
+    assert before['soft_zone_shortfall_rad'] == 0.0
+    assert after['soft_zone_shortfall_rad'] == shortfall
+    assert after['lost_motion_rad'] == pytest.approx(before['lost_motion_rad'] - shortfall)
+    assert after['wear_m'] == before['wear_m']
+    assert after['lost_motion_obs_rad'] == before['lost_motion_obs_rad']
+    stage = LifeStage(PARAMS)
+    raised = LifeStage(PARAMS, LifeConfig(lost_motion_limit=stage.limit + shortfall))
+    got, expected = stage.prediction(after), raised.prediction(before)
+    assert (got.p10, got.p50, got.p90) == (expected.p10, expected.p50, expected.p90)
+    assert got.p50 > stage.prediction(before).p50
+    # Records with and without one, predicted together, each as alone.
+    both = stage.predictions([before, after])
+    assert [p.p50 for p in both] == [stage.prediction(before).p50, got.p50]
+
+
 def test_a_prediction_does_not_depend_on_the_records_predicted_before(worn_record):
     # The stage draws its random numbers once and reuses them: a record gets the answer of
     # a new stage, whatever the stage predicted before.
