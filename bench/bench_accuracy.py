@@ -106,9 +106,11 @@ EVAL_RANGE = (0.25, 0.75)
 MIN_OBSERVED = 5
 """Usable windows over a life below which a run counts as not observed."""
 
-GENERATOR_VERSION = 2
+GENERATOR_VERSION = 3
 """
 Bump when the generation below changes, so cached windows are not reused.
+
+3: the windows carry the soft zone's shortfall (``soft_zone_shortfall_rad``).
 
 2: the windows come from the twin's own front (:func:`_front`), whose extractor bridges
 gaps of up to 50 ms as ``analyze`` and the nodes do; version 1 built its own with 5 ms,
@@ -491,6 +493,8 @@ def with_true_lost_motion(run, params, noise=0.02 * ARCMIN, seed=0):
     records[usable, fields.index('lost_motion_std_rad')] = noise
     records[usable, fields.index('wear_fit_m')] = np.maximum(
         records[usable, fields.index('wear_fit_m')], 1e-9)
+    # The truth is the lost motion at the test torque: no soft zone left to take off it.
+    records[:, fields.index('soft_zone_shortfall_rad')] = 0.0
     return Run(run.truth, records, run.t_end, run.eol, run.wear, run.lost_motion, run.wear_mid)
 
 
@@ -543,7 +547,7 @@ def estimate(run, params, config=None, law_weight=None):
     fields = TE_FEATURES.fields
     for row, t_op in zip(run.records, run.t_end):
         f = features_from_record(dict(zip(fields, row)))
-        result = stage.estimator.step(f)
+        result = stage.step(f)
         record = stage.record(f.t_end)
         life.observe_duty(f.duty)
         pred = _prediction(life, record, law_weight)

@@ -402,6 +402,25 @@ class EstimatorStage:
         if last is not None and last - CLOCK_RESET_S < features.t_end <= last:
             self.skipped_replays += 1
             return 'replay'
+        result = self.step(features)
+        self.save()
+        return result.status
+
+    def step(self, features):
+        """
+        Step the filter with one window, without the replay check or persisting.
+
+        Parameters
+        ----------
+        features : object
+            Window features (see :func:`features_from_record`).
+
+        Returns
+        -------
+        object
+            The estimator's update result (``status``, ``nis``, ...).
+
+        """
         said = self.estimator.service_verdict
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
@@ -412,8 +431,7 @@ class EstimatorStage:
             self.service_said = service_note(self.estimator.service_verdict,
                                              self.estimator.config.service_time_s)
             self.log(self.service_said)
-        self.save()
-        return result.status
+        return result
 
     def save(self):
         """Hand the state to the store (at once, or queued by a background store)."""
