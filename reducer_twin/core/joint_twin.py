@@ -619,14 +619,16 @@ class TwinBack:
         -------
         dict
             JSON-able: ``estimator`` (``WearEstimator.state_dict``), ``duty`` (the life
-            stage's last duty summary or None) and ``lost_motion_obs_rad`` (or None).
+            stage's last duty summary or None), ``lost_motion_obs_rad`` (or None) and
+            ``soft_zone_shortfall_rad`` (the soft zone said last, 0 if none).
 
         """
         obs = self.estimator.last_observation
         duty = self.life.duty
         return {'estimator': self.estimator.estimator.state_dict(),
                 'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
-                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None}
+                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None,
+                'soft_zone_shortfall_rad': float(self.estimator.soft_zone_shortfall)}
 
     def restore(self, state):
         """Continue from :meth:`state` of an earlier analysis of the same reducer."""
@@ -636,6 +638,7 @@ class TwinBack:
         self.estimator.estimator = WearEstimator.from_state(self.params, state['estimator'])
         obs = state.get('lost_motion_obs_rad')
         self.estimator.last_observation = float('nan') if obs is None else float(obs)
+        self.estimator.soft_zone_shortfall = float(state.get('soft_zone_shortfall_rad', 0.0))
         duty = state.get('duty')
         self.life.duty = None if duty is None else SimpleNamespace(**duty)
 

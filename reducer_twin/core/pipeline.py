@@ -425,8 +425,10 @@ class EstimatorStage:
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
         shortfall = float(getattr(features, 'soft_zone_shortfall', 0.0))
-        self.soft_zone_shortfall = shortfall if math.isfinite(shortfall) and shortfall > 0.0 \
-            else 0.0
+        if math.isfinite(shortfall) and shortfall > 0.0:
+            # A soft zone is the unit's: a stream whose own check has not said it yet (the
+            # next bag, a restarted monitor) keeps the one said before.
+            self.soft_zone_shortfall = shortfall
         if said is None and self.estimator.service_verdict is not None:
             self.service_said = service_note(self.estimator.service_verdict,
                                              self.estimator.config.service_time_s)
@@ -454,6 +456,7 @@ class EstimatorStage:
 
         """
         self.estimator.reset(reason)
+        self.soft_zone_shortfall = 0.0
         self.save()
         self.flush()
         self.log(f'estimator reset: {reason}')
@@ -468,10 +471,11 @@ class EstimatorStage:
         claimed), its correlations kept; the wear, the lost motion and the growth law
         are the estimator's (the law's samples are not widened: how far its exponent
         should be is not measured). The lost motion is given at the test torque: the play
-        the estimator follows less the latest window's ``soft_zone_shortfall`` (0 unless
-        a soft zone reaching beyond the test torque is said, :mod:`.soft_zone`), which
-        the record carries; the remaining life meets the limit where the play reaches
-        the limit plus it (:func:`play_limit`).
+        the estimator follows less the ``soft_zone_shortfall`` windows said last (0 unless
+        a soft zone reaching beyond the test torque was said, :mod:`.soft_zone`; kept by
+        windows that say none, cleared by :meth:`reset`), which the record carries; the
+        remaining life meets the limit where the play reaches the limit plus it
+        (:func:`play_limit`).
 
         Parameters
         ----------

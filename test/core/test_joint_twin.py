@@ -9,6 +9,7 @@ joint's processing are one validated spec.
 """
 
 from dataclasses import FrozenInstanceError
+import json
 import re
 
 from hypothesis import given
@@ -22,6 +23,7 @@ from reducer_twin.core.joint_twin import TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import lost_motion
+from reducer_twin.core.units import ARCMIN
 
 PARAMS = ReducerParams()
 AGING = 180_000.0
@@ -97,6 +99,25 @@ def test_windows_stepped_together_give_what_each_step_gives(stream, updates):
         np.testing.assert_array_equal(list(life.record.values()), list(u.life.record.values()))
         assert (life.level, life.message) == (u.life.level, u.life.message)
         assert summary == u.summary
+
+
+def test_the_next_bags_back_keeps_the_soft_zone_said_before(stream):
+    # A reducer's next bag starts where the last ended (BagResult.states, the fleet):
+    # its windows say no soft zone until their own check has seen enough, and the lost
+    # motion stays at the test torque meanwhile.
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=AGING))
+    records = [front.record(f) for piece in stream for f in front.update(*piece)]
+    back = TwinBack(PARAMS)
+    for record in records[:3]:
+        back.step({**record, 'soft_zone_shortfall_rad': 0.4 * ARCMIN})
+    state = json.loads(json.dumps(back.state()))
+    assert state['soft_zone_shortfall_rad'] == 0.4 * ARCMIN
+    after = TwinBack(PARAMS)
+    after.restore(state)
+    wear, _ = after.step(records[3])
+    assert wear.record['soft_zone_shortfall_rad'] == 0.4 * ARCMIN
+    assert wear.record['lost_motion_rad'] == pytest.approx(
+        back.step(records[3])[0].record['lost_motion_rad'])
 
 
 def test_the_health_summary_is_the_diagnostic_status_in_its_documented_order(updates):

@@ -278,6 +278,21 @@ def test_a_soft_zone_gives_the_lost_motion_at_the_test_torque_and_the_limit_met_
     assert [p.p50 for p in both] == [stage.prediction(before).p50, got.p50]
 
 
+def test_a_soft_zone_said_before_stays_until_the_reducer_is_replaced(windows):
+    # The next bag's windows (or a restarted monitor's) say none until their own check
+    # has seen enough: the unit's soft zone stays; a new reducer has none.
+    stage = EstimatorStage(PARAMS)
+    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': 0.5 * ARCMIN})
+                for w in windows[:20]])
+    run(stage, windows[20:30])
+    assert stage.record(windows[29].t_end)['soft_zone_shortfall_rad'] == 0.5 * ARCMIN
+    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': 0.3 * ARCMIN})
+                for w in windows[30:]])
+    assert stage.soft_zone_shortfall == 0.3 * ARCMIN      # the latest said
+    stage.reset('replaced')
+    assert stage.record(windows[-1].t_end)['soft_zone_shortfall_rad'] == 0.0
+
+
 def test_a_prediction_does_not_depend_on_the_records_predicted_before(worn_record):
     # The stage draws its random numbers once and reuses them: a record gets the answer of
     # a new stage, whatever the stage predicted before.

@@ -171,6 +171,20 @@ def test_features_in_give_the_offline_estimate_and_a_late_subscriber_gets_the_la
     same_estimate(latest, last)
 
 
+def test_windows_that_carry_a_soft_zone_give_the_lost_motion_at_the_test_torque(
+        ros, tmp_path, records):
+    # te_monitor found the play still being taken up at the test torque: the estimate
+    # follows the play as before, and the lost motion published is at the test torque.
+    shortfall = 0.4 * ARCMIN
+    est = Estimator(ros, tmp_path)
+    est.send([{**rec, 'soft_zone_shortfall_rad': shortfall} for rec in records[:10]])
+    last = est.latest(est.wear, records[9]['window_end_s'])
+    plain = offline(records[:10])
+    assert last['soft_zone_shortfall_rad'] == shortfall
+    assert last['lost_motion_rad'] == pytest.approx(plain['lost_motion_rad'] - shortfall)
+    same_estimate(last, plain, skip=('stamp_s', 'lost_motion_rad', 'soft_zone_shortfall_rad'))
+
+
 def test_the_state_file_is_replaced_atomically_after_every_window(ros, tmp_path, records):
     est = Estimator(ros, tmp_path)
     assert not est.state.exists(), 'nothing to save before the first window'
