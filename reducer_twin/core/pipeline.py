@@ -357,6 +357,7 @@ class EstimatorStage:
         self.log = log or (lambda text: None)
         self.last_observation = float('nan')
         self.soft_zone_shortfall = 0.0
+        self._soft_zone_said = False     # a window of this stream carried one
         self.skipped_replays = 0
         self.restored_from = None
         self.service_said = None
@@ -426,9 +427,13 @@ class EstimatorStage:
         self.last_observation = float(features.lost_motion)
         shortfall = float(getattr(features, 'soft_zone_shortfall', 0.0))
         if math.isfinite(shortfall) and shortfall > 0.0:
-            # A soft zone is the unit's: a stream whose own check has not said it yet (the
-            # next bag, a restarted monitor) keeps the one said before.
             self.soft_zone_shortfall = shortfall
+            self._soft_zone_said = True
+        elif self._soft_zone_said:
+            # This stream's check said it and no longer does: its evidence is followed.
+            self.soft_zone_shortfall = 0.0
+        # Otherwise a soft zone carried over from the reducer's last stream stays until
+        # this stream's own check says one (the next bag of a fleet, BagResult.states).
         if said is None and self.estimator.service_verdict is not None:
             self.service_said = service_note(self.estimator.service_verdict,
                                              self.estimator.config.service_time_s)
@@ -457,6 +462,7 @@ class EstimatorStage:
         """
         self.estimator.reset(reason)
         self.soft_zone_shortfall = 0.0
+        self._soft_zone_said = False
         self.save()
         self.flush()
         self.log(f'estimator reset: {reason}')
@@ -471,11 +477,11 @@ class EstimatorStage:
         claimed), its correlations kept; the wear, the lost motion and the growth law
         are the estimator's (the law's samples are not widened: how far its exponent
         should be is not measured). The lost motion is given at the test torque: the play
-        the estimator follows less the ``soft_zone_shortfall`` windows said last (0 unless
-        a soft zone reaching beyond the test torque was said, :mod:`.soft_zone`; kept by
-        windows that say none, cleared by :meth:`reset`), which the record carries; the
-        remaining life meets the limit where the play reaches the limit plus it
-        (:func:`play_limit`).
+        the estimator follows less the ``soft_zone_shortfall`` of the latest window (0
+        unless a soft zone reaching beyond the test torque is said, :mod:`.soft_zone`; one
+        carried over from the reducer's last stream stays until this stream's windows say
+        one, cleared by :meth:`reset`), which the record carries; the remaining life meets
+        the limit where the play reaches the limit plus it (:func:`play_limit`).
 
         Parameters
         ----------

@@ -278,17 +278,24 @@ def test_a_soft_zone_gives_the_lost_motion_at_the_test_torque_and_the_limit_met_
     assert [p.p50 for p in both] == [stage.prediction(before).p50, got.p50]
 
 
-def test_a_soft_zone_said_before_stays_until_the_reducer_is_replaced(windows):
-    # The next bag's windows (or a restarted monitor's) say none until their own check
-    # has seen enough: the unit's soft zone stays; a new reducer has none.
+def test_a_soft_zone_follows_its_stream_and_one_carried_over_stays_until_the_stream_says(
+        windows):
+    def said(ws, shortfall):
+        return [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall}) for w in ws]
+
+    # Within a stream the windows' evidence is followed, back to none where it fades.
     stage = EstimatorStage(PARAMS)
-    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': 0.5 * ARCMIN})
-                for w in windows[:20]])
-    run(stage, windows[20:30])
-    assert stage.record(windows[29].t_end)['soft_zone_shortfall_rad'] == 0.5 * ARCMIN
-    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': 0.3 * ARCMIN})
-                for w in windows[30:]])
-    assert stage.soft_zone_shortfall == 0.3 * ARCMIN      # the latest said
+    run(stage, said(windows[:10], 0.5 * ARCMIN))
+    run(stage, windows[10:12])
+    assert stage.record(windows[11].t_end)['soft_zone_shortfall_rad'] == 0.0
+    # The next bag's windows say none until their own check has seen enough: the one
+    # carried over (TwinBack.restore) stays meanwhile; a new reducer has none.
+    stage = EstimatorStage(PARAMS)
+    stage.soft_zone_shortfall = 0.5 * ARCMIN
+    run(stage, windows[:20])
+    assert stage.record(windows[19].t_end)['soft_zone_shortfall_rad'] == 0.5 * ARCMIN
+    run(stage, said(windows[20:], 0.3 * ARCMIN))
+    assert stage.soft_zone_shortfall == 0.3 * ARCMIN      # this stream's own
     stage.reset('replaced')
     assert stage.record(windows[-1].t_end)['soft_zone_shortfall_rad'] == 0.0
 
