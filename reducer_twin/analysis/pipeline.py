@@ -356,7 +356,8 @@ class _EntryCounts:
 class _Run:
     """The analysis of one opened bag."""
 
-    def __init__(self, bag, plan, settings, writer, backs, aging, chunks, diagnostics=None):
+    def __init__(self, bag, plan, settings, writer, backs, aging, chunks, diagnostics=None,
+                 initial_states=None):
         self.bag = bag
         self.chunks = chunks
         self.plan = plan
@@ -377,14 +378,18 @@ class _Run:
                      'starts with a digit)')
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
-        self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep)
-                       for j in plan.joints}
+        # The encoders' time offset each reducer's last bag ended with, if any.
+        carried = {j: (initial_states or {}).get(j, {}).get('time_offset_s')
+                   for j in plan.joints}
+        self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep,
+                                     carried[j]) for j in plan.joints}
         # With a worker, some joints' fronts run there (their paired samples go through
         # the pipe): the two processes share the window analysis.
         remote = plan.joints[1::WORKER_FRONT_EVERY] if isinstance(backs, WorkerBacks) else ()
         self.remote = set(remote)
         for joint in remote:
-            backs.add_front(joint, settings, aging, _motor_scale(settings, joint), keep)
+            backs.add_front(joint, settings, aging, _motor_scale(settings, joint), keep,
+                            carried[joint])
         # (column index, joint), the worker's first: it starts on a chunk while this
         # process analyses its own joints.
         self.order = sorted(enumerate(plan.joints), key=lambda kj: kj[1] not in self.remote)
@@ -837,6 +842,7 @@ class _Run:
             res.velocity = _velocity_source(front.analyzer)
             res.inputs = self._inputs_said(joint, front)
             res.soft_zone = front.twin.soft_zone
+            res.time_offset_s = front.twin.calibration.to_carry
             self._rate_said(joint, res)
             self._service_said(joint, res, outputs)
             self._note_gaps(joint, front)
@@ -930,7 +936,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                               what='derived bag') as writer:
                 for robot in plans:
                     run = _analyse_robot(bag, robot, settings, writer, backs, aging,
-                                         diagnostics, reader_process)
+                                         diagnostics, reader_process, initial_states)
                     chunks = run.chunks
                     diagnostics = run.out.diagnostics
                     joints.update(run.run())
@@ -950,7 +956,7 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
                     for robot in late:
                         # Read here: a reader forked now would inherit the writer's threads.
                         run = _analyse_robot(bag, robot, settings, writer, backs, aging,
-                                             diagnostics, False)
+                                             diagnostics, False, initial_states)
                         chunks = run.chunks
                         joints.update(run.run())
                         states.update(backs.states)
@@ -970,15 +976,19 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         raise
     if backs is not stage_worker:
         backs.close()
+    for joint, res in joints.items():   # the fronts' learnt time offsets go on too
+        if states.get(joint) is not None:
+            states[joint] = {**states[joint], 'time_offset_s': res.time_offset_s}
     return BagResult(Path(path), Path(out_dir), plan, joints, messages,
                      time.perf_counter() - start, aging, warnings,
                      any(is_damage(w) for w in warnings), states)
 
 
-def _analyse_robot(bag, plan, settings, writer, backs, aging, diagnostics, reader_process):
+def _analyse_robot(bag, plan, settings, writer, backs, aging, diagnostics, reader_process,
+                   initial_states=None):
     """Return the analysis of one plan's joints (a :class:`_Run`, not yet run)."""
     topics = [plan.link_topic] + ([plan.motor_topic] if plan.motor_topic else [])
     chunks = BagChunks(bag, topics, CHUNK_MESSAGES, plan.prefix)
     if reader_process:   # forked before the writer opens its file and threads
         chunks = ForkedBagChunks(chunks)
-    return _Run(bag, plan, settings, writer, backs, aging, chunks, diagnostics)
+    return _Run(bag, plan, settings, writer, backs, aging, chunks, diagnostics, initial_states)

@@ -39,6 +39,11 @@ class JointResult:
         Thinned TE samples (stamp_s, output_angle_rad, te_rad, torque_nm).
     truth : numpy.ndarray or None
         ``ground_truth`` records from the bag, if it has them.
+    soft_zone : dict or None
+        A soft zone beyond the test torque, where said (:attr:`.joint_twin.TwinFront.soft_zone`).
+    time_offset_s : float or None
+        The encoders' time offset the joint's next bag may start from
+        (:attr:`.pipeline.TimeOffsetCalibration.to_carry`).
 
     """
 
@@ -58,6 +63,7 @@ class JointResult:
     velocity: str = None
     service: dict = None
     soft_zone: dict = None
+    time_offset_s: float = None
     inputs: list = field(default_factory=list)
 
     @property

@@ -67,13 +67,16 @@ FRONT_OUTPUT = '!front'
 class JointFront:
     """The ``te_monitor`` part of one joint, and the spike rule of ``encoder_ingest``."""
 
-    def __init__(self, joint, settings, aging_factor, motor_scale, keep_every):
+    def __init__(self, joint, settings, aging_factor, motor_scale, keep_every,
+                 time_offset_s=None):
         params = settings.params_of(joint)
         self.joint = joint
         self.params = params
         self.twin = TwinFront(params, TwinConfig(
             aging_factor=aging_factor, window_s=settings.window_s, max_gap_s=settings.max_gap_s,
             friction_in_effort=settings.friction_in_effort, effort_lag_s=settings.effort_lag_s))
+        # The encoders' time offset the reducer's last bag ended with (BagResult.states).
+        self.twin.carry_time_offset(time_offset_s)
         self.ratio = self.twin.ratio
         self.extractor = self.twin.extractor
         self.calibration = self.twin.calibration
@@ -590,14 +593,16 @@ class WorkerBacks:
         self.states = {}
         self._inbox.put((_CONFIG, params, life_config, states, estimators))
 
-    def add_front(self, joint, settings, aging_factor, motor_scale, keep_every):
+    def add_front(self, joint, settings, aging_factor, motor_scale, keep_every,
+                  time_offset_s=None):
         """
         Run the front of ``joint`` in the worker (a :class:`JointFront` of these arguments).
 
         Its paired samples then go to :meth:`submit` as ``'feed'`` work, and its
         windows to the worker's back stages directly (see :meth:`LocalBacks.submit`).
         """
-        self._inbox.put((_ADD_FRONT, joint, settings, aging_factor, motor_scale, keep_every))
+        self._inbox.put((_ADD_FRONT, joint, settings, aging_factor, motor_scale, keep_every,
+                         time_offset_s))
 
     def submit(self, joint, kind, items):
         """Send work (see :meth:`LocalBacks.submit`)."""

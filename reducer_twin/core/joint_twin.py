@@ -383,6 +383,16 @@ class TwinFront:
                                        effort_lag_s=config.effort_lag_s)
         self.windows = 0
 
+    def carry_time_offset(self, offset_s):
+        """
+        Start from the encoders' time offset the reducer's last stream ended with [s].
+
+        What :attr:`.pipeline.TimeOffsetCalibration.to_carry` gave at that stream's end
+        (``BagResult.states``, the fleet); None or a non-finite value: learnt afresh.
+        """
+        if offset_s is not None and math.isfinite(offset_s) and offset_s != 0.0:
+            self.calibration.carry(float(offset_s))
+
     def te(self, t_s, motor, link):
         """
         Return the TE stream of paired samples (stamps [s], motor and link angles [rad]).

@@ -173,6 +173,21 @@ class TimeOffsetCalibration:
         self.drift = None
         self._times = []        # the estimates' window ends [s]
         self._changes = []      # (mid-stamp of its windows [s], offset after it [s])
+        self.carried = False    # the offset came from the reducer's last stream
+
+    def carry(self, offset_s):
+        """
+        Start from the offset the reducer's last stream ended with [s].
+
+        Applied at once, not yet :attr:`settled`: windows whose fit still finds more than
+        the linear term give no lost motion until the next windows' median confirms it
+        (within :data:`TIME_OFFSET_TRACK_S`) or corrects it, as after a first median.
+        Recordings of short bags (a fleet's snippets of 10-30 s) then keep their windows
+        where each would otherwise spend its first five learning the offset again.
+        """
+        self.extractor.link_time_offset_s += offset_s
+        self.applied = float(offset_s)
+        self.carried = True
 
     def observe(self, features):
         """
@@ -270,8 +285,10 @@ class TimeOffsetCalibration:
                     'transmission error still carries more than '
                     f'{1e3 * TIME_OFFSET_LINEAR_S:g} ms of it give no lost motion: '
                     'synchronise the clocks or stamp both encoders on one')
-        how = ('learnt from the first windows and removed from then on' if self.applied
-               is not None else 'read by the first windows, not yet removed')
+        how = ('read by the first windows, not yet removed' if self.applied is None else
+               "carried over from the reducer's last recording, checked by its windows"
+               if self.carried and not self._changes else
+               'learnt from the first windows and removed from then on')
         return (f'the link and motor encoders are stamped {1e3 * abs(offset):.1f} ms apart '
                 '(two clocks, or one topic stamped on arrival or a control cycle late): '
                 f'{how}; windows whose transmission error still carries it give no lost '
@@ -283,9 +300,23 @@ class TimeOffsetCalibration:
             self.extractor.link_time_offset_s -= self.applied
         self.applied = self.delta = None
         self.settled = False
+        self.carried = False
         self.drift = None
         self._changes = []
         self.estimates, self._times = [], []
+
+    @property
+    def to_carry(self):
+        """
+        Return the offset a reducer's next stream may start from [s], or None.
+
+        The offset applied, where it does not drift (two clocks that drift apart are
+        somewhere else by the next recording). Confirmed or not: the next stream's windows
+        check it before they give a lost motion (:meth:`carry`).
+        """
+        if self.applied is None or self.drift is not None:
+            return None
+        return float(self.applied)
 
 
 def features_record(f, params):

@@ -292,6 +292,34 @@ def test_a_motor_topic_stamped_milliseconds_apart_is_learnt_and_said(tmp_path, s
         assert float(apart) == pytest.approx(abs(offset_ms), abs=1e3 * TIME_OFFSET_LINEAR_S)
 
 
+def test_short_bags_of_encoders_stamped_apart_are_observed_from_the_reducers_second_bag(
+        tmp_path, monkeypatch):
+    # A fleet's snippets of 12 s, the motor topic stamped 5 ms late: each bag spent its
+    # windows learning the offset again, and every bag of the reducer was "not observed".
+    # The next bag starts from the offset the last one ended with (BagResult.states, as
+    # the fleet chains them) and reads its windows; the first still says why it cannot.
+    states, got = None, []
+    for k in range(3):
+        monkeypatch.setattr(gen, 'START_S', gen.START_S + 3600)    # bags an hour apart
+        spec = gen.Spec(seed=21, kinds=('shoulder', 'forearm'), hours=12.0 / 3600.0,
+                        start_hours=1000.0 + 100.0 * k, rate_hz=500.0,
+                        motor_stamp_offset_s=0.005)
+        truth = gen.generate_bag(spec, tmp_path / f'bag{k}')['joints']
+        result = analyze_bag(tmp_path / f'bag{k}', tmp_path / f'out{k}', initial_states=states)
+        states = result.states
+        got.append((truth, {j: r.summary() for j, r in result.joints.items()}))
+        assert all(s['time_offset_s'] == pytest.approx(0.005, abs=1e-4)
+                   for s in states.values())
+    first = got[0][1]
+    assert all(not j['observed'] and 'stamped up to 5' in j['reason'] for j in first.values())
+    for truth, joints in got[1:]:
+        for name, j in joints.items():
+            assert j['observed'] and j['windows'] >= 4, (name, j['reason'])
+            assert j['lost_motion_arcmin'] == pytest.approx(
+                truth[name]['lost_motion_end_arcmin'], rel=0.1)
+            assert any('carried over from the reducer' in line for line in j['inputs'])
+
+
 @pytest.mark.parametrize('ppm', [20, 100])
 def test_a_motor_clock_drifting_from_the_links_is_followed_and_said(tmp_path, split_1khz, ppm):
     # Two clocks that are not synchronised drift apart by a crystal's tolerance: 3 and 15 ms

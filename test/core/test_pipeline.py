@@ -575,6 +575,32 @@ def test_a_drifting_clock_is_followed_between_the_windows_and_said():
     assert 'drift by 6 ms a minute (100 ppm' in calibration.reason
 
 
+def test_an_offset_carried_from_the_last_stream_is_applied_and_checked_by_the_windows():
+    # A reducer's next bag starts from the offset its last ended with: applied at once,
+    # not settled until the windows' median confirms it; a wrong one is corrected as a
+    # first median would be. A drifting offset is not carried (the clocks moved on).
+    extractor = SimpleNamespace(link_time_offset_s=0.0)
+    calibration = TimeOffsetCalibration(extractor, windows=5)
+    calibration.carry(5e-3)
+    assert extractor.link_time_offset_s == 5e-3 and not calibration.settled
+    assert 'carried over from the reducer' in calibration.reason
+    assert not any(calibration.observe(f) for f in _fits([1e-5, -2e-5, 0.0, 2e-5, 1e-5]))
+    assert calibration.settled and calibration.to_carry == 5e-3
+    wrong = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=5)
+    wrong.carry(5e-3)
+    assert [wrong.observe(f) for f in _fits([-5.1e-3, -4.9e-3, -5e-3, -5e-3, -5e-3])] \
+        == [False] * 4 + [True]
+    assert wrong.applied == pytest.approx(0.0, abs=1e-9) and not wrong.settled
+    assert not any(wrong.observe(f) for f in _fits([1e-5, -2e-5, 0.0, 2e-5, 1e-5], 10.0))
+    assert wrong.settled and wrong.reason is None       # 0 ms apart after all
+    assert TimeOffsetCalibration(extractor).to_carry is None       # nothing learnt
+    drifting = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=5)
+    for group in range(4):
+        for f in _fits([1e-3] * 5, 10.0 * group):
+            drifting.observe(f)
+    assert drifting.drift is not None and drifting.to_carry is None
+
+
 def test_a_microsecond_offset_is_learnt_once_and_settled():
     calibration = TimeOffsetCalibration(SimpleNamespace(link_time_offset_s=0.0), windows=2)
     for f in _fits([50e-6, 52e-6]):
