@@ -466,7 +466,9 @@ class TwinFront:
 
         The stream means of :attr:`.soft_zone.SoftZoneCheck.said` once the soft zone is said
         (``shortfall``, ``shortfall_sd``, ``play``, ``width`` [rad], ``windows``): the line of
-        :meth:`input_warnings` as numbers. The estimate is not changed by them.
+        :meth:`input_warnings` as numbers. From then on each window carries the shortfall
+        (``WindowFeatures.soft_zone_shortfall``), and the back gives the lost motion at the
+        test torque (:meth:`.pipeline.EstimatorStage.record`).
         """
         return self.analyzer.soft_zone_said
 
