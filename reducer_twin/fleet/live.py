@@ -290,7 +290,9 @@ class LiveHistory:
         state = {'estimator': estimator_state,
                  'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
                  'lost_motion_obs_rad': float(lost_motion_obs) if np.isfinite(lost_motion_obs)
-                 else None}
+                 else None,
+                 # As TwinBack.state: a soft zone said goes on with the reducer.
+                 'soft_zone_shortfall_rad': float(wear.get('soft_zone_shortfall_rad', 0.0))}
         features = record_values(TE_FEATURES, record)
         with self._lock:
             if self.conflict is not None:

@@ -31,6 +31,7 @@ import json
 import os
 from pathlib import Path
 import sqlite3
+import time
 import zlib
 
 import numpy as np
@@ -397,12 +398,19 @@ class FleetStore:
 
     def _prepare(self):
         conn = self.conn
-        version = conn.execute('PRAGMA user_version').fetchone()[0]
+        # One read transaction: the version and the tables of one moment (another process
+        # creating the store at the same time commits its schema and version together).
+        conn.execute('BEGIN')
+        try:
+            version = conn.execute('PRAGMA user_version').fetchone()[0]
+            tables = {r[0] for r in conn.execute(
+                "SELECT name FROM sqlite_master WHERE type='table'")}
+        finally:
+            conn.execute('COMMIT')
         if version > SCHEMA_VERSION:
             raise StoreError(f'{self.path}: fleet store schema version {version} is newer than '
                              f'this reducer-twin reads (up to {SCHEMA_VERSION}); update '
                              'reducer-twin')
-        tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
         if version == 0 and tables:
             raise StoreError(f'{self.path} is an SQLite file but not a fleet store (tables: '
                              f'{sorted(tables)}); expected a file written by analyze --store')
@@ -412,8 +420,18 @@ class FleetStore:
                 raise StoreError(f'{self.path} is not a fleet store (kind {kind!r})')
         if version < SCHEMA_VERSION:
             self.migrate(SCHEMA_VERSION)
-        if conn.execute('PRAGMA journal_mode').fetchone()[0].lower() != 'wal':
-            conn.execute('PRAGMA journal_mode = WAL')
+        # Two processes opening a new store at once: the switch to WAL needs the file to
+        # itself and can fail at once as locked (no busy wait); it is tried again.
+        deadline = time.monotonic() + BUSY_TIMEOUT_S
+        while True:
+            try:
+                if conn.execute('PRAGMA journal_mode').fetchone()[0].lower() == 'wal':
+                    break
+                conn.execute('PRAGMA journal_mode = WAL')
+            except sqlite3.OperationalError:
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.01)
 
     def migrate(self, target):
         """

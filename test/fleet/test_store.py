@@ -1,5 +1,6 @@
 """The fleet store: a versioned SQLite file that survives crashes and concurrent writers."""
 
+import multiprocessing
 import sqlite3
 
 import numpy as np
@@ -128,6 +129,32 @@ def test_a_second_writer_fails_clearly_or_waits_for_the_first(tmp_path):
     first.close()
     second.lock_for_writing(wait=False)
     second.close()
+
+
+def _open_at_once(path, barrier, said):
+    barrier.wait()      # every process opens the new store at the same moment
+    try:
+        with FleetStore(path, create=True) as store:
+            said.put(('ok', store.schema_version))
+    except StoreError as err:
+        said.put(('error', str(err)))
+
+
+def test_processes_that_create_a_store_at_once_all_open_one_fleet_store(tmp_path):
+    # Two analyses started together on a new --store: one of them read the version
+    # before the other's schema was committed and the tables after it, and refused the
+    # store as "an SQLite file but not a fleet store" (3 of 100 rounds of 8 processes).
+    ctx = multiprocessing.get_context('fork')
+    for k in range(60):
+        barrier, said = ctx.Barrier(8), ctx.Queue()
+        procs = [ctx.Process(target=_open_at_once, args=(tmp_path / f'f{k}.db', barrier, said))
+                 for _ in range(8)]
+        for proc in procs:
+            proc.start()
+        got = [said.get(timeout=60) for _ in procs]
+        for proc in procs:
+            proc.join()
+        assert got == [('ok', SCHEMA_VERSION)] * 8, got
 
 
 def test_replace_retires_the_reducer_and_installs_a_new_one_after_its_data(tmp_path):
