@@ -172,6 +172,10 @@ class SoftZoneCheck:
         if not (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play
                 and short >= SHORTFALL_SIGMAS * sd):
             return None
+        if not short < play:
+            # No width left at the test torque: a hysteresis is never narrower than none,
+            # so the bins there are misread (the load's sign mistaken), not a soft zone.
+            return None
         return {'shortfall': short, 'shortfall_sd': sd, 'play': play, 'width': play - short,
                 'windows': self.windows}
 

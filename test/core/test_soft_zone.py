@@ -71,6 +71,19 @@ def test_one_window_or_a_small_zone_is_not_enough():
     assert _checked(*_catalogue_bins(0.3, 0.06)).reason is None
 
 
+def test_a_width_at_the_test_torque_of_none_or_less_is_no_soft_zone():
+    # Bins at the test torque narrower than no hysteresis at all are misread bins (the
+    # load's sign mistaken there), not a play still being taken up: taken off the play,
+    # such a shortfall would leave a lost motion of zero or less.
+    torque, width, std, usable = _catalogue_bins(2.0, 0.05)
+    near = np.abs(torque - TEST_TORQUE) <= 0.15 * TEST_TORQUE
+    assert near.any()
+    width[near] = -0.2 * ARCMIN + 2.0 * torque[near] / STIFFNESS
+    check = _checked(torque, width, std, usable)
+    assert check.shortfall[0] > check.shortfall[2] > 0.0
+    assert check.said is None and check.reason is None
+
+
 def test_a_window_at_the_test_torque_is_compared_with_the_line_of_recent_windows():
     # A window with loads at the test torque seldom has loads far beyond it too: it is
     # compared with the straight line the windows before it pooled. Unused bins may hold
