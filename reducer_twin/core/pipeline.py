@@ -440,18 +440,10 @@ class EstimatorStage:
 
     def step(self, features):
         """
-        Step the filter with one window, without the replay check or persisting.
+        Step the filter with one window: :meth:`process` without its replay check or save.
 
-        Parameters
-        ----------
-        features : object
-            Window features (see :func:`features_from_record`).
-
-        Returns
-        -------
-        object
-            The estimator's update result (``status``, ``nis``, ...).
-
+        Returns the estimator's update result (``status``, ``nis``, ...); the stage's last
+        observation and soft-zone shortfall follow the window, as in :meth:`process`.
         """
         said = self.estimator.service_verdict
         result = self.estimator.step(features)
