@@ -69,6 +69,7 @@ from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
+from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -700,6 +701,25 @@ class _Run:
             warn(self.bag, f'{joint}: {line}')
         return said
 
+    def _soft_zone_carried(self, joint, res):
+        """
+        Say a soft zone carried over from the reducer's last bag that this one has not shown.
+
+        Its shortfall still gives the lost motion at the test torque (``initial_states``,
+        :meth:`.pipeline.EstimatorStage.step`); return the lines said.
+        """
+        if res.soft_zone is not None or res.wear is None or not len(res.wear):
+            return []
+        short = float(res.wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
+        if not short > 0.0:
+            return []
+        line = ('the lost motion and remaining life are given at the lost-motion test torque '
+                f'with the soft zone an earlier recording of this reducer found (the play '
+                f'{rad_to_arcmin(short):.2f} arcmin wider than the width there); this '
+                'recording has not shown it yet')
+        warn(self.bag, f'{joint}: {line}')
+        return [line]
+
     def _rate_said(self, joint, res):
         """Say when an observed joint's remaining life is the model's wear rate, not its own."""
         if not (res.observed and len(res.wear)):
@@ -842,6 +862,7 @@ class _Run:
             res.velocity = _velocity_source(front.analyzer)
             res.inputs = self._inputs_said(joint, front)
             res.soft_zone = front.twin.soft_zone
+            res.inputs += self._soft_zone_carried(joint, res)
             res.time_offset_s = front.twin.calibration.to_carry
             self._rate_said(joint, res)
             self._service_said(joint, res, outputs)

@@ -13,6 +13,7 @@ from bench_scripts import load
 from cli_runs import analyze_process
 import numpy as np
 import pytest
+from reducer_twin.analysis.pipeline import analyze_bag
 
 gen = load('third_generator')
 
@@ -114,3 +115,31 @@ def test_a_play_still_taken_up_beyond_the_test_torque_is_said_with_its_width_the
     # arcmin; read as the lost motion before, +110 %) less the stream's shortfall.
     assert reported == pytest.approx(truth['joint_3']['lost_motion_end_arcmin'], rel=0.25)
     assert 'narrower than the flanks' in (tmp_path / 'report' / 'index.html').read_text()
+
+
+@pytest.mark.slow
+def test_a_soft_zone_found_in_one_bag_gives_the_next_bags_lost_motion_at_the_test_torque(
+        tmp_path, monkeypatch):
+    # The forearm above, then 20 s of it a day later: too short for its own check to say
+    # the soft zone, so alone it reads its play (and is called worn out). Continued from
+    # the first bag's state (as the fleet store chains them) it keeps the shortfall found
+    # there, gives the lost motion at the test torque and says where that came from.
+    runs = {}
+    for k, (hours, start) in enumerate(((300.0, 0.4), (20.0, 0.41))):
+        monkeypatch.setattr(gen.indep, 'START_S', gen.indep.START_S + 86400 * k)
+        spec = gen.Spec(seed=7, kinds=('base', 'shoulder', 'forearm'), hours=hours,
+                        aging_factor=3600.0, rate_hz=1000.0, start_fraction=start)
+        truth = gen.generate_bag(spec, tmp_path / f'bag{k}')['joints']['joint_3']
+        first = runs.get('first')
+        for name, states in ((('first', None),) if k == 0 else
+                             (('chained', first.states), ('alone', None))):
+            runs[name] = analyze_bag(tmp_path / f'bag{k}', tmp_path / f'out_{name}',
+                                     initial_states=states)
+    true_lm = truth['lost_motion_end_arcmin']
+    chained, alone = (runs[n].joints['joint_3'].summary() for n in ('chained', 'alone'))
+    assert chained['soft_zone'] is None and alone['soft_zone'] is None   # not seen in 20 s
+    assert alone['lost_motion_arcmin'] > 1.5 * true_lm
+    assert chained['lost_motion_arcmin'] == pytest.approx(true_lm, rel=0.25)
+    said = [line for line in chained['inputs'] if 'an earlier recording of this' in line]
+    assert len(said) == 1 and 'has not shown it yet' in said[0]
+    assert not any('an earlier recording' in line for line in alone['inputs'])
