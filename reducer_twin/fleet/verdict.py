@@ -184,10 +184,10 @@ def _judge(row, r, state, params):
     lm, limit = row['lost_motion_arcmin'], row['lost_motion_limit_arcmin']
     if lm is not None and limit is not None and lm >= limit:
         # The estimator follows the play: a soft zone beyond the test torque meets the
-        # limit stated there that much later (the latest analysis's shortfall).
-        soft = row.get('soft_zone') or {}
-        play_limit = r.lost_motion_limit_rad + soft.get('shortfall_arcmin', 0.0) * ARCMIN
-        p10, p50, p90 = (_hours(v) for v in overdue_life(state, params, play_limit))
+        # limit stated there that much later (the shortfall its lost motion was given with).
+        shortfall = float((r.state or {}).get('soft_zone_shortfall_rad', 0.0))
+        p10, p50, p90 = (_hours(v) for v in overdue_life(
+            state, params, r.lost_motion_limit_rad + shortfall))
         row.update(rul_p10_h=p10, rul_p50_h=p50, rul_p90_h=p90)
         past = f'about {-p50:,.0f} h ago at the recent duty' if p50 is not None and p50 < 0 \
             else 'now'

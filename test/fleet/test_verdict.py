@@ -61,6 +61,18 @@ def test_past_the_limit_the_remaining_life_is_negative_hours_past_it():
     assert f'about {-row["rul_p50_h"]:,.0f} h ago' in row['reason']
 
 
+def test_past_the_limit_with_a_soft_zone_the_limit_was_crossed_by_the_play_later():
+    # The lost motion at the test torque is the play less a soft zone's shortfall: the
+    # play the estimator follows met the limit stated there that much later.
+    w_lim = limit_wear(PARAMS, LIMIT)
+    plain = fleet_row(_reducer(0.0, lm=3.4, wear_m=w_lim * 1.3), PARAMS)
+    soft = _reducer(0.0, lm=3.4, wear_m=w_lim * 1.3)
+    soft.state['soft_zone_shortfall_rad'] = 0.2 * ARCMIN
+    row = fleet_row(soft, PARAMS)
+    assert row['verdict'] == 'REPLACE' and 'past its limit' in row['reason']
+    assert plain['rul_p50_h'] < row['rul_p50_h'] < 0.0
+
+
 def test_the_overdue_life_is_the_closed_form_at_a_certain_state():
     from reducer_twin.core.estimator import run_in_free_wear
     w_lim = limit_wear(PARAMS, LIMIT)
