@@ -30,7 +30,7 @@ from .ingest import IngestConfig
 from .kinematics import total_ratio
 from .params import _Validated, spec
 from .pipeline import EstimatorStage, features_from_record, features_record, LifeConfig
-from .pipeline import LifeStage, TimeOffsetCalibration
+from .pipeline import LifeStage, reducer_state, TimeOffsetCalibration
 from .te_extraction import TEExtractor, TIME_OFFSET_LINEAR_S
 from .units import HOUR, m_to_um, rad_to_arcmin
 from .window_analysis import WindowAnalyzer
@@ -630,27 +630,18 @@ class TwinBack:
         Returns
         -------
         dict
-            JSON-able: ``estimator`` (``WearEstimator.state_dict``), ``duty`` (the life
-            stage's last duty summary or None), ``lost_motion_obs_rad`` (or None) and
-            ``soft_zone_shortfall_rad`` (the soft zone said last, 0 if none).
+            :func:`.pipeline.reducer_state`: the estimator, the life stage's last duty, the
+            last observation and the soft zone the lost motion is given with.
 
         """
-        obs = self.estimator.last_observation
-        duty = self.life.duty
-        return {'estimator': self.estimator.estimator.state_dict(),
-                'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
-                'lost_motion_obs_rad': float(obs) if np.isfinite(obs) else None,
-                'soft_zone_shortfall_rad': float(self.estimator.soft_zone_shortfall)}
+        stage = self.estimator
+        return reducer_state(stage.estimator.state_dict(), self.life.duty,
+                             stage.last_observation, stage.soft_zone_shortfall)
 
     def restore(self, state):
         """Continue from :meth:`state` of an earlier analysis of the same reducer."""
         from types import SimpleNamespace
-
-        from .estimator import WearEstimator
-        self.estimator.estimator = WearEstimator.from_state(self.params, state['estimator'])
-        obs = state.get('lost_motion_obs_rad')
-        self.estimator.last_observation = float('nan') if obs is None else float(obs)
-        self.estimator.soft_zone_shortfall = float(state.get('soft_zone_shortfall_rad', 0.0))
+        self.estimator.continue_from(state)
         duty = state.get('duty')
         self.life.duty = None if duty is None else SimpleNamespace(**duty)
 

@@ -463,6 +463,19 @@ class EstimatorStage:
             self.log(self.service_said)
         return result
 
+    def continue_from(self, state, config=None):
+        """
+        Continue from a reducer's state (:func:`reducer_state`: an earlier bag, the store).
+
+        The estimator, its last observation and the soft zone carried over; the duty is the
+        life stage's. Raises :class:`~.errors.StateFileError` for an unusable estimator.
+        """
+        from .estimator import WearEstimator
+        self.estimator = WearEstimator.from_state(self.params, state['estimator'], config)
+        obs = state.get('lost_motion_obs_rad')
+        self.last_observation = float('nan') if obs is None else float(obs)
+        self.soft_zone_shortfall = float(state.get('soft_zone_shortfall_rad', 0.0))
+
     def save(self):
         """Hand the state to the store (at once, or queued by a background store)."""
         if self.store is not None:
@@ -545,6 +558,35 @@ class EstimatorStage:
         for (i, j), key in _TREND_COVARIANCE_KEYS.items():
             rec[key] = float(cov[i, j])
         return rec
+
+
+def reducer_state(estimator_state, duty, lost_motion_obs, soft_zone_shortfall):
+    """
+    Return where a reducer's stages are, to continue with its next bag or live segment.
+
+    Parameters
+    ----------
+    estimator_state : dict
+        ``WearEstimator.state_dict()``.
+    duty : object or None
+        The life stage's last duty summary.
+    lost_motion_obs : float
+        The estimator stage's last observation [rad] (NaN: none).
+    soft_zone_shortfall : float
+        The soft zone the lost motion is given with [rad] (:class:`EstimatorStage`).
+
+    Returns
+    -------
+    dict
+        JSON-able: ``estimator``, ``duty`` (or None), ``lost_motion_obs_rad`` (or None) and
+        ``soft_zone_shortfall_rad``; :meth:`EstimatorStage.continue_from` reads it.
+
+    """
+    return {'estimator': estimator_state,
+            'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
+            'lost_motion_obs_rad': float(lost_motion_obs) if np.isfinite(lost_motion_obs)
+            else None,
+            'soft_zone_shortfall_rad': float(soft_zone_shortfall)}
 
 
 _COVARIANCE_KEYS = {

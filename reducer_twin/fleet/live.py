@@ -36,6 +36,7 @@ import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.joint_twin import estimate_numbers
 from reducer_twin.core.pipeline import features_from_record, life_basis, LifeStage
+from reducer_twin.core.pipeline import reducer_state
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
@@ -286,13 +287,8 @@ class LiveHistory:
             self.error = (f'window ending {iso_from_ns(_ns(wear["stamp_s"]))} not stored: '
                           f'{err}')
             return 'ERROR'
-        duty = self.life.duty
-        state = {'estimator': estimator_state,
-                 'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
-                 'lost_motion_obs_rad': float(lost_motion_obs) if np.isfinite(lost_motion_obs)
-                 else None,
-                 # As TwinBack.state: a soft zone said goes on with the reducer.
-                 'soft_zone_shortfall_rad': float(wear.get('soft_zone_shortfall_rad', 0.0))}
+        state = reducer_state(estimator_state, self.life.duty, lost_motion_obs,
+                              wear.get('soft_zone_shortfall_rad', 0.0))
         features = record_values(TE_FEATURES, record)
         with self._lock:
             if self.conflict is not None:
@@ -598,13 +594,10 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
         raise StoreError(f'parameter store: {err}') from None
     if start.state is not None:
         try:
-            stage.estimator = WearEstimator.from_state(params, start.state['estimator'],
-                                                       estimator_config)
+            stage.continue_from(start.state, estimator_config)
         except StateFileError as err:
             raise StateFileError(f'parameter store: the state of {robot}/{joint} in the '
                                  f'fleet store {store} cannot be used: {err}') from None
-        obs = start.state.get('lost_motion_obs_rad')
-        stage.last_observation = float('nan') if obs is None else float(obs)
         stage.restored_from = f'fleet store {store} ({robot}/{joint})'
     elif start.new_reducer:
         # Fitted new: not the unit the configuration's service time was of.

@@ -492,7 +492,6 @@ class FleetStore:
 
         """
         import fcntl
-        import time
         if self._lock_fd is not None:
             return
         lock_path = self.path.with_name(self.path.name + '.lock')

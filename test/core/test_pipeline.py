@@ -23,6 +23,7 @@ from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
+from reducer_twin.core.pipeline import reducer_state
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -298,6 +299,22 @@ def test_a_soft_zone_follows_its_stream_and_one_carried_over_stays_until_the_str
     assert stage.soft_zone_shortfall == 0.3 * ARCMIN      # this stream's own
     stage.reset('replaced')
     assert stage.record(windows[-1].t_end)['soft_zone_shortfall_rad'] == 0.0
+
+
+def test_a_stage_continues_from_a_reducer_state_with_its_soft_zone(windows):
+    # What a bag (TwinBack.state) or the fleet store's live writer leaves is what the
+    # next bag, or a wear_estimator started from the store, continues from.
+    stage = EstimatorStage(PARAMS)
+    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': 0.5 * ARCMIN})
+                for w in windows[:20]])
+    state = json.loads(json.dumps(reducer_state(
+        stage.estimator.state_dict(), windows[19].duty, stage.last_observation,
+        stage.soft_zone_shortfall)))
+    assert state['duty']['exposure_s'] == windows[19].duty.exposure_s
+    after = EstimatorStage(PARAMS)
+    after.continue_from(state)
+    assert after.record(1.0) == {**stage.record(1.0)}
+    assert after.soft_zone_shortfall == 0.5 * ARCMIN
 
 
 def test_a_prediction_does_not_depend_on_the_records_predicted_before(worn_record):
