@@ -245,6 +245,10 @@ def summarise(runs, noise_pct):
     said = sum(j['soft_zone'] for j in joints)
     print(f'  said to take the play up beyond the test torque (core/soft_zone.py): '
           f'{said} of {len(joints)} joints')
+    if said:   # their lost motion is given at the test torque: its error there
+        errors = [(j['reported'] - j['truth']) / j['truth'] for j in joints
+                  if j['soft_zone'] and j['observed'] and math.isfinite(j['reported'])]
+        print(f'    the joints it is said of, reported: {_stats(errors)}')
     reasons = {}
     for r in runs:
         for name, j in r['joints'].items():
