@@ -69,7 +69,7 @@ from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
-from reducer_twin.core.units import rad_to_arcmin
+from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -713,10 +713,7 @@ class _Run:
         short = float(res.wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
         if not short > 0.0:
             return []
-        line = ('the lost motion and remaining life are given at the lost-motion test torque '
-                f'with the soft zone an earlier recording of this reducer found (the play '
-                f'{rad_to_arcmin(short):.2f} arcmin wider than the width there); this '
-                'recording has not shown it yet')
+        line = carried_line(short)
         warn(self.bag, f'{joint}: {line}')
         return [line]
 

@@ -194,6 +194,10 @@ class HealthSummary:
         Peak-to-peak TE of the last window [arcmin]; None before one.
     lost_motion_limit_arcmin : float
         The accuracy limit [arcmin].
+    soft_zone_shortfall_arcmin : float
+        The soft zone the lost motion is given at the test torque with (the play less it),
+        found by this stream or carried over from the reducer's last (:mod:`.soft_zone`);
+        0 without one [arcmin].
 
     """
 
@@ -214,6 +218,7 @@ class HealthSummary:
     rejected_updates: int
     te_pp_arcmin: Optional[float]
     lost_motion_limit_arcmin: float
+    soft_zone_shortfall_arcmin: float = 0.0
 
     @classmethod
     def of(cls, wear, life, te_pp_rad=None):
@@ -247,10 +252,16 @@ class HealthSummary:
             exposure_h=wear['exposure_s'] / HOUR, level=life.level, message=life.message,
             updates=int(wear['updates']), rejected_updates=int(wear['rejected']),
             te_pp_arcmin=None if te_pp_rad is None else rad_to_arcmin(te_pp_rad),
-            lost_motion_limit_arcmin=rad_to_arcmin(rec['lost_motion_limit_rad']))
+            lost_motion_limit_arcmin=rad_to_arcmin(rec['lost_motion_limit_rad']),
+            soft_zone_shortfall_arcmin=rad_to_arcmin(wear.get('soft_zone_shortfall_rad', 0.0)))
 
     def as_dict(self):
-        """Return the summary as a dict (``te_pp_arcmin`` only once a window was seen)."""
+        """
+        Return the summary as a dict.
+
+        ``te_pp_arcmin`` only once a window was seen, ``soft_zone_shortfall_arcmin`` only
+        while the lost motion is given at the test torque less a soft zone.
+        """
         out = {'wear_um': self.wear_um, 'wear_std_um': self.wear_std_um,
                'rate_scale': self.rate_scale, 'lost_motion_arcmin': self.lost_motion_arcmin,
                'lost_motion_obs_arcmin': self.lost_motion_obs_arcmin,
@@ -261,6 +272,8 @@ class HealthSummary:
                'rejected_updates': self.rejected_updates}
         if self.te_pp_arcmin is not None:
             out['te_pp_arcmin'] = self.te_pp_arcmin
+        if self.soft_zone_shortfall_arcmin > 0.0:
+            out['soft_zone_shortfall_arcmin'] = self.soft_zone_shortfall_arcmin
         return out
 
     def diagnostic(self, rejected_messages=0):

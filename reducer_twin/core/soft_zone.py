@@ -195,3 +195,24 @@ class SoftZoneCheck:
                 'the lost motion and remaining life are given at the test torque from here on '
                 '(the play the estimate follows, less this shortfall); the wear is that of '
                 'the play')
+
+
+def carried_line(shortfall):
+    """
+    Say that the lost motion is given with a soft zone an earlier recording found.
+
+    Parameters
+    ----------
+    shortfall : float
+        The shortfall carried over from the reducer's last recording [rad].
+
+    Returns
+    -------
+    str
+        The line (the bag analysis's ``WARNING`` and input line, the live log).
+
+    """
+    return ('the lost motion and remaining life are given at the lost-motion test torque with '
+            'the soft zone an earlier recording of this reducer found (the play '
+            f'{shortfall / ARCMIN:.2f} arcmin wider than the width there); this recording has '
+            'not shown it yet')

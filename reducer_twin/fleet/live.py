@@ -37,6 +37,7 @@ from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwin
 from reducer_twin.core.joint_twin import estimate_numbers
 from reducer_twin.core.pipeline import features_from_record, life_basis, LifeStage
 from reducer_twin.core.pipeline import reducer_state
+from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.core.units import HOUR
 from reducer_twin.fleet.cli import MAX_ROBOT_NAME, valid_robot_name
 from reducer_twin.fleet.store import FleetStore, iso_from_ns, Segment, StoreBusy
@@ -599,6 +600,8 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
             raise StateFileError(f'parameter store: the state of {robot}/{joint} in the '
                                  f'fleet store {store} cannot be used: {err}') from None
         stage.restored_from = f'fleet store {store} ({robot}/{joint})'
+        if stage.soft_zone_shortfall > 0.0:
+            log(f'{robot}/{joint}: {carried_line(stage.soft_zone_shortfall)}')
     elif start.new_reducer:
         # Fitted new: not the unit the configuration's service time was of.
         stage.estimator = WearEstimator(params,

@@ -114,13 +114,17 @@ def test_the_next_bags_back_keeps_the_soft_zone_said_before(stream):
     assert state['soft_zone_shortfall_rad'] == 0.4 * ARCMIN
     after = TwinBack(PARAMS)
     after.restore(state)
-    wear, _ = after.step(records[3])
+    wear, life = after.step(records[3])
     assert wear.record['soft_zone_shortfall_rad'] == 0.4 * ARCMIN
     # The stream that said it and then did not (the first back) follows its windows.
-    ended, _ = back.step(records[3])
+    ended, ended_life = back.step(records[3])
     assert ended.record['soft_zone_shortfall_rad'] == 0.0
     assert wear.record['lost_motion_rad'] == pytest.approx(
         ended.record['lost_motion_rad'] - 0.4 * ARCMIN)
+    # The health summary (/diagnostics, the demo) says so beside the lost motion.
+    carried = after.summary(wear, life).as_dict()
+    assert carried['soft_zone_shortfall_arcmin'] == pytest.approx(0.4)
+    assert 'soft_zone_shortfall_arcmin' not in back.summary(ended, ended_life).as_dict()
 
 
 def test_the_health_summary_is_the_diagnostic_status_in_its_documented_order(updates):

@@ -28,7 +28,7 @@ from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
-from reducer_twin.core.units import HOUR
+from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.fleet.store import FleetStore, iso_from_ns
 from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
@@ -212,6 +212,32 @@ def test_a_restarted_node_continues_from_the_store_when_it_is_newer_than_its_sta
     assert row['hours_observed'] == pytest.approx(12 * 200.0)
     with FleetStore(est.store) as store:
         assert store.reducers()[0].state['estimator'] == stage.estimator.state_dict()
+
+
+def test_a_node_started_from_the_store_keeps_the_soft_zone_its_history_found(
+        ros, tmp_path, records, capfd):
+    # The lost motion was given at the test torque (te_monitor found a soft zone); a node
+    # on another machine takes the reducer over from the store: until its own te_monitor
+    # finds it again, it goes on giving the lost motion there, and says so.
+    shortfall = 0.4 * ARCMIN
+    est = LiveEstimator(ros, tmp_path, state_dir=tmp_path / 'a')
+    est.send([{**rec, 'soft_zone_shortfall_rad': shortfall} for rec in records[:5]])
+    node = est.restart(state_dir=tmp_path / 'b')
+    assert node.stage.soft_zone_shortfall == shortfall
+    est.send(records[5:7])
+    end = records[6]['window_end_s']
+    ros.spin_until(lambda: from_multiarray(est.wear[-1], WEAR_ESTIMATE)['stamp_s'] == end,
+                   what='the estimate of the last window')
+    wear = from_multiarray(est.wear[-1], WEAR_ESTIMATE)
+    assert wear['soft_zone_shortfall_rad'] == shortfall
+    assert wear['lost_motion_rad'] == pytest.approx(offline(records[:7])[0][-1][
+        WEAR_ESTIMATE.fields.index('lost_motion_rad')] - shortfall)
+    _, values = est.status(lambda s: any(kv.key == 'soft_zone_shortfall_arcmin'
+                                         for kv in s.values))
+    assert float(values['soft_zone_shortfall_arcmin']) == pytest.approx(0.4)
+    said = [x for x in capfd.readouterr().err.splitlines() if 'an earlier recording' in x]
+    assert len(said) == 1 and 'arcmin wider than the width there' in said[0]
+    est.stop()
 
 
 def test_a_node_whose_state_file_is_newer_keeps_it(ros, tmp_path, records, capsys):
