@@ -419,10 +419,14 @@ class FlankPool:
 
     def hysteresis(self, stats, beta, noise, pooled, needed):
         """
-        Observed hysteresis ``(|T|, H, std, usable)`` per window and bin, shape (W, bins).
+        Observed hysteresis ``(|T|, H, std, usable, odd, fewest)`` per window and bin.
 
         ``needed`` is the samples a flank needs
-        (:meth:`.window_analysis.WindowAnalyzer.flank_samples`).
+        (:meth:`.window_analysis.WindowAnalyzer.flank_samples`). ``fewest`` is the
+        samples of the window's own flank with fewer of them, per bin (whether or not
+        the bin's flanks were taken from the pool): :class:`.soft_zone.SoftZoneCheck`
+        compares bins at the lost-motion test torque from fewer samples than a lost
+        motion needs.
         """
         n_win, n_par = beta.shape
         b_group = np.repeat(beta, 2 * self.torque_bins, axis=0)
@@ -437,6 +441,7 @@ class FlankPool:
         count, u_mean, s_uu, sloped, level, slope, sin1, cos1 = (
             a.reshape(shape) for a in (count, u_mean, s_uu, sloped, level, slope, *first))
         own = count >= needed
+        fewest = count.min(axis=2)
         count, u_mean, s_uu, sloped, level, slope, sin1, cos1 = self._borrow_flanks(
             own, beta, (count, u_mean, s_uu, sloped, level, slope, sin1, cos1), pooled,
             needed)
@@ -451,7 +456,7 @@ class FlankPool:
         std = np.sqrt(var + _MODEL_SIGMA ** 2)
         usable &= np.isfinite(width) & np.isfinite(std)
         odd = np.stack([sin1[..., 1] - sin1[..., 0], cos1[..., 1] - cos1[..., 0]], axis=-1)
-        return u_eval + self.centres, width, std, usable, np.nan_to_num(odd)
+        return u_eval + self.centres, width, std, usable, np.nan_to_num(odd), fewest
 
     def _first_order_means(self, s0, count):
         """Per flank group, the mean ``sin(theta)`` and ``cos(theta)`` (zeros without order 1)."""

@@ -12,7 +12,9 @@ than their lost motion at the test torque, the bins at the test torque showing i
 
 :class:`SoftZoneCheck` compares the hysteresis width in a window's bin at the test torque
 with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
-over recent windows, and pools the shortfall over the stream. Once it is said
+over recent windows, and pools the shortfall over the stream (from bins of
+:data:`NEAR_FLANK_SAMPLES` a flank while the stream has had none of a flank's worth
+there; its standard error counts the windows' scatter). Once it is said
 (:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
 (``WindowFeatures.soft_zone_shortfall``): the estimator still follows the play its windows
 read, and the lost motion it gives is that play less the shortfall, the remaining life the
@@ -64,6 +66,20 @@ SHORTFALL_SIGMAS = 5.0
 MIN_WINDOWS = 2
 """... from at least this many windows."""
 
+NEAR_FLANK_SAMPLES = 4
+"""
+Samples of its own each flank of a bin at the test torque needs to be compared.
+
+Fewer than a lost motion needs (``min_bin_samples``, 20 at 500 Hz and above): the load
+passes the test torque quickly at each reversal, so a 2-s window seldom holds 20 there
+under both signs (1-3 of 60-70 windows of third-generator shoulders at 500 Hz whose bins
+lie there; 13-25 with 4 each). On a swing whose load is known such bins read the width
+at the test torque as well as full ones; on the generators' efforts they read it 0.2-0.5
+arcmin wide (the effort's smoothing and friction place a fast passage less well), so
+their comparisons decide only while a stream has fewer than :data:`MIN_WINDOWS` windows
+compared on full bins.
+"""
+
 
 class SoftZoneCheck:
     """
@@ -80,21 +96,34 @@ class SoftZoneCheck:
     Attributes
     ----------
     windows : int
-        Windows whose bin at the test torque was compared with the pooled straight line.
+        Windows whose bin at the test torque was compared with the pooled straight line
+        (those with full bins once :data:`MIN_WINDOWS` of them were, else those with
+        :data:`NEAR_FLANK_SAMPLES`).
 
     """
 
     def __init__(self, takeup_torque, series_stiffness):
         self.takeup_torque = float(takeup_torque)
         self.series_stiffness = float(series_stiffness)
-        self.windows = 0
         self._line = np.zeros(5)   # pooled Σw, Σw·T, Σw·T², Σw·h, Σw·T·h of the far bins
         self._memory = math.exp(-1.0 / FAR_MEMORY)
-        self._weight = 0.0      # sum of 1/sd^2 of the windows' shortfalls
-        self._shortfall = 0.0   # their weighted sum [rad]
-        self._play = 0.0        # the weighted sum of the play read at the test torque [rad]
+        # Per kind of comparison (full bins, thin bins): windows, Σw, Σw·s, Σw·s², Σw·p of
+        # the windows' shortfalls s and plays p read at the test torque [rad], w = 1/sd².
+        self._sums = {'full': np.zeros(5), 'thin': np.zeros(5)}
 
-    def observe(self, torque_b, width_b, std_b, usable):
+    @property
+    def _pool(self):
+        """Return the comparisons in use: the full bins' once there are enough."""
+        full = self._sums['full']
+        return full if full[0] >= MIN_WINDOWS or not self._sums['thin'][0] else \
+            self._sums['thin']
+
+    @property
+    def windows(self):
+        """Return the windows compared (of the comparisons in use)."""
+        return int(self._pool[0])
+
+    def observe(self, torque_b, width_b, std_b, usable, near_ok=None):
         """
         Add the windows of one batch, in stream order.
 
@@ -109,22 +138,30 @@ class SoftZoneCheck:
             Mean load [N·m], hysteresis width [rad] and its standard error [rad] per bin.
         usable : ndarray of bool, shape (W, B)
             Bins that take part in the lost motion.
+        near_ok : ndarray of bool, shape (W, B), optional
+            Bins that may be compared at the test torque when none of the window is
+            usable there (thin bins: in windows that may be read, those whose flanks hold
+            :data:`NEAR_FLANK_SAMPLES` each; default none).
 
         """
         tt = self.takeup_torque
-        near = usable & (np.abs(torque_b - tt) <= NEAR_SHARE * tt)
+        at_test = np.abs(torque_b - tt) <= NEAR_SHARE * tt
+        near = usable & at_test
+        thin = (near_ok & at_test & ~near.any(axis=1)[:, None]) if near_ok is not None \
+            else np.zeros_like(near)
         far = usable & (torque_b >= FAR_LOADS * tt)
         lined = far.sum(axis=1) >= FAR_BINS
-        for k in np.flatnonzero(lined | near.any(axis=1)):
+        for k in np.flatnonzero(lined | near.any(axis=1) | thin.any(axis=1)):
             if lined[k]:
                 t, h = torque_b[k, far[k]], width_b[k, far[k]]
                 w = 1.0 / std_b[k, far[k]] ** 2
                 self._line = self._memory * self._line + np.array(
                     [w.sum(), w @ t, w @ t ** 2, w @ h, w @ (t * h)])
-            if near[k].any():
-                self._compare(torque_b[k, near[k]], width_b[k, near[k]], std_b[k, near[k]])
+            for kind, bins in (('full', near[k]), ('thin', thin[k])):
+                if bins.any():
+                    self._compare(kind, torque_b[k, bins], width_b[k, bins], std_b[k, bins])
 
-    def _compare(self, torque, width, std):
+    def _compare(self, kind, torque, width, std):
         """Add one window's bins at the test torque against the pooled straight line."""
         s0, s1, s2, sy, sty = self._line
         det = s0 * s2 - s1 * s1
@@ -138,18 +175,27 @@ class SoftZoneCheck:
         if not var > 0.0:
             return
         line = a + b * t_near
-        self.windows += 1
-        self._weight += 1.0 / var
-        self._shortfall += (line - h_near) / var
-        self._play += (line - 2.0 * t_near / self.series_stiffness) / var
+        short = line - h_near
+        self._sums[kind] += np.array([
+            1.0, 1.0 / var, short / var, short ** 2 / var,
+            (line - 2.0 * t_near / self.series_stiffness) / var])
 
     @property
     def shortfall(self):
-        """Return the pooled shortfall, its standard error and the play read [rad], or None."""
-        if self._weight <= 0.0:
+        """
+        Return the pooled shortfall, its standard error and the play read [rad], or None.
+
+        The standard error is the windows' own (their bins' standard errors) scaled up by
+        their scatter about the pooled value where it exceeds them (the Birge ratio,
+        ``sqrt(chi^2 / (n - 1))``).
+        """
+        n, weight, sum_s, sum_ss, sum_p = self._pool
+        if weight <= 0.0:
             return None
-        return (self._shortfall / self._weight, 1.0 / math.sqrt(self._weight),
-                self._play / self._weight)
+        mean = sum_s / weight
+        chi2 = max(sum_ss - mean * sum_s, 0.0)
+        ratio = chi2 / (n - 1) if n > 1 else 1.0
+        return (float(mean), math.sqrt(max(ratio, 1.0) / weight), float(sum_p / weight))
 
     @property
     def said(self):

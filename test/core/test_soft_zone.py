@@ -99,11 +99,11 @@ def test_a_window_at_the_test_torque_is_compared_with_the_line_of_recent_windows
     assert check.shortfall[0] == pytest.approx(0.8 * ARCMIN, rel=0.05)
 
 
-def _swinging_joint(zone_arcmin, knee_fraction):
+def _swinging_joint(zone_arcmin, knee_fraction, **swing):
     """Return the analyzer after :func:`te_streams.soft_zone_swing`, and its usable windows."""
-    t, theta, omega, te, effort = soft_zone_swing(zone_arcmin, knee_fraction)
+    t, theta, omega, te, effort = soft_zone_swing(zone_arcmin, knee_fraction, **swing)
     analyzer = WindowAnalyzer(PARAMS, friction=False)
-    stream = TEStream(t, te, theta, np.ones(t.size, dtype=bool), 0.005)
+    stream = TEStream(t, te, theta, np.ones(t.size, dtype=bool), 5.0 * (t[1] - t[0]))
     windows = analyzer.update(stream, effort, omega) + analyzer.flush()
     return analyzer, [w for w in windows if np.isfinite(w.lost_motion)]
 
@@ -120,3 +120,52 @@ def test_a_joint_whose_knee_lies_above_the_test_torque_says_so_and_one_below_doe
     analyzer, windows = _swinging_joint(1.5, 0.01)
     assert np.median([w.lost_motion for w in windows]) == pytest.approx(1.5 * ARCMIN, rel=0.05)
     assert analyzer.soft_zone is None and analyzer.soft_zone_said is None
+
+
+@pytest.mark.parametrize('swing', [{'period_s': 2.0}, {'period_s': 3.0, 'rate_hz': 500.0},
+                                   {'rate_hz': 250.0}])
+def test_a_load_that_passes_the_test_torque_quickly_is_compared_from_fewer_samples(swing):
+    # A 2-s swing at 1 kHz, a 3-s one at 500 Hz or a 6-s one at 250 Hz gives the bin at the
+    # test torque 4-10 samples a crossing: too few for a lost motion (20 a flank), enough
+    # to compare the width there with the flanks of higher loads, bin by bin weighed by
+    # its standard error. Without it such a soft zone was never said.
+    analyzer, windows = _swinging_joint(1.5, 0.05, **swing)
+    assert np.median([w.lost_motion for w in windows]) > 1.2 * 0.9 * ARCMIN
+    assert analyzer.soft_zone_said is not None
+    assert analyzer.soft_zone_said['width'] == pytest.approx(0.9 * ARCMIN, rel=0.05)
+    analyzer, windows = _swinging_joint(1.5, 0.01, **swing)
+    assert analyzer.soft_zone_said is None
+    assert np.median([w.lost_motion for w in windows]) == pytest.approx(1.5 * ARCMIN, rel=0.05)
+
+
+def test_the_shortfalls_standard_error_counts_the_windows_scatter():
+    # Bins whose own standard errors are small but whose shortfalls scatter from window to
+    # window (a load misplaced along a steep soft zone) are not said on the bins' errors:
+    # the pooled standard error grows with the scatter (the Birge ratio).
+    torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=8)
+    near = np.abs(torque - TEST_TORQUE) <= 0.15 * TEST_TORQUE
+    width[near] += np.where(np.arange(8) % 2 == 0, 1.0, -1.0)[:, None].repeat(
+        near.shape[1], axis=1)[near] * 0.6 * ARCMIN
+    check = _checked(torque, width, std, usable)
+    short, sd, _ = check.shortfall
+    assert short == pytest.approx(0.8 * ARCMIN, rel=0.05)
+    assert sd > 0.6 * ARCMIN / np.sqrt(8) * 0.9 and check.said is None
+    steady = _checked(*_catalogue_bins(2.0, 0.05, windows=8))
+    assert steady.shortfall[1] < 0.01 * ARCMIN and steady.said is not None
+
+
+def test_bins_of_a_flanks_worth_decide_once_there_are_enough_of_them():
+    # Thin bins (a few samples a flank) are compared only while the stream has fewer than
+    # two windows compared on bins of a flank's worth: on real efforts a fast passage
+    # reads wide. Thin bins alone say the soft zone; full ones, once there, decide.
+    torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=6)
+    near = np.abs(torque - TEST_TORQUE) <= 0.15 * TEST_TORQUE
+    thin = near.copy()
+    usable[near] = False
+    wide = width.copy()
+    wide[near] += 0.5 * ARCMIN      # the thin bins read 0.5 arcmin wide
+    check = SoftZoneCheck(TEST_TORQUE, STIFFNESS)
+    check.observe(torque, wide, std, usable, thin)
+    assert check.windows == 6 and check.shortfall[0] == pytest.approx(0.3 * ARCMIN, rel=0.05)
+    check.observe(*_catalogue_bins(2.0, 0.05, windows=2), thin[:2])
+    assert check.windows == 2 and check.shortfall[0] == pytest.approx(0.8 * ARCMIN, rel=0.05)

@@ -49,19 +49,20 @@ def rms_without_offset(err):
     return float(np.sqrt(np.mean((err - err.mean()) ** 2)))
 
 
-def soft_zone_swing(zone_arcmin, knee_fraction, seed=0):
+def soft_zone_swing(zone_arcmin, knee_fraction, seed=0, period_s=6.0, rate_hz=1000.0):
     """
-    Return a joint swinging slowly through the vertical, its curve a soft zone to a knee.
+    Return a joint swinging through the vertical, its curve a soft zone to a knee.
 
     Under 200 N*m of gravity and a 6-s swing its load passes the lost-motion test torque
-    at about 250 N*m/s: the bin there gets some 25 samples a crossing, and loads reach
-    180 N*m. Returns 60 s at 1 kHz: stamps [s], link angle [rad], its rate [rad/s],
-    TE [rad] and effort [N*m] (the load with 2 N*m of noise; no friction in it).
+    at about 250 N*m/s: at 1 kHz the bin there gets some 25 samples a crossing, and loads
+    reach 180 N*m; a shorter swing or a lower rate gives it fewer. Returns 60 s: stamps
+    [s], link angle [rad], its rate [rad/s], TE [rad] and effort [N*m] (the load with
+    2 N*m of noise; no friction in it).
     """
     rng = np.random.default_rng(seed)
-    t = np.arange(60000) / 1000.0
-    theta = 0.5 * math.pi + 1.2 * np.sin(TWO_PI * t / 6.0)
-    omega = 1.2 * TWO_PI / 6.0 * np.cos(TWO_PI * t / 6.0)
+    t = np.arange(int(round(60.0 * rate_hz))) / rate_hz
+    theta = 0.5 * math.pi + 1.2 * np.sin(TWO_PI * t / period_s)
+    omega = 1.2 * TWO_PI / period_s * np.cos(TWO_PI * t / period_s)
     torque = 200.0 * np.cos(theta)
     knee = knee_fraction * PARAMS.rating.rated_torque
     stiffness = model_tables(PARAMS).series_stiffness
