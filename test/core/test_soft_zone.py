@@ -156,8 +156,8 @@ def test_the_shortfalls_standard_error_counts_the_windows_scatter():
 
 def test_bins_of_a_flanks_worth_decide_once_there_are_enough_of_them():
     # Thin bins (a few samples a flank) are compared only while the stream has fewer than
-    # two windows compared on bins of a flank's worth: on real efforts a fast passage
-    # reads wide. Thin bins alone say the soft zone; full ones, once there, decide.
+    # two windows compared on bins of a flank's worth, which read the width with less
+    # scatter. Thin bins alone say the soft zone; full ones, once there, decide.
     torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=6)
     near = np.abs(torque - TEST_TORQUE) <= 0.15 * TEST_TORQUE
     thin = near.copy()
