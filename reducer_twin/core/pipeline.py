@@ -23,6 +23,7 @@ from .life import catalogue_life, DEFAULT_HORIZON_S, GrowthTrendState, LifeDraws
 from .life import LifeQuery, LOST_MOTION_LIMIT, remaining_lives
 from .params import _Validated, spec
 from .service_time import service_note
+from .soft_zone import carried_line
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .trend_score import SCORE_AFTER, SCORE_LAG
 from .units import HOUR
@@ -39,6 +40,13 @@ _DUTY_KEYS = {
 
 CLOCK_RESET_S = 60.0
 """A window ending this far before the last one means the clock was reset, not a replay."""
+
+SOFT_ZONE_KEY = 'soft_zone_shortfall_rad'
+"""
+The key of the soft zone's shortfall [rad] in a reducer's state and in the estimator's state
+file (written only while the lost motion is given less one, so a file without a soft zone is
+the estimator's state alone).
+"""
 
 
 def features_from_record(record):
@@ -368,8 +376,8 @@ class EstimatorStage:
     store : object, optional
         Where the state persists (e.g. :class:`reducer_twin.io.state_file.StateFile`):
         ``restore(params, config)`` returns a loaded state (``estimator``,
-        ``path``, ``used_backup``, ``primary_error``) or None for a new
-        reducer, ``save(state_dict)`` persists a state, ``flush()`` waits for
+        ``path``, ``used_backup``, ``primary_error``, ``soft_zone_shortfall``) or None
+        for a new reducer, ``save(state_dict)`` persists a state, ``flush()`` waits for
         queued saves and ``path`` names it. None keeps the state in memory.
     log : callable, optional
         Called with one line of text for notable events (restore, reset).
@@ -400,6 +408,10 @@ class EstimatorStage:
             self.log(f'restored estimator state from {loaded.path}{note}: wear '
                      f'{self.estimator.wear * 1e6:.3f} um after '
                      f'{self.estimator.exposure_s / HOUR:.1f} h')
+            # Carried as from an earlier bag: it stays until this stream's check says one.
+            self.soft_zone_shortfall = float(getattr(loaded, 'soft_zone_shortfall', 0.0))
+            if self.soft_zone_shortfall > 0.0:
+                self.log(carried_line(self.soft_zone_shortfall))
         else:
             self.estimator = WearEstimator(params, config)
             if store is not None:
@@ -474,12 +486,20 @@ class EstimatorStage:
         self.estimator = WearEstimator.from_state(self.params, state['estimator'], config)
         obs = state.get('lost_motion_obs_rad')
         self.last_observation = float('nan') if obs is None else float(obs)
-        self.soft_zone_shortfall = float(state.get('soft_zone_shortfall_rad', 0.0))
+        self.soft_zone_shortfall = float(state.get(SOFT_ZONE_KEY, 0.0))
 
     def save(self):
-        """Hand the state to the store (at once, or queued by a background store)."""
+        """
+        Hand the state to the store (at once, or queued by a background store).
+
+        The estimator's state, with the soft zone's shortfall (:data:`SOFT_ZONE_KEY`)
+        while the lost motion is given less one: a restarted stage continues with it.
+        """
         if self.store is not None:
-            self.store.save(self.estimator.state_dict())
+            state = self.estimator.state_dict()
+            if self.soft_zone_shortfall > 0.0:
+                state[SOFT_ZONE_KEY] = float(self.soft_zone_shortfall)
+            self.store.save(state)
 
     def flush(self):
         """Wait until the store has written the queued states (a no-op without a store)."""
@@ -586,7 +606,7 @@ def reducer_state(estimator_state, duty, lost_motion_obs, soft_zone_shortfall):
             'duty': None if duty is None else {k: float(v) for k, v in vars(duty).items()},
             'lost_motion_obs_rad': float(lost_motion_obs) if np.isfinite(lost_motion_obs)
             else None,
-            'soft_zone_shortfall_rad': float(soft_zone_shortfall)}
+            SOFT_ZONE_KEY: float(soft_zone_shortfall)}
 
 
 _COVARIANCE_KEYS = {

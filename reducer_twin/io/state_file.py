@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import errno
 import hashlib
 import json
+import math
 import os
 from pathlib import Path
 import queue
@@ -28,6 +29,7 @@ import threading
 
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import STATE_KIND, WearEstimator
+from reducer_twin.core.pipeline import SOFT_ZONE_KEY
 
 
 def save_estimator(estimator, path):
@@ -75,6 +77,11 @@ def load_estimator(path, params, config=None):
         version or of another reducer.
 
     """
+    return _load(path, params, config)[0]
+
+
+def _load(path, params, config=None):
+    """Return the estimator of a state file and the soft-zone shortfall it carries [rad]."""
     path = Path(path)
     try:
         data = path.read_bytes()
@@ -82,9 +89,15 @@ def load_estimator(path, params, config=None):
         raise StateFileError(f'cannot read estimator state {path}: {err}') from err
     state = decode_state(data, path)
     try:
-        return WearEstimator.from_state(params, state, config)
+        estimator = WearEstimator.from_state(params, state, config)
     except StateFileError as err:
         raise StateFileError(f'{path}: {err}') from err
+    shortfall = state.get(SOFT_ZONE_KEY, 0.0)
+    if isinstance(shortfall, bool) or not isinstance(shortfall, (int, float)) \
+            or not math.isfinite(shortfall) or shortfall < 0.0:
+        raise StateFileError(f'{path}: {SOFT_ZONE_KEY} must be a finite number of at least '
+                             f'0 rad, got {shortfall!r}')
+    return estimator, float(shortfall)
 
 
 @dataclass(frozen=True)
@@ -102,6 +115,9 @@ class LoadedState:
         True when the primary file failed and ``<path>.bak`` was used.
     primary_error : str or None
         Why the primary file was not used.
+    soft_zone_shortfall : float
+        The soft zone's shortfall the stage gave the lost motion less when it saved the
+        state (:attr:`.pipeline.EstimatorStage.soft_zone_shortfall`; 0 without one) [rad].
 
     """
 
@@ -109,6 +125,7 @@ class LoadedState:
     path: Path
     used_backup: bool
     primary_error: str = None
+    soft_zone_shortfall: float = 0.0
 
 
 def backup_path(path):
@@ -159,15 +176,16 @@ def load_with_fallback(path, params, config=None):
     """
     path = Path(path)
     try:
-        return LoadedState(load_estimator(path, params, config), path, False, None)
+        est, shortfall = _load(path, params, config)
     except StateFileError as primary:
         backup = backup_path(path)
         try:
-            est = load_estimator(backup, params, config)
+            est, shortfall = _load(backup, params, config)
         except StateFileError as secondary:
             raise StateFileError(
                 f'no usable estimator state: {primary}; backup: {secondary}') from primary
-        return LoadedState(est, backup, True, str(primary))
+        return LoadedState(est, backup, True, str(primary), shortfall)
+    return LoadedState(est, path, False, None, shortfall)
 
 
 def canonical_json(state):

@@ -8,13 +8,14 @@ known (:mod:`window_records`); every file is read back through the checksummed f
 import gc
 import json
 import math
+from types import SimpleNamespace
 
 import pytest
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.estimator import EstimatorConfig, params_fingerprint, WearEstimator
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import EstimatorStage, features_from_record
-from reducer_twin.core.units import HOUR
+from reducer_twin.core.pipeline import EstimatorStage, features_from_record, SOFT_ZONE_KEY
+from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.io.state_file import (
     backup_path, decode_state, encode_state, load_estimator, load_with_fallback, save_estimator,
     StateFile)
@@ -285,3 +286,47 @@ def test_a_failing_background_write_is_counted_and_the_stage_keeps_running(windo
     assert stage.store.writer.failures == 3
     assert isinstance(stage.store.writer.error, StateFileError)
     assert math.isfinite(stage.estimator.wear)
+
+
+def _with_shortfall(windows, shortfall):
+    """Return the windows as a stream whose soft-zone check says ``shortfall`` [rad]."""
+    return [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall}) for w in windows]
+
+
+def test_a_restarted_stage_keeps_giving_the_lost_motion_at_the_test_torque(windows, tmp_path):
+    # The shortfall of a soft zone the stream said is written with the estimator's state,
+    # so a restarted wear_estimator gives the lost motion and remaining life at the test
+    # torque at once (not the play until te_monitor says it again), and says so. It is
+    # carried as from an earlier bag: kept until the new stream's own check says one.
+    path = tmp_path / 'joint_1.json'
+    shortfall = 0.8 * ARCMIN
+    stage = EstimatorStage(PARAMS, store=StateFile(path))
+    run(stage, _with_shortfall(windows[:8], shortfall))
+    assert decode_state(path.read_bytes(), path)[SOFT_ZONE_KEY] == shortfall
+    logs = []
+    restarted = EstimatorStage(PARAMS, store=StateFile(path), log=logs.append)
+    assert restarted.soft_zone_shortfall == shortfall
+    assert 'soft zone an earlier recording of this reducer found' in logs[-1]
+    assert restarted.estimator.state_dict() == stage.estimator.state_dict()
+    stamp = windows[7].t_end
+    assert restarted.record(stamp)['lost_motion_rad'] == stage.record(stamp)['lost_motion_rad']
+    run(restarted, windows[8:10])
+    assert restarted.soft_zone_shortfall == shortfall
+    # A reset (a new reducer) forgets it, in the file too.
+    restarted.reset('maintenance: reducer replaced')
+    assert SOFT_ZONE_KEY not in decode_state(path.read_bytes(), path)
+    assert EstimatorStage(PARAMS, store=StateFile(path)).soft_zone_shortfall == 0.0
+
+
+@pytest.mark.parametrize('value', [-1e-4, 'wide', None, True])
+def test_a_state_file_with_a_bad_shortfall_falls_back_to_its_backup(windows, tmp_path, value):
+    path = tmp_path / 'joint_1.json'
+    stage = EstimatorStage(PARAMS, store=StateFile(path))
+    run(stage, _with_shortfall(windows[:4], 0.5 * ARCMIN))
+    path.write_bytes(reencode_with(path.read_bytes(), **{SOFT_ZONE_KEY: value}))
+    with pytest.raises(StateFileError, match=f'{SOFT_ZONE_KEY} must be a finite number of '
+                                             f'at least 0 rad, got {value!r}'):
+        load_estimator(path, PARAMS)
+    restored = EstimatorStage(PARAMS, store=StateFile(path))
+    assert restored.restored_from == str(backup_path(path))
+    assert restored.soft_zone_shortfall == 0.5 * ARCMIN

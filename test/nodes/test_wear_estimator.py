@@ -171,7 +171,7 @@ def test_features_in_give_the_offline_estimate_and_a_late_subscriber_gets_the_la
     same_estimate(latest, last)
 
 
-def test_windows_that_carry_a_soft_zone_give_the_lost_motion_at_the_test_torque(
+def test_windows_that_carry_a_soft_zone_give_the_lost_motion_at_the_test_torque_after_a_restart(
         ros, tmp_path, records):
     # te_monitor found the play still being taken up at the test torque: the estimate
     # follows the play as before, and the lost motion published is at the test torque.
@@ -183,6 +183,18 @@ def test_windows_that_carry_a_soft_zone_give_the_lost_motion_at_the_test_torque(
     assert last['soft_zone_shortfall_rad'] == shortfall
     assert last['lost_motion_rad'] == pytest.approx(plain['lost_motion_rad'] - shortfall)
     same_estimate(last, plain, skip=('stamp_s', 'lost_motion_rad', 'soft_zone_shortfall_rad'))
+    # Restarted on its state file, it goes on giving the lost motion at the test torque
+    # (before it gave the play until te_monitor said the soft zone again).
+    heard = len(est.wear)
+    node = est.restart()
+    assert node.stage.soft_zone_shortfall == shortfall
+    ros.spin_until(lambda: len(est.wear) > heard, what='the restarted estimate')
+    again = est.wear[-1]
+    assert again['soft_zone_shortfall_rad'] == shortfall
+    assert again['lost_motion_rad'] == pytest.approx(last['lost_motion_rad'])
+    status = est.status(lambda s: any(kv.key == 'soft_zone_shortfall_arcmin' for kv in s.values))
+    values = {kv.key: kv.value for kv in status.values}
+    assert float(values['soft_zone_shortfall_arcmin']) == pytest.approx(0.4, abs=1e-3)
 
 
 def test_the_state_file_is_replaced_atomically_after_every_window(ros, tmp_path, records):
