@@ -201,8 +201,8 @@ def soft_zone_numbers(said):
     Returns
     -------
     dict or None
-        ``width_arcmin``, ``play_arcmin``, ``shortfall_arcmin``, ``shortfall_sd_arcmin``
-        and ``windows``.
+        ``width_arcmin``, ``play_arcmin``, ``shortfall_arcmin``, ``shortfall_sd_arcmin``,
+        ``windows`` and ``few_samples`` (compared on bins of a few samples each).
 
     """
     if said is None:
@@ -210,6 +210,7 @@ def soft_zone_numbers(said):
     out = {f'{key}_arcmin': rad_to_arcmin(float(said[key]))
            for key in ('width', 'play', 'shortfall', 'shortfall_sd')}
     out['windows'] = int(said['windows'])
+    out['few_samples'] = bool(said.get('few_samples', False))
     return out
 
 

@@ -208,8 +208,9 @@ class SoftZoneCheck:
         dict or None
             ``shortfall`` and its standard error ``shortfall_sd``, the ``play`` the flanks
             of higher loads give at the test torque and the ``width`` there (the
-            catalogue's lost motion, ``play - shortfall``), all stream means [rad], and the
-            ``windows`` compared.
+            catalogue's lost motion, ``play - shortfall``), all stream means [rad], the
+            ``windows`` compared, and ``few_samples``: True when those are thin bins
+            (:data:`NEAR_FLANK_SAMPLES` a flank; no window had a flank's worth there).
 
         """
         found = self.shortfall
@@ -224,7 +225,7 @@ class SoftZoneCheck:
             # so the bins there are misread (the load's sign mistaken), not a soft zone.
             return None
         return {'shortfall': short, 'shortfall_sd': sd, 'play': play, 'width': play - short,
-                'windows': self.windows}
+                'windows': self.windows, 'few_samples': self._pool is self._sums['thin']}
 
     @property
     def reason(self):
@@ -233,10 +234,12 @@ class SoftZoneCheck:
         if said is None:
             return None
         short, play = said['shortfall'], said['play']
+        few = (', from a few samples a bin: the load passes the test torque fast'
+               if said['few_samples'] else '')
         return (f"the transmission error's hysteresis at the lost-motion test torque "
                 f'({self.takeup_torque:.1f} N·m) is {short / ARCMIN:.2f} arcmin narrower than '
-                f'the flanks of higher loads give ({self.windows} windows): the play is still '
-                'being taken up there (a soft zone whose knee lies above the test torque). '
+                f'the flanks of higher loads give ({self.windows} windows{few}): the play is '
+                'still being taken up there (a soft zone whose knee lies above the test torque). '
                 f'Those flanks give {play / ARCMIN:.2f} arcmin of play, the width at the test '
                 f"torque (the catalogue's lost motion) is about {(play - short) / ARCMIN:.2f}; "
                 'the lost motion and remaining life are given at the test torque from here on '

@@ -42,6 +42,7 @@ def test_a_knee_above_the_test_torque_is_said_with_the_width_there():
     said = check.said       # the line's numbers
     assert said['width'] == pytest.approx(1.2 * ARCMIN, rel=0.05)
     assert said['play'] - said['shortfall'] == said['width'] and said['windows'] == 4
+    assert not said['few_samples'] and 'few samples' not in check.reason
     assert said['shortfall'] >= 5.0 * said['shortfall_sd']
 
 
@@ -131,7 +132,9 @@ def test_a_load_that_passes_the_test_torque_quickly_is_compared_from_fewer_sampl
     # its standard error. Without it such a soft zone was never said.
     analyzer, windows = _swinging_joint(1.5, 0.05, **swing)
     assert np.median([w.lost_motion for w in windows]) > 1.2 * 0.9 * ARCMIN
-    assert analyzer.soft_zone_said is not None
+    assert analyzer.soft_zone_said is not None and analyzer.soft_zone_said['few_samples']
+    assert 'from a few samples a bin: the load passes the test torque fast' in \
+        analyzer.soft_zone
     assert analyzer.soft_zone_said['width'] == pytest.approx(0.9 * ARCMIN, rel=0.05)
     analyzer, windows = _swinging_joint(1.5, 0.01, **swing)
     assert analyzer.soft_zone_said is None
