@@ -92,7 +92,8 @@ class JointResult:
             ``soft_zone`` (where the play is still being taken up at the lost-motion test
             torque, :attr:`.joint_twin.TwinFront.soft_zone` in arcmin: ``width_arcmin``, the
             catalogue's lost motion there, ``play_arcmin``, ``shortfall_arcmin``,
-            ``shortfall_sd_arcmin``, stream means, and ``windows``; else None) and
+            ``shortfall_sd_arcmin``, stream means, ``windows`` and ``few_samples``; else
+            None) and
             ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth

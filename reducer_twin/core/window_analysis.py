@@ -872,7 +872,6 @@ class WindowAnalyzer:
             self.te_steps += len(self._flanks.steps)
         torque_h, width, std, usable, odd, fewest = self._flanks.hysteresis(
             stats, beta, noise, pooled, self.flank_samples())
-        readable = np.ones(n_win, dtype=bool)   # windows from which a lost motion may be read
         if unknown is not None:
             # Before the friction can be told from the load (the joint has not yet moved
             # both ways), the effort still carries the motor's friction, which gives the
@@ -885,7 +884,6 @@ class WindowAnalyzer:
             withheld = unknown & (usable.sum(axis=1) >= self.min_bins)
             self.windows_friction_unknown += int(withheld.sum())
             usable &= ~unknown[:, None]
-            readable &= ~unknown
         # A time offset beyond a linear term of the TE, not yet removed (learnt from the
         # first windows, :class:`.pipeline.TimeOffsetCalibration`): no lost motion is read.
         # Once removed, what is left is within it: a window's fit beyond it is then its
@@ -898,12 +896,10 @@ class WindowAnalyzer:
             self.largest_unremoved_offset_s = max(self.largest_unremoved_offset_s,
                                                   float(np.max(np.abs(offset[unremoved]))))
             usable &= ~unremoved[:, None]
-            readable &= ~unremoved
         te_max = np.maximum.reduceat(y, starts)
         te_min = np.minimum.reduceat(y, starts)
         implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
         usable &= ~(implausible | still)[:, None]
-        readable &= ~(implausible | still)
         # Windows with bins enough for a lost motion crossed a torque reversal under load:
         # their TE spans at least the play (:data:`.observability.DERIVED_LINK_SPAN_RAD`).
         reversed_ = usable.sum(axis=1) >= self.min_bins
@@ -915,9 +911,12 @@ class WindowAnalyzer:
         faulty = self._effort.check(torque_h, width, std, usable,
                                     odd * ~self._flanks.first_order(ident)[:, None, :])
         usable &= ~faulty[:, None]
-        readable &= ~faulty
         self.windows_effort_fault += int(faulty.sum())
-        thin = (fewest >= NEAR_FLANK_SAMPLES) & readable[:, None] & np.isfinite(width) \
+        # Bins of a few samples a flank, in windows from which a lost motion may be read.
+        unread = unremoved | implausible | still | faulty
+        if unknown is not None:
+            unread = unread | unknown
+        thin = (fewest >= NEAR_FLANK_SAMPLES) & ~unread[:, None] & np.isfinite(width) \
             & np.isfinite(std)
         self._soft_zone.observe(torque_h, width, std, usable, thin)
         fit = self._lost_motion_fit.fit(torque_h, width, std, usable)

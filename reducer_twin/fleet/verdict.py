@@ -20,6 +20,7 @@ Rows are ranked by P10, most urgent first; not observed and retired reducers fol
 import math
 
 import numpy as np
+from reducer_twin.core.pipeline import SOFT_ZONE_KEY
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from reducer_twin.fleet.store import iso_from_ns
 
@@ -185,7 +186,7 @@ def _judge(row, r, state, params):
     if lm is not None and limit is not None and lm >= limit:
         # The estimator follows the play: a soft zone beyond the test torque meets the
         # limit stated there that much later (the shortfall its lost motion was given with).
-        shortfall = float((r.state or {}).get('soft_zone_shortfall_rad', 0.0))
+        shortfall = float((r.state or {}).get(SOFT_ZONE_KEY, 0.0))
         p10, p50, p90 = (_hours(v) for v in overdue_life(
             state, params, r.lost_motion_limit_rad + shortfall))
         row.update(rul_p10_h=p10, rul_p50_h=p50, rul_p90_h=p90)
