@@ -12,7 +12,8 @@ than their lost motion at the test torque, the bins at the test torque showing i
 
 :class:`SoftZoneCheck` compares the hysteresis width in a window's bin at the test torque
 with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
-over recent windows, and pools the shortfall over the stream (from bins of
+over recent windows (bins at the test torque seen before the stream's first line wait
+for it :data:`FAR_MEMORY` windows), and pools the shortfall over the stream (from bins of
 :data:`NEAR_FLANK_SAMPLES` a flank while the stream has had none of a flank's worth
 there; its standard error counts the windows' scatter). Once it is said
 (:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
@@ -111,6 +112,8 @@ class SoftZoneCheck:
         # Per kind of comparison (full bins, thin bins): windows, Σw, Σw·s, Σw·s², Σw·p of
         # the windows' shortfalls s and plays p read at the test torque [rad], w = 1/sd².
         self._sums = {'full': np.zeros(5), 'thin': np.zeros(5)}
+        self._seen = 0        # windows observed
+        self._waiting = []    # (window, kind, torque, width, sd) of bins without a line yet
 
     @property
     def _pool(self):
@@ -131,7 +134,10 @@ class SoftZoneCheck:
         A window with :data:`FAR_BINS` bins beyond :data:`FAR_LOADS` times the test torque
         adds them to the straight line pooled over recent such windows (it fades by
         :data:`FAR_MEMORY` of them); a window with a bin at the test torque is compared
-        with that line.
+        with that line. Before the stream has a line, such bins wait for it (a window
+        seldom has both, and a joint may reach loads far beyond the test torque only after
+        its bins there): those of the last :data:`FAR_MEMORY` windows are compared with
+        the first line.
 
         Parameters
         ----------
@@ -152,7 +158,8 @@ class SoftZoneCheck:
             else np.zeros_like(near)
         far = usable & (torque_b >= FAR_LOADS * tt)
         lined = far.sum(axis=1) >= FAR_BINS
-        for k in np.flatnonzero(lined | near.any(axis=1) | thin.any(axis=1)):
+        for k in range(torque_b.shape[0]):
+            self._seen += 1
             if lined[k]:
                 t, h = torque_b[k, far[k]], width_b[k, far[k]]
                 w = 1.0 / std_b[k, far[k]] ** 2
@@ -160,7 +167,20 @@ class SoftZoneCheck:
                     [w.sum(), w @ t, w @ t ** 2, w @ h, w @ (t * h)])
             for kind, bins in (('full', near[k]), ('thin', thin[k])):
                 if bins.any():
-                    self._compare(kind, torque_b[k, bins], width_b[k, bins], std_b[k, bins])
+                    self._waiting.append((self._seen, kind, torque_b[k, bins],
+                                          width_b[k, bins], std_b[k, bins]))
+            # Bins at the test torque wait for a line (a window seldom has both; the
+            # first line may come after them): those of the last FAR_MEMORY windows.
+            self._waiting = [w for w in self._waiting if self._seen - w[0] < FAR_MEMORY]
+            if self._waiting and self._line_defined():
+                for _, kind, t, h, sd in self._waiting:
+                    self._compare(kind, t, h, sd)
+                self._waiting = []
+
+    def _line_defined(self):
+        """Return whether the pooled far bins define a straight line."""
+        s0, s1, s2 = self._line[:3]
+        return s0 * s2 - s1 * s1 > 0.0
 
     def _compare(self, kind, torque, width, std):
         """Add one window's bins at the test torque against the pooled straight line."""
