@@ -56,10 +56,12 @@ TE_FEATURES = Layout('te_features', (
     'wear_fit_m', 'wear_fit_std_m', 'order1_rad', 'order2_rad', 'order_zc_rad',
     'order_zp_rad', 'time_offset_s', 'duration_s', 'exposure_s', 'archard_increment_m',
     'mean_abs_torque_nm', 'mean_abs_speed_rad_s', 'cubic_mean_torque_nm',
-    'mean_speed_rad_s', 'max_abs_torque_nm', 'soft_zone_shortfall_rad'))
+    'mean_speed_rad_s', 'max_abs_torque_nm', 'soft_zone_shortfall_rad', 'soft_zone_width_rad'))
 """
 Per-window TE features and duty of one joint (paper Table 5 style); ``lost_motion_rad`` is
-the play the loaded flanks give, the catalogue's lost motion ``soft_zone_shortfall_rad`` less.
+the play the loaded flanks give, the catalogue's lost motion ``soft_zone_shortfall_rad`` less
+but not below ``soft_zone_width_rad``, the width those flanks' comparison gives at the test
+torque (both 0 unless a soft zone reaching beyond the test torque is said).
 """
 
 WEAR_ESTIMATE = Layout('wear', (

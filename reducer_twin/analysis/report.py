@@ -75,9 +75,13 @@ def _readings(ax, joint, res):
     nominal unit's: censored, never used by the estimate) is drawn hollow, apart.
     """
     h = _hours(res)
-    # At the test torque, as the estimate: the play less a soft zone's shortfall, if said.
-    obs = (_col(res.features, TE_FEATURES, 'lost_motion_rad')
-           - _col(res.features, TE_FEATURES, 'soft_zone_shortfall_rad')) / ARCMIN
+    # At the test torque, as the estimate: the play less a soft zone's shortfall, if said,
+    # not below the width at the test torque (pipeline.taken_off).
+    play = _col(res.features, TE_FEATURES, 'lost_motion_rad')
+    short = _col(res.features, TE_FEATURES, 'soft_zone_shortfall_rad')
+    width = _col(res.features, TE_FEATURES, 'soft_zone_width_rad')
+    obs = np.where(width > 0.0, np.minimum(play, np.maximum(play - short, width)),
+                   play - short) / ARCMIN
     std = _col(res.features, TE_FEATURES, 'lost_motion_std_rad') / ARCMIN
     bound = _col(res.features, TE_FEATURES, 'wear_fit_m') <= 0.0
     used = ~bound

@@ -63,7 +63,8 @@ def features_from_record(record):
     types.SimpleNamespace
         With ``t_start``, ``t_end``, ``lost_motion``, ``lost_motion_std``,
         ``wear_fit``, ``wear_fit_std``, ``duty`` (a namespace with the
-        duty fields) and ``soft_zone_shortfall``, what the estimator stage reads.
+        duty fields), ``soft_zone_shortfall`` and ``soft_zone_width``, what the estimator
+        stage reads.
 
     """
     duty = SimpleNamespace(**{k: float(record[v]) for k, v in _DUTY_KEYS.items()})
@@ -72,7 +73,8 @@ def features_from_record(record):
         lost_motion=float(record['lost_motion_rad']),
         lost_motion_std=float(record['lost_motion_std_rad']),
         wear_fit=float(record['wear_fit_m']), wear_fit_std=float(record['wear_fit_std_m']),
-        duty=duty, soft_zone_shortfall=float(record.get('soft_zone_shortfall_rad', 0.0)))
+        duty=duty, soft_zone_shortfall=float(record.get('soft_zone_shortfall_rad', 0.0)),
+        soft_zone_width=float(record.get('soft_zone_width_rad', 0.0)))
 
 
 def duty_to_record(duty):
@@ -358,7 +360,8 @@ def features_record(f, params):
         'order1_rad': orders.get(1, np.nan), 'order2_rad': orders.get(2, np.nan),
         'order_zc_rad': orders.get(g.z_cycloid, np.nan),
         'order_zp_rad': orders.get(g.z_pins, np.nan), 'time_offset_s': f.time_offset_s,
-        'soft_zone_shortfall_rad': f.soft_zone_shortfall}
+        'soft_zone_shortfall_rad': f.soft_zone_shortfall,
+        'soft_zone_width_rad': f.soft_zone_width}
     rec.update(duty_to_record(f.duty))
     return rec
 
@@ -455,14 +458,18 @@ class EstimatorStage:
         Step the filter with one window: :meth:`process` without its replay check or save.
 
         Returns the estimator's update result (``status``, ``nis``, ...); the stage's last
-        observation and soft-zone shortfall follow the window, as in :meth:`process`.
+        observation and soft-zone shortfall follow the window, as in :meth:`process`:
+        the shortfall the window carries, but no more than takes the play the estimator
+        follows down to the window's ``soft_zone_width`` (:func:`taken_off`).
         """
         said = self.estimator.service_verdict
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
         shortfall = float(getattr(features, 'soft_zone_shortfall', 0.0))
         if math.isfinite(shortfall) and shortfall > 0.0:
-            self.soft_zone_shortfall = shortfall
+            self.soft_zone_shortfall = taken_off(
+                shortfall, float(getattr(features, 'soft_zone_width', 0.0)),
+                lambda: self.estimator.lost_motion(self.estimator.growth_trend())[0])
             self._soft_zone_said = True
         elif self._soft_zone_said:
             # This stream's check said it and no longer does: its evidence is followed.
@@ -578,6 +585,39 @@ class EstimatorStage:
         for (i, j), key in _TREND_COVARIANCE_KEYS.items():
             rec[key] = float(cov[i, j])
         return rec
+
+
+def taken_off(shortfall, width, play):
+    """
+    Return the share of a soft zone's shortfall taken off the play the estimator follows.
+
+    The shortfall is how much narrower the hysteresis is at the test torque than the
+    flanks of loads far beyond it give; the estimator follows the play its windows read,
+    which is that of those flanks where the windows' loads reach beyond the soft zone's
+    knee, but lies nearer the width at the test torque where they seldom do (a base:
+    third-generator bases were given 0.02 arcmin for a true 1.19, the whole shortfall
+    taken off a play read 6 % high). So it is taken off only down to the ``width`` the
+    same comparison gives at the test torque: ``min(shortfall, max(play - width, 0))``.
+
+    Parameters
+    ----------
+    shortfall : float
+        The soft zone's shortfall [rad] (> 0).
+    width : float
+        The width at the test torque [rad]; 0 or less: not known (a record from before
+        it was carried), the whole shortfall is taken off.
+    play : callable
+        Returns the play the estimator follows [rad] (called only with a width).
+
+    Returns
+    -------
+    float
+        The shortfall taken off [rad], 0 to ``shortfall``.
+
+    """
+    if not (math.isfinite(width) and width > 0.0):
+        return shortfall
+    return min(shortfall, max(float(play()) - width, 0.0))
 
 
 def reducer_state(estimator_state, duty, lost_motion_obs, soft_zone_shortfall):

@@ -17,9 +17,12 @@ for it :data:`FAR_MEMORY` windows), and pools the shortfall over the stream (fro
 :data:`NEAR_FLANK_SAMPLES` a flank while the stream has had none of a flank's worth
 there; its standard error counts the windows' scatter). Once it is said
 (:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
-(``WindowFeatures.soft_zone_shortfall``): the estimator still follows the play its windows
-read, and the lost motion it gives is that play less the shortfall, the remaining life the
-time to the play reaching the limit plus it (:func:`.pipeline.play_limit`).
+(``WindowFeatures.soft_zone_shortfall``, with the width at the test torque,
+``soft_zone_width``): the estimator still follows the play its windows read, and the lost
+motion it gives is that play less the shortfall but not below that width (windows whose
+loads seldom pass the knee read less than the far flanks' play:
+:func:`.pipeline.taken_off`), the remaining life the time to the play reaching the limit
+plus what was taken off (:func:`.pipeline.play_limit`).
 
 Measured per joint (one-off survey, 300-h recordings at 1 kHz): third-generator units
 with knees at 4.0-6.0 % of rated fell 0.55-2.2 arcmin (26-73 %) short at the test torque;
@@ -263,8 +266,8 @@ class SoftZoneCheck:
                 f'Those flanks give {play / ARCMIN:.2f} arcmin of play, the width at the test '
                 f"torque (the catalogue's lost motion) is about {(play - short) / ARCMIN:.2f}; "
                 'the lost motion and remaining life are given at the test torque from here on '
-                '(the play the estimate follows, less this shortfall); the wear is that of '
-                'the play')
+                '(the play the estimate follows, less this shortfall but not below that '
+                'width); the wear is that of the play')
 
 
 def carried_line(shortfall):

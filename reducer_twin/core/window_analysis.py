@@ -135,6 +135,11 @@ class WindowFeatures:
         loads give, pooled over the stream up to this window, where the soft zone is said
         (:attr:`.soft_zone.SoftZoneCheck.said`), else 0 [rad]. ``lost_motion`` is the
         play those flanks give; the catalogue's lost motion is this much less.
+    soft_zone_width : float
+        The width at the test torque the same comparison gives (the play those flanks
+        give less the shortfall, stream means), where the soft zone is said, else 0
+        [rad]: a play the estimate follows below that of those flanks is taken down to
+        it, not below (:meth:`.pipeline.EstimatorStage.step`).
 
     """
 
@@ -160,6 +165,7 @@ class WindowFeatures:
     duty: DutySummary = None
     implausible: bool = False
     soft_zone_shortfall: float = 0.0
+    soft_zone_width: float = 0.0
 
 
 class WindowAnalyzer:
@@ -944,7 +950,8 @@ class WindowAnalyzer:
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
         soft = self._soft_zone.said
-        shortfall = 0.0 if soft is None else float(soft['shortfall'])
+        shortfall, zone_width = (0.0, 0.0) if soft is None else (
+            float(soft['shortfall']), float(soft['width']))
         out = []
         for k in range(n_win):
             use = usable[k]
@@ -961,7 +968,7 @@ class WindowAnalyzer:
                 hysteresis_torque=torque_h[k, use], hysteresis=width[k, use],
                 hysteresis_std=std[k, use],
                 duty=duty[k], implausible=bool(implausible[k]),
-                soft_zone_shortfall=shortfall))
+                soft_zone_shortfall=shortfall, soft_zone_width=zone_width))
         return out
 
     def flank_samples(self):

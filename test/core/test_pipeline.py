@@ -23,7 +23,7 @@ from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
-from reducer_twin.core.pipeline import reducer_state
+from reducer_twin.core.pipeline import reducer_state, taken_off
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.core.window_analysis import DutySummary
@@ -277,6 +277,39 @@ def test_a_soft_zone_gives_the_lost_motion_at_the_test_torque_and_the_limit_met_
     # Records with and without one, predicted together, each as alone.
     both = stage.predictions([before, after])
     assert [p.p50 for p in both] == [stage.prediction(before).p50, got.p50]
+
+
+def test_a_soft_zone_is_taken_off_the_play_only_down_to_the_width_at_the_test_torque(
+        windows):
+    # The estimate follows the play its windows read; where their loads seldom pass the
+    # soft zone's knee it lies near the width at the test torque, not at the play of the
+    # far flanks. Taken off whole there, a shortfall left a third-generator base 0.02
+    # arcmin for a true 1.19 (never below zero, now: no more than down to the width).
+    plain = EstimatorStage(PARAMS)
+    run(plain, windows)
+    play = plain.record(windows[-1].t_end)['lost_motion_rad']
+
+    def given(shortfall, width):
+        stage = EstimatorStage(PARAMS)
+        run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall,
+                                       'soft_zone_width': width}) for w in windows])
+        return stage.record(windows[-1].t_end)
+
+    # Windows that read the play of the far flanks: the whole shortfall, as before.
+    far = given(0.5 * ARCMIN, play - 0.5 * ARCMIN)
+    assert far['lost_motion_rad'] == pytest.approx(play - 0.5 * ARCMIN, abs=1e-3 * ARCMIN)
+    assert far['soft_zone_shortfall_rad'] == pytest.approx(0.5 * ARCMIN, abs=1e-3 * ARCMIN)
+    # Windows that read between: down to the width, and the limit met where the play
+    # exceeds it by what was taken off.
+    between = given(1.0 * ARCMIN, play - 0.3 * ARCMIN)
+    assert between['lost_motion_rad'] == pytest.approx(play - 0.3 * ARCMIN, abs=1e-3 * ARCMIN)
+    assert between['soft_zone_shortfall_rad'] == pytest.approx(0.3 * ARCMIN,
+                                                               abs=1e-3 * ARCMIN)
+    # Windows that read the width itself or less: nothing taken off, never below zero.
+    near = given(1.5 * ARCMIN, play + 0.1 * ARCMIN)
+    assert near['lost_motion_rad'] == pytest.approx(play)
+    assert near['soft_zone_shortfall_rad'] == 0.0
+    assert taken_off(0.5 * ARCMIN, 0.0, lambda: 1 / 0) == 0.5 * ARCMIN   # width not known
 
 
 def test_a_soft_zone_follows_its_stream_and_one_carried_over_stays_until_the_stream_says(

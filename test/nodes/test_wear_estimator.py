@@ -197,6 +197,22 @@ def test_windows_that_carry_a_soft_zone_give_the_lost_motion_at_the_test_torque_
     assert float(values['soft_zone_shortfall_arcmin']) == pytest.approx(0.4, abs=1e-3)
 
 
+def test_a_soft_zone_is_taken_off_the_play_no_further_than_the_width_at_the_test_torque(
+        ros, tmp_path, records):
+    # Windows whose play lies near the width te_monitor's comparison gives at the test
+    # torque (their loads seldom pass the soft zone's knee): the lost motion published is
+    # that width, not the play less the whole shortfall (which would be below zero here).
+    plain = offline(records[:10])
+    width = plain['lost_motion_rad'] - 0.2 * ARCMIN
+    est = Estimator(ros, tmp_path)
+    est.send([{**rec, 'soft_zone_shortfall_rad': 1.5 * ARCMIN, 'soft_zone_width_rad': width}
+              for rec in records[:10]])
+    last = est.latest(est.wear, records[9]['window_end_s'])
+    assert last['lost_motion_rad'] == pytest.approx(width, abs=1e-4 * ARCMIN)
+    assert last['soft_zone_shortfall_rad'] == pytest.approx(0.2 * ARCMIN, abs=1e-4 * ARCMIN)
+    same_estimate(last, plain, skip=('stamp_s', 'lost_motion_rad', 'soft_zone_shortfall_rad'))
+
+
 def test_the_state_file_is_replaced_atomically_after_every_window(ros, tmp_path, records):
     est = Estimator(ros, tmp_path)
     assert not est.state.exists(), 'nothing to save before the first window'
