@@ -106,9 +106,12 @@ EVAL_RANGE = (0.25, 0.75)
 MIN_OBSERVED = 5
 """Usable windows over a life below which a run counts as not observed."""
 
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4
 """
 Bump when the generation below changes, so cached windows are not reused.
+
+4: the windows carry the width at the test torque (``soft_zone_width_rad``), and a soft
+zone's bins at the test torque wait for the stream's first far line.
 
 3: the windows carry the soft zone's shortfall (``soft_zone_shortfall_rad``).
 
@@ -495,6 +498,7 @@ def with_true_lost_motion(run, params, noise=0.02 * ARCMIN, seed=0):
         records[usable, fields.index('wear_fit_m')], 1e-9)
     # The truth is the lost motion at the test torque: no soft zone left to take off it.
     records[:, fields.index('soft_zone_shortfall_rad')] = 0.0
+    records[:, fields.index('soft_zone_width_rad')] = 0.0
     return Run(run.truth, records, run.t_end, run.eol, run.wear, run.lost_motion, run.wear_mid)
 
 
