@@ -607,7 +607,8 @@ def taken_off(shortfall, width, play):
         The width at the test torque [rad]; 0 or less: not known (a record from before
         it was carried), the whole shortfall is taken off.
     play : callable
-        Returns the play the estimator follows [rad] (called only with a width).
+        Returns the play the estimator follows [rad] (called only with a width; not a
+        number: the whole shortfall is taken off).
 
     Returns
     -------
@@ -617,7 +618,8 @@ def taken_off(shortfall, width, play):
     """
     if not (math.isfinite(width) and width > 0.0):
         return shortfall
-    return min(shortfall, max(float(play()) - width, 0.0))
+    above = float(play()) - width
+    return min(shortfall, max(above, 0.0)) if math.isfinite(above) else shortfall
 
 
 def reducer_state(estimator_state, duty, lost_motion_obs, soft_zone_shortfall):

@@ -310,6 +310,7 @@ def test_a_soft_zone_is_taken_off_the_play_only_down_to_the_width_at_the_test_to
     assert near['lost_motion_rad'] == pytest.approx(play)
     assert near['soft_zone_shortfall_rad'] == 0.0
     assert taken_off(0.5 * ARCMIN, 0.0, lambda: 1 / 0) == 0.5 * ARCMIN   # width not known
+    assert taken_off(0.5 * ARCMIN, 1.0 * ARCMIN, lambda: math.nan) == 0.5 * ARCMIN
 
 
 def test_a_soft_zone_follows_its_stream_and_one_carried_over_stays_until_the_stream_says(
