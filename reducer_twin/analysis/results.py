@@ -92,8 +92,10 @@ class JointResult:
             ``soft_zone`` (where the play is still being taken up at the lost-motion test
             torque, :attr:`.joint_twin.TwinFront.soft_zone` in arcmin: ``width_arcmin``, the
             catalogue's lost motion there, ``play_arcmin``, ``shortfall_arcmin``,
-            ``shortfall_sd_arcmin``, stream means, ``windows`` and ``few_samples``; else
-            None) and
+            ``shortfall_sd_arcmin``, stream means, ``windows``, ``few_samples`` and
+            ``taken_off_arcmin``, what the lost motion given was taken off the play by: the
+            shortfall, less where the play followed lies nearer the width,
+            :func:`.pipeline.taken_off`; None when not observed; else None) and
             ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
@@ -124,6 +126,11 @@ class JointResult:
         out['velocity'] = self.velocity
         out['inputs'] = list(self.inputs)
         out['soft_zone'] = soft_zone_numbers(self.soft_zone)
+        if out['soft_zone'] is not None:
+            # What the lost motion given was taken off the play by (pipeline.taken_off).
+            taken = wear.get('soft_zone_shortfall_rad') if observed else None
+            out['soft_zone']['taken_off_arcmin'] = None if taken is None else \
+                rad_to_arcmin(float(taken))
         out.update(life_basis(wear, life, observed))
         out['service'] = self.service
         return out

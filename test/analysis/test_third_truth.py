@@ -112,8 +112,12 @@ def test_a_play_still_taken_up_beyond_the_test_torque_is_said_with_its_width_the
     assert joints['joint_2']['soft_zone'] is None and joints['joint_1']['soft_zone'] is None
     reported = joints['joint_3']['lost_motion_arcmin']
     # The lost motion is given at the test torque: the play the estimate follows (3.26
-    # arcmin; read as the lost motion before, +110 %) less the stream's shortfall.
+    # arcmin; read as the lost motion before, +110 %) less the stream's shortfall, no
+    # further than the width there; --json says how much was taken off.
     assert reported == pytest.approx(truth['joint_3']['lost_motion_end_arcmin'], rel=0.25)
+    assert 0.0 < figures['taken_off_arcmin'] <= figures['shortfall_arcmin']
+    assert figures['taken_off_arcmin'] == pytest.approx(figures['shortfall_arcmin']) or \
+        reported == pytest.approx(figures['width_arcmin'], abs=1e-3)
     assert 'narrower than the flanks' in (tmp_path / 'report' / 'index.html').read_text()
 
 
