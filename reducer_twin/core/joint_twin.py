@@ -477,7 +477,7 @@ class TwinFront:
         """
         Return the figures of a play still being taken up at the test torque, else None.
 
-        The stream means of :attr:`.soft_zone.SoftZoneCheck.said` once the soft zone is said
+        The pooled figures of :attr:`.soft_zone.SoftZoneCheck.said` once the soft zone is said
         (``shortfall``, ``shortfall_sd``, ``play``, ``width`` [rad], ``windows``,
         ``few_samples``): the line of :meth:`input_warnings` as numbers. From then on each
         window carries the shortfall (``WindowFeatures.soft_zone_shortfall``), and the back

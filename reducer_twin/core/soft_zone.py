@@ -13,7 +13,8 @@ than their lost motion at the test torque, the bins at the test torque showing i
 :class:`SoftZoneCheck` compares the hysteresis width in a window's bin at the test torque
 with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
 over recent windows (bins at the test torque seen before the stream's first line wait
-for it :data:`FAR_MEMORY` windows), and pools the shortfall over the stream (from bins of
+for it :data:`FAR_MEMORY` windows), and pools the shortfall over the stream's recent
+comparisons (:data:`SHORTFALL_MEMORY`; the whole stream of a short recording) (from bins of
 :data:`NEAR_FLANK_SAMPLES` a flank while the stream has had none of a flank's worth
 there; its standard error counts the windows' scatter). Once it is said
 (:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
@@ -70,6 +71,16 @@ SHORTFALL_SIGMAS = 5.0
 MIN_WINDOWS = 2
 """... from at least this many windows."""
 
+SHORTFALL_MEMORY = 30.0
+"""
+Comparisons over which the pooled shortfall fades.
+
+A soft zone may change as the reducer wears (on the third generator it grows with the
+play): pooled over a whole life, the early shortfall under-corrected the late windows.
+A steady one reads the same as pooled over the whole stream; one that grows is followed,
+lagging by about this many comparisons (and the far line's :data:`FAR_MEMORY`).
+"""
+
 NEAR_FLANK_SAMPLES = 4
 """
 Samples of its own each flank of a bin at the test torque needs to be compared.
@@ -112,9 +123,11 @@ class SoftZoneCheck:
         self.series_stiffness = float(series_stiffness)
         self._line = np.zeros(5)   # pooled Σw, Σw·T, Σw·T², Σw·h, Σw·T·h of the far bins
         self._memory = math.exp(-1.0 / FAR_MEMORY)
-        # Per kind of comparison (full bins, thin bins): windows, Σw, Σw·s, Σw·s², Σw·p of
-        # the windows' shortfalls s and plays p read at the test torque [rad], w = 1/sd².
-        self._sums = {'full': np.zeros(5), 'thin': np.zeros(5)}
+        # Per kind of comparison (full bins, thin bins): windows, then faded by
+        # SHORTFALL_MEMORY comparisons: windows, Σw, Σw·s, Σw·s², Σw·p of the windows'
+        # shortfalls s and plays p read at the test torque [rad], w = 1/sd².
+        self._sums = {'full': np.zeros(6), 'thin': np.zeros(6)}
+        self._fade = np.array([1.0] + [math.exp(-1.0 / SHORTFALL_MEMORY)] * 5)
         self._seen = 0        # windows observed
         self._waiting = []    # (window, kind, torque, width, sd) of bins without a line yet
 
@@ -200,8 +213,8 @@ class SoftZoneCheck:
             return
         line = a + b * t_near
         short = line - h_near
-        self._sums[kind] += np.array([
-            1.0, 1.0 / var, short / var, short ** 2 / var,
+        self._sums[kind] = self._fade * self._sums[kind] + np.array([
+            1.0, 1.0, 1.0 / var, short / var, short ** 2 / var,
             (line - 2.0 * t_near / self.series_stiffness) / var])
 
     @property
@@ -213,7 +226,7 @@ class SoftZoneCheck:
         their scatter about the pooled value where it exceeds them (the Birge ratio,
         ``sqrt(chi^2 / (n - 1))``).
         """
-        n, weight, sum_s, sum_ss, sum_p = self._pool
+        _, n, weight, sum_s, sum_ss, sum_p = self._pool
         if weight <= 0.0:
             return None
         mean = sum_s / weight
@@ -231,7 +244,8 @@ class SoftZoneCheck:
         dict or None
             ``shortfall`` and its standard error ``shortfall_sd``, the ``play`` the flanks
             of higher loads give at the test torque and the ``width`` there (the
-            catalogue's lost motion, ``play - shortfall``), all stream means [rad], the
+            catalogue's lost motion, ``play - shortfall``), all means over the stream's recent
+            comparisons (:data:`SHORTFALL_MEMORY`) [rad], the
             ``windows`` compared, and ``few_samples``: True when those are thin bins
             (:data:`NEAR_FLANK_SAMPLES` a flank; no window had a flank's worth there).
 

@@ -132,12 +132,13 @@ class WindowFeatures:
         :data:`PLAUSIBLE_TE_SPAN_RAD`, :data:`PLAUSIBLE_LOST_MOTION_RAD`).
     soft_zone_shortfall : float
         How much narrower the hysteresis is at the test torque than the flanks of higher
-        loads give, pooled over the stream up to this window, where the soft zone is said
+        loads give, pooled over the stream's recent comparisons up to this window
+        (:data:`.soft_zone.SHORTFALL_MEMORY`), where the soft zone is said
         (:attr:`.soft_zone.SoftZoneCheck.said`), else 0 [rad]. ``lost_motion`` is the
         play those flanks give; the catalogue's lost motion is this much less.
     soft_zone_width : float
         The width at the test torque the same comparison gives (the play those flanks
-        give less the shortfall, stream means), where the soft zone is said, else 0
+        give less the shortfall, pooled alike), where the soft zone is said, else 0
         [rad]: a play the estimate follows below that of those flanks is taken down to
         it, not below (:meth:`.pipeline.EstimatorStage.step`).
 
