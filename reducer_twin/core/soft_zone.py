@@ -14,9 +14,9 @@ than their lost motion at the test torque, the bins at the test torque showing i
 with the straight line through the bins of loads beyond :data:`FAR_LOADS` times it, pooled
 over recent windows (bins at the test torque seen before the stream's first line wait
 for it :data:`FAR_MEMORY` windows), and pools the shortfall over the stream's recent
-comparisons (:data:`SHORTFALL_MEMORY`; the whole stream of a short recording) (from bins of
+comparisons (:data:`SHORTFALL_MEMORY`: a short recording's whole stream), from bins of
 :data:`NEAR_FLANK_SAMPLES` a flank while the stream has had none of a flank's worth
-there; its standard error counts the windows' scatter). Once it is said
+there; its standard error counts the windows' scatter. Once it is said
 (:attr:`SoftZoneCheck.reason`), every window carries the pooled shortfall
 (``WindowFeatures.soft_zone_shortfall``, with the width at the test torque,
 ``soft_zone_width``): the estimator still follows the play its windows read, and the lost
