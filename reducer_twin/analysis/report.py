@@ -20,6 +20,7 @@ import math
 from pathlib import Path
 
 import numpy as np
+from reducer_twin.core.pipeline import taken_off
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from reducer_twin.io.outputs import OutputDir
 from reducer_twin.msg_adapters.layouts import (
@@ -76,12 +77,11 @@ def _readings(ax, joint, res):
     """
     h = _hours(res)
     # At the test torque, as the estimate: the play less a soft zone's shortfall, if said,
-    # not below the width at the test torque (pipeline.taken_off).
+    # not below the width at the test torque.
     play = _col(res.features, TE_FEATURES, 'lost_motion_rad')
-    short = _col(res.features, TE_FEATURES, 'soft_zone_shortfall_rad')
-    width = _col(res.features, TE_FEATURES, 'soft_zone_width_rad')
-    obs = np.where(width > 0.0, np.minimum(play, np.maximum(play - short, width)),
-                   play - short) / ARCMIN
+    taken = taken_off(_col(res.features, TE_FEATURES, 'soft_zone_shortfall_rad'),
+                      _col(res.features, TE_FEATURES, 'soft_zone_width_rad'), lambda: play)
+    obs = (play - taken) / ARCMIN
     std = _col(res.features, TE_FEATURES, 'lost_motion_std_rad') / ARCMIN
     bound = _col(res.features, TE_FEATURES, 'wear_fit_m') <= 0.0
     used = ~bound

@@ -601,25 +601,30 @@ def taken_off(shortfall, width, play):
 
     Parameters
     ----------
-    shortfall : float
-        The soft zone's shortfall [rad] (> 0).
-    width : float
+    shortfall : float or ndarray
+        The soft zone's shortfall [rad] (> 0; per window for the report's readings).
+    width : float or ndarray
         The width at the test torque [rad]; 0 or less: not known (a record from before
         it was carried), the whole shortfall is taken off.
     play : callable
-        Returns the play the estimator follows [rad] (called only with a width; not a
-        number: the whole shortfall is taken off).
+        Returns the play the estimator follows [rad], like ``width`` (called only where a
+        width is known; not a number: the whole shortfall is taken off).
 
     Returns
     -------
-    float
+    float or ndarray
         The shortfall taken off [rad], 0 to ``shortfall``.
 
     """
-    if not (math.isfinite(width) and width > 0.0):
+    width = np.asarray(width, dtype=float)
+    known = np.isfinite(width) & (width > 0.0)
+    if not known.any():
         return shortfall
-    above = float(play()) - width
-    return min(shortfall, max(above, 0.0)) if math.isfinite(above) else shortfall
+    with np.errstate(invalid='ignore'):
+        above = np.asarray(play(), dtype=float) - width
+    taken = np.where(known & np.isfinite(above),
+                     np.minimum(shortfall, np.maximum(above, 0.0)), shortfall)
+    return float(taken) if taken.ndim == 0 else taken
 
 
 def reducer_state(estimator_state, duty, lost_motion_obs, soft_zone_shortfall):
