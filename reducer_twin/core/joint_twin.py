@@ -5,7 +5,7 @@ A joint's processing is written here once. :class:`JointTwin` runs it whole
 (:class:`TwinFront`: TE extraction, the learnt encoder time offset and the
 window analysis; then :class:`TwinBack`: the Kalman wear estimate and the
 remaining-life prediction), and returns frozen results:
-:class:`~reducer_twin.core.window_analysis.WindowFeatures` per window,
+:class:`~reducer_twin.core.window_fit.WindowFeatures` per window,
 :class:`WearEstimate`, :class:`LifeEstimate` and :class:`HealthSummary`.
 
 The live ROS nodes are shells over these pieces on separate topics

@@ -14,7 +14,8 @@ import math
 from .effort_check import PLAUSIBLE_LOST_MOTION_RAD
 from .kinematics import total_ratio
 from .units import ARCMIN, ARCSEC
-from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ, PLAUSIBLE_TE_SPAN_RAD
+from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ
+from .window_fit import PLAUSIBLE_TE_SPAN_RAD
 
 DERIVED_LINK_SPAN_RAD = 0.1 * ARCMIN
 """
@@ -57,7 +58,7 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
     if derived is not None:
         # Before the effort's checks: without a TE they read nothing of the effort.
         return derived
-    if fault is not None and not analyzer.windows_implausible:
+    if fault is not None and not analyzer.fit.windows_implausible:
         return fault
     seen = analyzer.samples_seen
     if seen == 0:
@@ -67,10 +68,10 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 'samples): the lost motion needs the torque')
     if analyzer.windows_emitted == 0:
         return f'no complete analysis window yet ({seen} samples)'
-    if analyzer.windows_implausible:
+    if analyzer.fit.windows_implausible:
         return (f'the motor and link encoders do not measure the same motion: the '
-                f'transmission error spans up to {math.degrees(analyzer.largest_te_span):.3g} '
-                f'deg in {analyzer.windows_implausible} of {analyzer.windows_emitted} windows '
+                f'transmission error spans up to {math.degrees(analyzer.fit.largest_te_span):.3g} '
+                f'deg in {analyzer.fit.windows_implausible} of {analyzer.windows_emitted} windows '
                 f"(a reducer's moves by arcminutes; at most "
                 f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
                 f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
@@ -113,17 +114,17 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 'on the motor entry, taken for a motor torque and multiplied by the '
                 'ratio: motor_effort_units joint; or other units: effort_scale, '
                 'twin.effort_scale in --config)')
-    if analyzer.windows_offset_unremoved:
+    if analyzer.fit.windows_offset_unremoved:
         return (f'the link and motor encoders are stamped up to '
-                f'{1e3 * analyzer.largest_unremoved_offset_s:.3g} ms apart: '
-                f'{analyzer.windows_offset_unremoved} of {analyzer.windows_emitted} windows had '
-                'torque reversals, but their transmission error carried that offset, which '
+                f'{1e3 * analyzer.fit.largest_unremoved_offset_s:.3g} ms apart: '
+                f'{analyzer.fit.windows_offset_unremoved} of {analyzer.windows_emitted} windows '
+                'had torque reversals, but their transmission error carried that offset, which '
                 'is removed once learnt from 5 windows that find it; no lost motion is read '
                 'before (stamp both encoders on one clock)')
-    if analyzer.windows_friction_unknown:
+    if analyzer.fit.windows_friction_unknown:
         return (f'the friction in the effort could not yet be told from the load: '
-                f'{analyzer.windows_friction_unknown} of {analyzer.windows_emitted} windows had '
-                'torque reversals, but the joint has not yet moved both ways in a fifth '
+                f'{analyzer.fit.windows_friction_unknown} of {analyzer.windows_emitted} windows '
+                'had torque reversals, but the joint has not yet moved both ways in a fifth '
                 'of the samples each, and a motor friction in the effort would pick the '
                 'flank (an effort measured by a torque sensor at the output carries no '
                 'friction: set twin.friction_in_effort to 0)')
@@ -139,8 +140,8 @@ def link_from_motor(analyzer):
     transmission error spanning :data:`DERIVED_LINK_SPAN_RAD`; such a joint is never
     observed (:func:`not_observed_reason` says so).
     """
-    return bool(analyzer.windows_reversed) and \
-        analyzer.largest_reversed_te_span < DERIVED_LINK_SPAN_RAD
+    return bool(analyzer.fit.windows_reversed) and \
+        analyzer.fit.largest_reversed_te_span < DERIVED_LINK_SPAN_RAD
 
 
 def derived_link_reason(analyzer):
@@ -152,8 +153,8 @@ def derived_link_reason(analyzer):
     if not link_from_motor(analyzer):
         return None
     return (f'the link angle follows the motor angle divided by the reduction ratio to within '
-            f'{analyzer.largest_reversed_te_span / ARCSEC:.2g} arcsec in all '
-            f'{analyzer.windows_reversed} windows with a torque reversal under load, where a '
+            f'{analyzer.fit.largest_reversed_te_span / ARCSEC:.2g} arcsec in all '
+            f'{analyzer.fit.windows_reversed} windows with a torque reversal under load, where a '
             "reducer's play alone moves it by tenths of an arcminute: the link position is "
             "computed from the motor encoder, not read by an encoder at the reducer's output "
             "(or the motor position from the link's); the lost motion needs both encoders (a "
@@ -195,5 +196,6 @@ def stale_reason(analyzer, after_s, effort_source='the joint states'):
     if since['implausible']:
         return gap, (f'in {since["implausible"]} of {since["windows"]} windows since, the '
                      f'transmission error spans up to '
-                     f'{math.degrees(analyzer.largest_te_span):.3g} deg (a frozen encoder?)'), True
+                     f'{math.degrees(analyzer.fit.largest_te_span):.3g} deg '
+                     '(a frozen encoder?)'), True
     return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False

@@ -7,166 +7,27 @@ manufacturing-error orders, the encoder time offset, the duty the reducer saw,
 and the lost motion observed at torque reversals (physics notes section 4),
 which is the observation of the wear estimator.
 
-Lost motion model (physics notes sections 3-4): the loaded mesh makes
-``TE = -(sign(T)·beta(|T|, w) + T/k_s)``, so at equal ``|T|`` the TE under a
-negative torque minus the TE under a positive torque is the hysteresis
-``H(|T|, w) = 2·(beta + |T|/k_s)``, which grows with the wear ``w``. On top
-the encoders see the manufacturing harmonics (functions of the output angle),
-``omega·delta`` from a time offset ``delta`` between the encoders, and an
-unknown constant offset. One linear least-squares fit removes the harmonics
-and the time offset jointly with a straight line in ``|T|`` per torque bin
-and torque sign; ``H`` at each bin follows from the two lines, and the wear
-that explains all bins through
-:meth:`.transmission_error.ModelTables.hysteresis` gives the lost motion
-(:mod:`.wear_fit`).
-
-Two things the data cannot do are handled explicitly. A harmonic or the time
-offset that the window's motion cannot separate from the torque dependence
-(at constant speed ``omega`` is a constant; under gravity ``cos(theta)``
-follows ``T``) is reported as NaN and left to the bin lines. What such a 1x
-harmonic leaves in ``H`` is odd in torque and grows with ``|T|``, like a
-stiffness error, so the wear fit carries a compliance correction with a prior
-and reads the wear from the level of ``H``, not its slope.
-
-The effort is first cleared of the drive's friction and efficiency
-(:mod:`.friction_fit`) and checked to be the output torque (:mod:`.effort_check`).
+The features of each batch of windows are read by :class:`.window_fit.WindowFit` (the
+lost-motion model, the flanks and harmonics, the friction and the checks of the effort);
+this module buffers the stream, bridges and cuts it, judges the encoders' and the
+effort's forms, and keeps what a joint's observability is told from.
 """
 
-from dataclasses import dataclass, field
 import math
 
 import numpy as np
 
-from .duty_summary import duty_summaries, DutySummary
-from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .errors import InvalidInput, InvalidParameter, out_of_range
-from .flanks import FlankPool
-from .friction_fit import FrictionFit
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
-from .soft_zone import NEAR_FLANK_SAMPLES, SoftZoneCheck
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .te_extraction import TIME_OFFSET_LINEAR_S
-from .torque_smoothing import nominal_step, TorqueSmoothing
+from .torque_smoothing import nominal_step
 from .transmission_error import model_tables
 from .units import rad_to_arcmin
 from .velocity_check import VelocityCheck
-from .wear_fit import LostMotionFit
 from .window_cut import cut_windows, WINDOW_MODES
-
-_HARMONIC_FIT_TORQUE = 0.5
-"""
-Share of the lost-motion test torque beyond which samples enter the harmonics' fit.
-
-Near zero torque the flank's level follows the load steeply, and an unloaded joint's
-position in the move mirrors its load: those samples bend the harmonics (all samples
-whose flank is sure: an unloaded base given its exact torque read 5-9 % low). Beyond
-the whole test torque, an unloaded joint that swings between two points meets each
-flank only where it starts and brakes, at one end of the move, and a 1x harmonic reads
-as lost motion (independent generator, 120-window lives: bases 1022, 2008 and 4013 read
-0.15, 0.13 and 0.18 arcmin high; with half the test torque -0.00, 0.07 and 0.11).
-"""
-
-
-STILL_SPAN_RAD = 2e-5
-"""
-Travel of the output angle [rad] (4 arcsec) below which a window stood still: no lost motion.
-
-Play is taken up by motion: a load that changes sign moves the joint by its lost motion
-(0.4-3 arcmin), a window that never moves shows none. A joint standing still under a
-held load with a drive's noise gives one flank at one torque and a frozen TE, which the
-pooled flanks completed into a lost motion: measured (the model's simulator, a used unit
-at 2.27 arcmin, 40 s held at 47 N·m), its 16 windows read a lost motion creeping 2.38 ->
-2.56 arcmin, and the pool they joined read the next 35 windows 5-8 % high. Its samples
-enter neither the window's flanks nor the pool.
-"""
-
-
-@dataclass(frozen=True)
-class WindowFeatures:
-    """
-    Features of one window of the TE stream.
-
-    Attributes
-    ----------
-    t_start, t_end : float
-        Stamps of the first and last sample [s].
-    samples : int
-        Samples used.
-    end_reason : str
-        Why the window ended: ``'revolution'``, ``'duration'``, ``'motion'``
-        (continuous turning stopped after ``window_s``), ``'max'``,
-        ``'gap'`` or ``'flush'``.
-    te_max, te_min, te_pp, te_mean : float
-        Maximum, minimum, peak-to-peak and mean TE [rad] (paper Table 5
-        format; raw, including the encoders' constant offset).
-    loaded_mean_te : float
-        Mean TE over samples with ``T > 10 %`` of rated torque [rad], after
-        removing the fitted harmonics and time-offset term; NaN if none.
-    orders : dict
-        Order per output revolution -> amplitude [rad] of the TE harmonic,
-        fitted against the output angle; NaN where not identifiable.
-    time_offset_s : float
-        Fitted time offset of the link encoder behind its stamps [s]
-        (coefficient of ``omega`` in the TE); NaN at constant speed.
-    lost_motion, lost_motion_std : float
-        Lost motion at the catalogue test torque for the fitted wear, and
-        its standard error [rad]; NaN without usable torque reversals.
-    wear_fit, wear_fit_std : float
-        Combined wear that explains the observed hysteresis, and its
-        standard error [m]; NaN like ``lost_motion``.
-    compliance_fit : float
-        Compliance correction ``c`` fitted with the wear [rad/(N·m)]: the
-        observed widths are modelled as ``H(|T|, w) + 2·|T|·c``; NaN like
-        ``lost_motion``.
-    hysteresis_torque : ndarray
-        Torque of each usable bin [N·m]: mean ``|T|`` of its samples.
-    hysteresis : ndarray
-        Observed width ``TE(-|T|) - TE(+|T|)`` at those torques [rad].
-    hysteresis_std : ndarray
-        Standard errors of ``hysteresis`` [rad].
-    duty : DutySummary
-        Load and speed history of the window.
-    implausible : bool
-        The encoders did not measure the same motion in it (no lost motion read:
-        :data:`PLAUSIBLE_TE_SPAN_RAD`, :data:`PLAUSIBLE_LOST_MOTION_RAD`).
-    soft_zone_shortfall : float
-        How much narrower the hysteresis is at the test torque than the flanks of higher
-        loads give, pooled over the stream's recent comparisons up to this window
-        (:data:`.soft_zone.SHORTFALL_MEMORY`), where the soft zone is said
-        (:attr:`.soft_zone.SoftZoneCheck.said`), else 0 [rad]. ``lost_motion`` is the
-        play those flanks give; the catalogue's lost motion is this much less.
-    soft_zone_width : float
-        The width at the test torque the same comparison gives (the play those flanks
-        give less the shortfall, pooled alike), where the soft zone is said, else 0
-        [rad]: a play the estimate follows below that of those flanks is taken down to
-        it, not below (:meth:`.pipeline.EstimatorStage.step`).
-
-    """
-
-    t_start: float
-    t_end: float
-    samples: int
-    end_reason: str
-    te_max: float
-    te_min: float
-    te_pp: float
-    te_mean: float
-    loaded_mean_te: float
-    orders: dict
-    time_offset_s: float
-    lost_motion: float
-    lost_motion_std: float
-    wear_fit: float
-    wear_fit_std: float
-    compliance_fit: float
-    hysteresis_torque: np.ndarray = field(repr=False)
-    hysteresis: np.ndarray = field(repr=False)
-    hysteresis_std: np.ndarray = field(repr=False)
-    duty: DutySummary = None
-    implausible: bool = False
-    soft_zone_shortfall: float = 0.0
-    soft_zone_width: float = 0.0
+from .window_fit import WindowFit
 
 
 class WindowAnalyzer:
@@ -312,21 +173,16 @@ class WindowAnalyzer:
         self.takeup_torque = params.rating.lost_motion_torque_fraction * self.rated_torque
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
         memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
-        self._flanks = FlankPool(self.orders, self.edges, self.rated_torque, self.min_bins,
-                                 memory)
-        self.centres = self._flanks.centres
-        self._friction_fit = FrictionFit(self.rated_torque, friction_memory_windows)
-        self._effort = EffortCheck(self.tables, self.takeup_torque)
         self._velocity = VelocityCheck(self.min_speed, total_ratio(g))
         self._held_effort = HeldEffort()
-        self._smoothing = TorqueSmoothing(self.torque_smoothing_s, self.sign_sigmas,
-                                          self.takeup_torque, self.rated_torque)
+        self.fit = WindowFit(params, self.tables, self.orders, self.edges, self.min_bins, memory,
+                             self.compliance_prior, self.torque_smoothing_s, self.sign_sigmas,
+                             self.friction, friction_memory_windows, self.aging_factor,
+                             self._held_effort)
+        self.centres = self.fit.flanks.centres
         # Until the velocity check decides: the link angle's rate of the buffered samples
         # (row 0) and whether they carry a field (row 1).
         self._rate_held = None
-        self._lost_motion_fit = LostMotionFit(self.tables, self.centres, self.takeup_torque,
-                                              self.compliance_prior, self.min_bins)
-        self._soft_zone = SoftZoneCheck(self.takeup_torque, self.tables.series_stiffness)
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._lag_head = None   # (stamps, effort) just before the buffer (effort_lag_s)
         self._last_t = None
@@ -341,20 +197,9 @@ class WindowAnalyzer:
         self.windows_emitted = 0
         self.windows_observed = 0
         self.windows_censored = 0       # of those, fits on the table's lower bound
-        self.windows_friction_unknown = 0
-        self.windows_offset_unremoved = 0   # withheld: a time offset not yet removed
         self.offset_removed = False     # set by the calibration once what is left is linear
-        self.largest_unremoved_offset_s = 0.0
-        self.windows_implausible = 0
-        self.windows_still = 0          # the joint stood still: no lost motion (STILL_SPAN_RAD)
-        self.largest_te_span = 0.0
-        self.windows_reversed = 0       # with bins enough for a lost motion
-        self.largest_reversed_te_span = 0.0  # of those [rad]
-        self.te_step = None             # (stream time [s], step [rad]) of the first step
-        self.te_steps = 0               # steps of the TE's constant
         self.gaps = 0                   # holes longer than max_gap_s between samples
         self.gap_time_s = 0.0           # the stream time they span [s]
-        self.windows_effort_fault = 0
         self.last_observed_t = None     # end of the last window with a lost motion [s]
         self.latest_t = None            # latest stamp fed [s]
         self._segment = None            # (first stamp since the last clock reset [s], stream
@@ -509,7 +354,7 @@ class WindowAnalyzer:
     @property
     def effort_fault(self):
         """Return why the effort is not the output torque, once found (:mod:`.effort_check`)."""
-        return self._effort.effort_fault
+        return self.fit.effort.effort_fault
 
     @property
     def velocity_fault(self):
@@ -524,12 +369,12 @@ class WindowAnalyzer:
     @property
     def soft_zone(self):
         """Say when the play is still being taken up at the test torque (:mod:`.soft_zone`)."""
-        return self._soft_zone.reason
+        return self.fit.soft_zone.reason
 
     @property
     def soft_zone_said(self):
         """Return the soft zone's pooled figures once said, else None (``SoftZoneCheck.said``)."""
-        return self._soft_zone.said
+        return self.fit.soft_zone.said
 
     @property
     def effort_held(self):
@@ -557,14 +402,14 @@ class WindowAnalyzer:
         the noise cannot tell from a ripple of the current loop: the line names the setting
         that undoes a filter (``effort_lag_s``) while it is 0.
         """
-        ratio = self._smoothing.correlated_ratio
+        ratio = self.fit.smoothing.correlated_ratio
         if ratio is None:
             return None
         line = (f"the effort's noise is correlated over successive samples (band-limited or "
                 f'filtered): its averages are {ratio:.1f} times as noisy as its sample-to-sample '
-                f'scatter implies (in {self._smoothing.correlated_windows} windows); the torque '
-                "bands are widened to the averages' own noise, and the lost motion rests on "
-                'fewer independent samples')
+                f'scatter implies (in {self.fit.smoothing.correlated_windows} windows); the '
+                "torque bands are widened to the averages' own noise, and the lost motion rests "
+                'on fewer independent samples')
         if self.effort_lag_s:
             return line
         return (line + '. If the drive low-pass filters its torque, the effort also lags the '
@@ -582,10 +427,10 @@ class WindowAnalyzer:
         whose offset changed, or a motor turn count lost across a gap (``2·pi/i``); the
         flank pool starts afresh there, so the readings hold, but the step is said.
         """
-        if self.te_step is None:
+        if self.fit.te_step is None:
             return None
-        into, step = self.te_step
-        more = self.te_steps - 1
+        into, step = self.fit.te_step
+        more = self.fit.te_steps - 1
         also = f' (and {more} more)' if more else ''
         return (f"the transmission error's constant stepped by about "
                 f'{rad_to_arcmin(step):+.0f} arcmin {into:.1f} s into the '
@@ -604,17 +449,17 @@ class WindowAnalyzer:
     @property
     def coulomb_friction(self):
         """Return the Coulomb friction last taken out of the effort [N·m]."""
-        return self._friction_fit.coulomb_friction
+        return self.fit.friction_fit.coulomb_friction
 
     @property
     def viscous_friction(self):
         """Return the viscous friction last taken out of the effort [N·m·s/rad]."""
-        return self._friction_fit.viscous_friction
+        return self.fit.friction_fit.viscous_friction
 
     @property
     def efficiency(self):
         """Return the drive's efficiency last fitted (1: a constant Coulomb friction)."""
-        return self._friction_fit.efficiency
+        return self.fit.friction_fit.efficiency
 
     def not_observed_reason(self, effort_source='the joint states'):
         """Say why no window has given a lost motion; None once one has (:mod:`.observability`)."""
@@ -679,7 +524,7 @@ class WindowAnalyzer:
         self._buf = {name: np.empty(0) for name in _BUFFER}
         self._rate_held = None
         self._lag_head = None
-        self._flanks.restart()
+        self.fit.flanks.restart()
 
     def retime(self, delta_s):
         """
@@ -698,10 +543,10 @@ class WindowAnalyzer:
             Time added to the link encoder's stamps [s].
 
         """
-        self._flanks.retime(delta_s)
+        self.fit.flanks.retime(delta_s)
         if abs(delta_s) > TIME_OFFSET_LINEAR_S:
             self.discard_buffer()
-            self._effort.restart()
+            self.fit.effort.restart()
         elif self._buf['te'].size:
             self._buf['te'] = self._buf['te'] - delta_s * self._buf['speed']
 
@@ -741,7 +586,9 @@ class WindowAnalyzer:
                 last += 1
             end = cuts[last - 1][1]
             part = {k: v[base:end] for k, v in buf.items()}
-            found = self._analyze(part, [(a - base, b - base, r) for a, b, r in cuts[first:last]])
+            found = self.fit.analyze(part, [(a - base, b - base, r) for a, b, r in
+                                            cuts[first:last]], self.flank_samples(),
+                                     self.offset_removed, self._stream_s)
             self.windows_emitted += len(found)
             self.windows_observed += sum(math.isfinite(f.lost_motion) for f in found)
             self.windows_censored += sum(math.isfinite(f.lost_motion) and f.wear_fit <= 0.0
@@ -786,7 +633,7 @@ class WindowAnalyzer:
     def _rate_reach(self):
         """Return the samples either side the effort's rate is taken over, and the step [s]."""
         period = self._period_s or nominal_step(self._buf['t'])
-        return max(1, self._smoothing.half_width(period)), period
+        return max(1, self.fit.smoothing.half_width(period)), period
 
     def _unfiltered_torque(self):
         """
@@ -818,159 +665,6 @@ class WindowAnalyzer:
                 rate = np.where(span > 0.0, (effort[hi] - effort[lo]) / span, 0.0)
             out[a:z] += self.effort_lag_s * rate
         return out[skip:]
-
-    def _analyze(self, buf, cuts):
-        """Compute the features of the windows ``cuts`` of ``buf`` (vectorised over windows)."""
-        starts = np.array([c[0] for c in cuts])
-        ends = np.array([c[1] for c in cuts])
-        n_win = starts.size
-        t, y, torque, speed, dt = (buf[k] for k in ('t', 'te', 'torque', 'speed', 'dt'))
-        win = np.repeat(np.arange(n_win), ends - starts)
-        drag = model = taken = unknown = None
-        period = nominal_step(t)
-        smoothing = self._smoothing
-        half = smoothing.half_width(period)
-        harmonics = self._flanks.harmonics(buf['theta'])
-        if self.friction:
-            torque, drag, model, taken, unknown = self._friction_fit.fit(
-                torque, t, harmonics, speed, win, starts, ends, half)
-        torque, band = smoothing.smooth(torque, half, t, period, model, win, starts, ends,
-                                        self._held_effort.hold_samples)
-        if model is not None:
-            torque, band = smoothing.toward_model(torque, band, model, win, starts)
-        # Viscous friction of the motor side and drag of the link both follow the speed;
-        # the effort cannot tell them apart: the torque lies between the two readings
-        # (all of it subtracted, or none; the same without friction taken out).
-        kept = torque + drag if drag is not None else torque
-        low = np.where(torque * kept > 0.0, np.minimum(np.abs(torque), np.abs(kept)), 0.0) - band
-        # Where the load may be inside the band, the noise or the friction picks the flank;
-        # nor is the level known where the drag decides whether the load is beyond the
-        # lost-motion test torque (the play taken up) or below it.
-        high = np.maximum(np.abs(torque), np.abs(kept))
-        ambiguous = (low <= 0.0) | ((high - np.abs(kept - torque) < self.takeup_torque)
-                                    & (high > self.takeup_torque))
-        te_mean = np.add.reduceat(y, starts) / (ends - starts)
-        z = self._flanks.regressors(harmonics, speed, y - te_mean[win])
-        x = z[:-1]
-        bins = self._flanks.bins(z, torque)
-        theta = buf['theta']
-        still = (np.maximum.reduceat(theta, starts) - np.minimum.reduceat(theta, starts)
-                 < STILL_SPAN_RAD)
-        if still.any():
-            self.windows_still += int(still.sum())
-            ambiguous = ambiguous | still[win]
-        stats = self._flanks.group_stats(z, torque, bins, win, starts, ends, ambiguous,
-                                         normal=False)
-        # The harmonics and the time offset come from samples whose load surely takes most
-        # of the play up (:data:`_HARMONIC_FIT_TORQUE`).
-        taken_up = (low > _HARMONIC_FIT_TORQUE * self.takeup_torque) & ~still[win]
-        fit_stats = self._flanks.group_stats(z, torque, bins, win, starts, ends, ~taken_up)
-        exposure = np.add.reduceat(dt, starts) * self.aging_factor
-        speed_mean = np.add.reduceat(speed, starts) / (ends - starts)
-        # The TE lags the load: a window's mean moves with its mean load, not a new constant.
-        windup_mean = (-np.add.reduceat(torque, starts) / (ends - starts)
-                       / self.tables.series_stiffness)
-        beta, ident, noise, pooled = self._flanks.fit_harmonics(
-            fit_stats, n_win, te_mean, exposure, taken, speed_mean, windup_mean)
-        if self._flanks.steps:
-            if self.te_step is None:
-                k, step = self._flanks.steps[0]
-                self.te_step = (self._stream_s(float(t[starts[k]])), step)
-            self.te_steps += len(self._flanks.steps)
-        torque_h, width, std, usable, odd, fewest = self._flanks.hysteresis(
-            stats, beta, noise, pooled, self.flank_samples())
-        if unknown is not None:
-            # Before the friction can be told from the load (the joint has not yet moved
-            # both ways), the effort still carries the motor's friction, which gives the
-            # torque near a reversal the sign of the motion: no lost motion is read.
-            # Measured on the independent generator (seeds 1-2): 41 of 61 units read their
-            # first lost motion before the friction was known; windows read then were off
-            # by 0.04 arcmin median, 0.28 at the 90th percentile, first windows read after
-            # by 0.01 and 0.10. Withheld (bench_accuracy, seeds 1-4), a unit's first usable
-            # window's error at the 90th percentile went from 0.22-0.55 to 0.09-0.14 arcmin.
-            withheld = unknown & (usable.sum(axis=1) >= self.min_bins)
-            self.windows_friction_unknown += int(withheld.sum())
-            usable &= ~unknown[:, None]
-        # A time offset beyond a linear term of the TE, not yet removed (learnt from the
-        # first windows, :class:`.pipeline.TimeOffsetCalibration`): no lost motion is read.
-        # Once removed, what is left is within it: a window's fit beyond it is then its
-        # noise (at 100 Hz 1 ms is a tenth of the sample period).
-        offset = np.where(ident[:, -1], beta[:, -1], np.nan)
-        unremoved = (np.abs(offset) > TIME_OFFSET_LINEAR_S) & (not self.offset_removed)
-        if unremoved.any():
-            self.windows_offset_unremoved += int(
-                (unremoved & (usable.sum(axis=1) >= self.min_bins)).sum())
-            self.largest_unremoved_offset_s = max(self.largest_unremoved_offset_s,
-                                                  float(np.max(np.abs(offset[unremoved]))))
-            usable &= ~unremoved[:, None]
-        te_max = np.maximum.reduceat(y, starts)
-        te_min = np.minimum.reduceat(y, starts)
-        implausible = (te_max - te_min) > PLAUSIBLE_TE_SPAN_RAD
-        usable &= ~(implausible | still)[:, None]
-        # Windows with bins enough for a lost motion crossed a torque reversal under load:
-        # their TE spans at least the play (:data:`.observability.DERIVED_LINK_SPAN_RAD`).
-        reversed_ = usable.sum(axis=1) >= self.min_bins
-        if reversed_.any():
-            self.windows_reversed += int(reversed_.sum())
-            self.largest_reversed_te_span = max(self.largest_reversed_te_span,
-                                                float(np.max((te_max - te_min)[reversed_])))
-        # From the window where the effort is found not to be the torque, none is read.
-        faulty = self._effort.check(torque_h, width, std, usable,
-                                    odd * ~self._flanks.first_order(ident)[:, None, :])
-        usable &= ~faulty[:, None]
-        self.windows_effort_fault += int(faulty.sum())
-        # Bins of a few samples a flank, in windows from which a lost motion may be read.
-        unread = unremoved | implausible | still | faulty
-        if unknown is not None:
-            unread = unread | unknown
-        thin = (fewest >= NEAR_FLANK_SAMPLES) & ~unread[:, None] & np.isfinite(width) \
-            & np.isfinite(std)
-        self._soft_zone.observe(torque_h, width, std, usable, thin)
-        fit = self._lost_motion_fit.fit(torque_h, width, std, usable)
-        # A lost motion no reducer has is an encoder or configuration fault.
-        beyond = fit[2] > PLAUSIBLE_LOST_MOTION_RAD
-        for k in (0, 1, 2, 3, 4):
-            fit[k][beyond] = np.nan
-        implausible |= beyond
-        if implausible.any():
-            self.windows_implausible += int(implausible.sum())
-            self.largest_te_span = max(self.largest_te_span,
-                                       float(np.max((te_max - te_min)[implausible])))
-        fit = [a.tolist() for a in fit]
-        # Mean TE under load, harmonics and time-offset term removed.
-        # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
-        # within a window), over the loaded samples.
-        loaded = torque > 0.1 * self.rated_torque
-        x_sums = np.add.reduceat(np.where(loaded, x, 0.0), starts, axis=1)
-        y_sums = np.add.reduceat(np.where(loaded, y, 0.0), starts)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            loaded_mean = ((y_sums - np.einsum('wj,jw->w', beta, x_sums))
-                           / np.add.reduceat(loaded, starts))
-        duty = duty_summaries(torque, speed, dt, starts, self.params, self.aging_factor)
-        n_ord = len(self.orders)
-        amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
-        amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
-        soft = self._soft_zone.said
-        shortfall, zone_width = (0.0, 0.0) if soft is None else (
-            float(soft['shortfall']), float(soft['width']))
-        out = []
-        for k in range(n_win):
-            use = usable[k]
-            out.append(WindowFeatures(
-                t_start=float(t[starts[k]]), t_end=float(t[ends[k] - 1]),
-                samples=int(ends[k] - starts[k]), end_reason=cuts[k][2],
-                te_max=float(te_max[k]), te_min=float(te_min[k]),
-                te_pp=float(te_max[k] - te_min[k]), te_mean=float(te_mean[k]),
-                loaded_mean_te=float(loaded_mean[k]),
-                orders=dict(zip(self.orders, amp[k].tolist())),
-                time_offset_s=float(offset[k]),
-                wear_fit=fit[0][k], wear_fit_std=fit[1][k], lost_motion=fit[2][k],
-                lost_motion_std=fit[3][k], compliance_fit=fit[4][k],
-                hysteresis_torque=torque_h[k, use], hysteresis=width[k, use],
-                hysteresis_std=std[k, use],
-                duty=duty[k], implausible=bool(implausible[k]),
-                soft_zone_shortfall=shortfall, soft_zone_width=zone_width))
-        return out
 
     def flank_samples(self):
         """
@@ -1007,17 +701,6 @@ _EMPTY = np.zeros(0)
 
 _SINCE = ('seen', 'without_effort', 'implausible', 'windows')
 """What :meth:`WindowAnalyzer.stale_reason` counts since the last lost motion."""
-
-
-PLAUSIBLE_TE_SPAN_RAD = math.radians(10.0)
-"""
-Largest transmission-error span [rad] within one window that encoders on one reducer give.
-
-A reducer's TE moves by arcminutes (windup, hysteresis, harmonics; an encoder time offset
-adds its speed times the delay, about 2 degrees at 3 rad/s and 10 ms). Beyond 10 degrees the
-two encoders do not measure the same motion: a motor encoder that counts against the link,
-a frozen encoder, or a wrong ratio. Such a window gives no lost motion.
-"""
 
 
 EFFORT_PLAUSIBLE_RATED = 5.0

@@ -30,7 +30,7 @@ def test_an_effort_or_angles_in_other_units_stop_the_lost_motion_with_the_reason
         effort, angles, said):
     _, b = simulated()
     clean = _fault_of(b)
-    assert clean.effort_fault is None and clean.windows_effort_fault == 0
+    assert clean.effort_fault is None and clean.fit.windows_effort_fault == 0
     assert clean.not_observed_reason() is None
     bad = _fault_of(b, effort, angles)
     assert said in bad.effort_fault
@@ -40,8 +40,8 @@ def test_an_effort_or_angles_in_other_units_stop_the_lost_motion_with_the_reason
     assert reason == bad.effort_fault or (
         angles != 1.0 and 'do not measure the same motion' in reason)
     # From the window that decided it on, none gives a lost motion.
-    assert bad.windows_effort_fault >= 1
-    assert bad.windows_observed + bad.windows_effort_fault <= bad.windows_emitted
+    assert bad.fit.windows_effort_fault >= 1
+    assert bad.windows_observed + bad.fit.windows_effort_fault <= bad.windows_emitted
 
 
 @pytest.mark.parametrize('fraction', [-0.19, -0.1, 0.1, 0.19])
@@ -56,7 +56,7 @@ def test_an_effort_offset_from_the_torque_stops_the_lost_motion_and_names_the_of
     named = float(bad.effort_fault.split('zero lies about ')[1].split()[0])
     assert named == pytest.approx(abs(offset), rel=0.2)
     assert bad.not_observed_reason() == bad.effort_fault
-    assert bad.windows_effort_fault >= 1
+    assert bad.fit.windows_effort_fault >= 1
 
 
 def test_an_offset_within_the_takeup_of_the_play_is_no_fault():

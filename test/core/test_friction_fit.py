@@ -19,7 +19,7 @@ def test_no_lost_motion_is_read_before_the_friction_can_be_told_from_the_load():
     # windows were 0.28 arcmin off at the 90th percentile (0.10 once the friction was known).
     first = simulated(samples=2200)[1]
     analyzer = analyzed(first)
-    assert analyzer.windows_friction_unknown == 1 and analyzer.windows_observed == 0
+    assert analyzer.fit.windows_friction_unknown == 1 and analyzer.windows_observed == 0
     assert analyzer.not_observed_reason().startswith(
         'the friction in the effort could not yet be told from the load')
     # Once the joint has moved both ways, its windows are read.
@@ -27,7 +27,7 @@ def test_no_lost_motion_is_read_before_the_friction_can_be_told_from_the_load():
     assert analyzer.windows_observed >= 1 and analyzer.not_observed_reason() is None
     # An effort declared free of friction (friction=False: a torque sensor) is read at once.
     analyzer = analyzed(first, friction=False)
-    assert analyzer.windows_friction_unknown == 0 and analyzer.windows_observed == 1
+    assert analyzer.fit.windows_friction_unknown == 0 and analyzer.windows_observed == 1
 
 
 def test_friction_the_effort_carries_is_identified_and_taken_out_of_the_torque():

@@ -263,19 +263,19 @@ def test_an_unloaded_joint_with_its_encoders_stamped_milliseconds_apart_reads_it
     # was refused at 20 ms ("the effort is not the output torque"), with a TE "step" said.
     front, windows = _stamped_apart(unloaded_noisy, offset_ms * 1e-3)
     assert front.calibration.applied == pytest.approx(offset_ms * 1e-3, abs=0.2e-3)
-    assert front.analyzer.effort_fault is None and front.analyzer.te_step is None
+    assert front.analyzer.effort_fault is None and front.analyzer.fit.te_step is None
     lm = np.array([f.lost_motion for f in windows])
     read = lm[np.isfinite(lm)]
     assert read.size >= 18
     assert np.median(read) == pytest.approx(lost_motion(2e-6, PARAMS), rel=0.03)
     # What was read with the offset in it gives no lost motion: none of the first five.
-    assert not np.isfinite(lm[:5]).any() and front.analyzer.windows_offset_unremoved > 0
+    assert not np.isfinite(lm[:5]).any() and front.analyzer.fit.windows_offset_unremoved > 0
 
 
 def test_an_offset_within_a_linear_term_keeps_the_windows_read_before_it_was_learnt(
         unloaded_noisy):
     front, windows = _stamped_apart(unloaded_noisy, 0.0)       # the simulator's 50 µs
-    assert front.calibration.settled and front.analyzer.windows_offset_unremoved == 0
+    assert front.calibration.settled and front.analyzer.fit.windows_offset_unremoved == 0
     assert np.isfinite([f.lost_motion for f in windows[1:5]]).all()
 
 

@@ -93,7 +93,7 @@ def test_encoders_that_do_not_measure_the_same_motion_give_no_lost_motion_and_sa
     analyzer = WindowAnalyzer(PARAMS)
     feats = analyzer.update(stream, b.effort, b.link_velocity) + analyzer.flush()
     assert feats and all(not np.isfinite(f.lost_motion) for f in feats)
-    assert analyzer.windows_implausible >= 1 and analyzer.windows_observed == 0
+    assert analyzer.fit.windows_implausible >= 1 and analyzer.windows_observed == 0
     reason = analyzer.not_observed_reason()
     assert reason.startswith('the motor and link encoders do not measure the same motion')
     assert 'frozen encoder' in reason and 'counts against the link' in reason
@@ -102,7 +102,7 @@ def test_encoders_that_do_not_measure_the_same_motion_give_no_lost_motion_and_sa
     analyzer.update(compute_te(b.t, b.motor_angle, b.t, b.link_angle, RATIO), b.effort,
                     b.link_velocity)
     analyzer.flush()
-    assert analyzer.windows_observed >= 1 and analyzer.windows_implausible == 0
+    assert analyzer.windows_observed >= 1 and analyzer.fit.windows_implausible == 0
 
 
 def test_a_lost_motion_that_stops_with_the_effort_is_said_with_its_cause():

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from reducer_twin.core import wear
+from reducer_twin.core.duty_summary import DutySummary
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
@@ -26,7 +27,6 @@ from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOff
 from reducer_twin.core.pipeline import reducer_state, taken_off
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
-from reducer_twin.core.window_analysis import DutySummary
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
 
 PARAMS = ReducerParams()

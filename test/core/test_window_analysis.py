@@ -89,7 +89,7 @@ def test_a_joint_standing_still_under_a_held_load_reads_no_lost_motion():
     feats = analyzer.update(stream, effort, velocity) + analyzer.flush()
     inside = [f for f in feats if b.t[still[0]] <= f.t_start and f.t_end <= b.t[still[-1]]]
     assert len(inside) >= 3 and all(np.isnan(f.lost_motion) for f in inside)
-    assert analyzer.windows_still >= len(inside)
+    assert analyzer.fit.windows_still >= len(inside)
     after = np.array([f.lost_motion for f in feats if f.t_start > b.t[still[-1]] + 2.0])
     np.testing.assert_allclose(after[np.isfinite(after)], lost_motion(10e-6, PARAMS), rtol=0.03)
 

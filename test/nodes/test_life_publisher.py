@@ -18,13 +18,13 @@ from rcl_interfaces.srv import SetParameters
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from reducer_twin.core import wear
+from reducer_twin.core.duty_summary import DutySummary
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import duty_to_record, EstimatorStage, features_from_record
 from reducer_twin.core.pipeline import LifeConfig
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
-from reducer_twin.core.window_analysis import DutySummary
 from reducer_twin.msg_adapters.layouts import record_values, REMAINING_LIFE, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray

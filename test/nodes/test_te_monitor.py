@@ -326,7 +326,7 @@ def test_an_effort_of_the_other_sign_is_an_error_with_the_setting_that_reads_it(
     assert 'effort_scale' in status.message
     # From the window that decided it on, no lost motion is published.
     analyzer = monitor.node.twin.analyzer
-    assert analyzer.windows_effort_fault >= 1
+    assert analyzer.fit.windows_effort_fault >= 1
     assert analyzer.windows_observed < analyzer.windows_emitted
     # Said once on the node's log (stderr) too.
     logged = [x for x in capfd.readouterr().err.splitlines() if 'opposite sign' in x]

@@ -11,10 +11,10 @@ import math
 
 import numpy as np
 from reducer_twin.core import wear
+from reducer_twin.core.duty_summary import DutySummary
 from reducer_twin.core.pipeline import duty_to_record
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN
-from reducer_twin.core.window_analysis import DutySummary
 from reducer_twin.msg_adapters.layouts import TE_FEATURES
 
 
