@@ -23,7 +23,6 @@ from .kinematics import total_ratio
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step
-from .transmission_error import model_tables
 from .units import rad_to_arcmin
 from .velocity_check import VelocityCheck
 from .window_cut import cut_windows, WINDOW_MODES
@@ -168,18 +167,15 @@ class WindowAnalyzer:
         if not self.orders or min(self.orders) < 1:
             raise InvalidParameter(out_of_range('orders', orders, '', 'whole numbers >= 1'))
         self.params = params
-        self.tables = model_tables(params)
         self.rated_torque = params.rating.rated_torque
-        self.takeup_torque = params.rating.lost_motion_torque_fraction * self.rated_torque
         self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
         memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
         self._velocity = VelocityCheck(self.min_speed, total_ratio(g))
         self._held_effort = HeldEffort()
-        self.fit = WindowFit(params, self.tables, self.orders, self.edges, self.min_bins, memory,
+        self.fit = WindowFit(params, self.orders, self.edges, self.min_bins, memory,
                              self.compliance_prior, self.torque_smoothing_s, self.sign_sigmas,
                              self.friction, friction_memory_windows, self.aging_factor,
                              self._held_effort)
-        self.centres = self.fit.flanks.centres
         # Until the velocity check decides: the link angle's rate of the buffered samples
         # (row 0) and whether they carry a field (row 1).
         self._rate_held = None

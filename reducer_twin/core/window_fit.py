@@ -44,6 +44,7 @@ from .friction_fit import FrictionFit
 from .soft_zone import NEAR_FLANK_SAMPLES, SoftZoneCheck
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step, TorqueSmoothing
+from .transmission_error import model_tables
 from .wear_fit import LostMotionFit
 
 _HARMONIC_FIT_TORQUE = 0.5
@@ -189,9 +190,7 @@ class WindowFit:
     Parameters
     ----------
     params : ReducerParams
-        Reducer parameters.
-    tables : ModelTables
-        The model's tables of ``params``.
+        Reducer parameters (the model's tables are those of ``params``).
     orders : tuple of int
         Harmonic orders per output revolution.
     edges : ndarray
@@ -218,11 +217,11 @@ class WindowFit:
 
     """
 
-    def __init__(self, params, tables, orders, edges, min_bins, memory, compliance_prior,
+    def __init__(self, params, orders, edges, min_bins, memory, compliance_prior,
                  torque_smoothing_s, sign_sigmas, friction, friction_memory_windows,
                  aging_factor, held_effort):
         self.params = params
-        self.tables = tables
+        self.tables = tables = model_tables(params)   # cached per parameter set
         self.orders = orders
         self.min_bins = min_bins
         self.friction = friction

@@ -7,7 +7,7 @@ import pytest
 from reducer_twin.core.held_effort import HeldEffort
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.te_extraction import compute_te, TIME_OFFSET_LINEAR_S
-from reducer_twin.core.transmission_error import lost_motion, model_tables
+from reducer_twin.core.transmission_error import lost_motion
 from reducer_twin.core.window_fit import STILL_SPAN_RAD, WindowFit
 from te_streams import PARAMS, RATIO, simulated
 
@@ -18,7 +18,7 @@ def fit():
     """Return a fit with the window analysis's defaults (orders 1, 2, Zc, Zp; 16 bins)."""
     g, rated = PARAMS.geometry, PARAMS.rating.rated_torque
     edges = np.geomspace(0.02, 1.5, 17) * rated
-    return WindowFit(PARAMS, model_tables(PARAMS), (1, 2, g.z_cycloid, g.z_pins), edges,
+    return WindowFit(PARAMS, (1, 2, g.z_cycloid, g.z_pins), edges,
                      min_bins=2, memory=math.exp(-0.1), compliance_prior=0.3,
                      torque_smoothing_s=0.03, sign_sigmas=3.0, friction=True,
                      friction_memory_windows=30.0, aging_factor=1.0, held_effort=HeldEffort())
