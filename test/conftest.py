@@ -14,15 +14,19 @@ module can import rclpy, and every subprocess a test starts inherits them:
   held with a lock file in the temporary directory for the whole session; an
   id another live suite holds is skipped.
 - ``MPLBACKEND=Agg``: plots render without a display.
+- ``XDG_STATE_HOME``: a new temporary directory, where nodes started without a state file
+  keep their state.
 
 The directory of the running interpreter (the venv's ``bin``) is put first on
 ``PATH`` so that subprocesses find this venv's ``colcon``, ``reducer-twin`` and
 node executables and never mix venvs in one process tree.
 """
 
+import atexit
 import fcntl
 import os
 from pathlib import Path
+import shutil
 import sys
 import tempfile
 
@@ -72,6 +76,10 @@ def _reserve_domain_id():
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['FASTDDS_BUILTIN_TRANSPORTS'] = 'SHM'
 os.environ['MPLBACKEND'] = 'Agg'
+# The nodes' default state files (<joint>.json, <joint>.te_monitor.json) go to a directory of
+# this session: a test never continues from an earlier run's state, nor writes the user's.
+os.environ['XDG_STATE_HOME'] = tempfile.mkdtemp(prefix='reducer_twin_test_state_')
+atexit.register(shutil.rmtree, os.environ['XDG_STATE_HOME'], True)
 os.environ['ROS_DOMAIN_ID'] = str(_reserve_domain_id())
 os.environ['PATH'] = os.pathsep.join(
     [os.path.dirname(sys.executable), os.environ.get('PATH', '')])

@@ -25,7 +25,7 @@ from typing import Mapping, Optional
 
 import numpy as np
 
-from .errors import InvalidParameter
+from .errors import InvalidParameter, StateFileError
 from .ingest import IngestConfig
 from .kinematics import total_ratio
 from .params import _Validated, spec
@@ -36,6 +36,12 @@ from .units import HOUR, m_to_um, rad_to_arcmin
 from .window_analysis import WindowAnalyzer
 
 TOPIC_NAMESPACE = 'reducer_twin'
+
+FRONT_STATE_KIND = 'reducer_twin.front_state'
+"""Kind of :meth:`TwinFront.state` (``te_monitor``'s state file)."""
+
+FRONT_STATE_VERSION = 1
+"""Version of :meth:`TwinFront.state`."""
 """Namespace of every derived topic."""
 
 
@@ -362,6 +368,28 @@ def estimate_numbers(wear, life, observed):
     return {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
 
 
+def maintenance_event(events):
+    """
+    Return the text of a reducer's latest maintenance event, or None without one.
+
+    What ``wear_estimator`` publishes on ``maintenance`` (transient-local) for the joint's
+    ``te_monitor`` to start its window analysis afresh once per event
+    (:meth:`TwinFront.new_reducer`): numbered and placed by the operation before it, so
+    that two events never read alike.
+
+    Parameters
+    ----------
+    events : list of dict
+        :attr:`.estimator.WearEstimator.events` (``exposure_s``, ``reason``).
+
+    """
+    if not events:
+        return None
+    last = events[-1]
+    return (f'maintenance event {len(events)} after {last["exposure_s"] / HOUR:.3f} h of '
+            f'operation: {last["reason"]}')
+
+
 def reducer_status_name(joint):
     """Return the ``/diagnostics`` name of a joint's reducer status."""
     return f'reducer_twin: {joint} reducer'
@@ -390,11 +418,38 @@ class TwinFront:
         self.calibration = TimeOffsetCalibration(self.extractor)
         self._restarted_for_held = False
         self._waiting = None    # (t, motor, link, effort, velocity) of samples awaiting motor
-        self.analyzer = WindowAnalyzer(params, window=window, window_s=config.window_s,
-                                       aging_factor=config.aging_factor,
-                                       friction=bool(config.friction_in_effort),
-                                       effort_lag_s=config.effort_lag_s)
+        self._window = window
+        self.analyzer = self._new_analyzer()
         self.windows = 0
+        self.maintenance = None     # the last maintenance event followed (new_reducer)
+
+    def _new_analyzer(self):
+        config = self.config
+        return WindowAnalyzer(self.params, window=self._window, window_s=config.window_s,
+                              aging_factor=config.aging_factor,
+                              friction=bool(config.friction_in_effort),
+                              effort_lag_s=config.effort_lag_s)
+
+    def new_reducer(self, event):
+        """
+        Start the window analysis afresh: the joint's reducer was replaced.
+
+        What the windows learnt of the old reducer (the soft-zone check, the flank pool,
+        the friction fit) goes, with the samples of the window in progress; what belongs
+        to the encoders (the time offset, their judgements in the TE extraction) stays.
+        The analysis of a reducer's next recording after a replacement starts so too.
+
+        Parameters
+        ----------
+        event : str
+            The maintenance event (``wear_estimator``'s reset), kept as :attr:`maintenance`
+            (and in :meth:`state`) so that it is followed once.
+
+        """
+        self.analyzer = self._new_analyzer()
+        self.analyzer.offset_removed = self.calibration.settled
+        self._waiting = None
+        self.maintenance = str(event)
 
     def carry_time_offset(self, offset_s):
         """
@@ -405,6 +460,91 @@ class TwinFront:
         """
         if offset_s is not None and math.isfinite(offset_s) and offset_s != 0.0:
             self.calibration.carry(float(offset_s))
+
+    def state(self):
+        """
+        Return what this front learnt of the joint's reducer, to continue after a restart.
+
+        The encoders' time offset a next stream may start from
+        (:attr:`.pipeline.TimeOffsetCalibration.to_carry`: not while the clocks drift) and
+        the soft-zone check's pools (:meth:`.soft_zone.SoftZoneCheck.state`). The rest of
+        the window analysis (the flank pool, the friction fit) is relearnt by the first
+        windows of any stream.
+
+        Returns
+        -------
+        dict
+            ``kind`` (:data:`FRONT_STATE_KIND`), ``version``, ``windows`` (analysed so far),
+            ``time_offset_s`` (or None), ``soft_zone`` and ``maintenance`` (the last
+            maintenance event followed, or None).
+
+        """
+        return {'kind': FRONT_STATE_KIND, 'version': FRONT_STATE_VERSION,
+                'windows': self.windows, 'time_offset_s': self.calibration.to_carry,
+                'soft_zone': self.analyzer.fit.soft_zone.state(),
+                'maintenance': self.maintenance}
+
+    def continue_from(self, state):
+        """
+        Continue from :meth:`state` of this joint's front before a restart.
+
+        The time offset is carried as from a reducer's last stream (:meth:`carry_time_offset`:
+        checked by the next windows before they give a lost motion); the soft-zone check
+        goes on with its pools, so a soft zone said before the restart is said, and
+        carried by every window, from the first. A check made for another reducer (the
+        joint's reducer changed in the configuration) starts afresh.
+
+        Parameters
+        ----------
+        state : dict
+            :meth:`state`.
+
+        Returns
+        -------
+        list of str
+            What was continued, one line each (for the node's log).
+
+        Raises
+        ------
+        StateFileError
+            If ``state`` is not a front's state of this version, or its values are unusable.
+
+        """
+        if not isinstance(state, dict) or state.get('kind') != FRONT_STATE_KIND \
+                or state.get('version') != FRONT_STATE_VERSION:
+            found = (state.get('kind'), state.get('version')) if isinstance(state, dict) \
+                else type(state).__name__
+            raise StateFileError(f'state must be {FRONT_STATE_KIND!r} version '
+                                 f'{FRONT_STATE_VERSION}, got {found!r}')
+        offset = state.get('time_offset_s')
+        if offset is not None and (isinstance(offset, bool) or not isinstance(
+                offset, (int, float)) or not abs(offset) < 1.0):
+            raise StateFileError('time_offset_s must be null or a finite offset within '
+                                 f'+-1 s, got {offset!r}')
+        event = state.get('maintenance')
+        if event is not None and not isinstance(event, str):
+            raise StateFileError(f'maintenance must be null or an event text, got {event!r}')
+        check = self.analyzer.fit.soft_zone
+        lines = []
+        try:
+            other = check.other_reducer(state['soft_zone'])
+            if other is None:
+                check.continue_from(state['soft_zone'])
+        except (KeyError, TypeError, ValueError) as err:
+            raise StateFileError(f"soft_zone is not a soft-zone check's state: {err}") from None
+        if other is not None:
+            lines.append(f'the soft-zone check starts afresh: its state was {other}')
+        else:
+            said = check.said
+            lines.append(f'soft-zone check continued ({check.windows} windows compared'
+                         + (f'; said: {rad_to_arcmin(said["shortfall"]):.2f} arcmin narrower '
+                            'at the test torque)' if said is not None else '; none said)'))
+        self.carry_time_offset(offset)
+        self.maintenance = event
+        if self.calibration.carried:
+            lines.insert(0, f'link encoder time offset {offset * 1e6:.1f} us carried over '
+                            '(checked by the next windows before they give a lost motion)')
+        return lines
 
     def te(self, t_s, motor, link):
         """

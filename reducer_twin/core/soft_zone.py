@@ -286,6 +286,73 @@ class SoftZoneCheck:
         return {'shortfall': short, 'shortfall_sd': sd, 'play': play, 'width': play - short,
                 'windows': self.windows, 'few_samples': self._pool is self._sums['thin']}
 
+    def state(self):
+        """
+        Return the check's pools as plain JSON-able data, to continue after a restart.
+
+        The far bins' line, both kinds of comparison, the bins at the test torque still
+        waiting for a line, and whether the soft zone stands (:data:`KEEP_SIGMAS`): a
+        ``te_monitor`` restarted from it says what it said and gives the same shortfall,
+        where a new check needs :data:`SHORTFALL_SIGMAS` over two windows again.
+
+        Returns
+        -------
+        dict
+            ``takeup_torque_nm``, ``series_stiffness_nm_per_rad`` (the reducer it was
+            made for), ``line``, ``full``, ``thin``, ``seen``, ``waiting``, ``standing``.
+
+        """
+        return {'takeup_torque_nm': self.takeup_torque,
+                'series_stiffness_nm_per_rad': self.series_stiffness,
+                'line': self._line.tolist(), 'full': self._sums['full'].tolist(),
+                'thin': self._sums['thin'].tolist(), 'seen': self._seen,
+                'waiting': [[w, kind, t.tolist(), h.tolist(), sd.tolist()]
+                            for w, kind, t, h, sd in self._waiting],
+                'standing': self._standing}
+
+    def other_reducer(self, state):
+        """
+        Say when :meth:`state` was made for another reducer than this check's, else None.
+
+        Its test torque or series stiffness differ: the joint's reducer was changed in the
+        configuration, and its pools do not apply.
+        """
+        mine = (self.takeup_torque, self.series_stiffness)
+        theirs = (float(state['takeup_torque_nm']), float(state['series_stiffness_nm_per_rad']))
+        if np.allclose(mine, theirs, rtol=1e-9, atol=0.0):
+            return None
+        return (f'made for another reducer (test torque {theirs[0]:.2f} N·m, series stiffness '
+                f'{theirs[1]:.4g} N·m/rad; this one {mine[0]:.2f}, {mine[1]:.4g})')
+
+    def continue_from(self, state):
+        """
+        Continue from :meth:`state` of a check of the same reducer (:meth:`other_reducer`).
+
+        Raises
+        ------
+        ValueError
+            If the state is not a check's (wrong sizes, values not finite); the check is
+            then left as it was.
+        KeyError, TypeError
+            If a key is missing or a value is of the wrong type.
+
+        """
+        line = np.array(state['line'], dtype=float)
+        sums = {kind: np.array(state[kind], dtype=float) for kind in ('full', 'thin')}
+        waiting = [(int(w), str(kind), *(np.array(v, dtype=float) for v in arrays))
+                   for w, kind, *arrays in state['waiting']]
+        seen, standing = int(state['seen']), state['standing']
+        if line.shape != (5,) or any(s.shape != (6,) for s in sums.values()) or not all(
+                np.all(np.isfinite(a)) for a in [line, *sums.values()]) or any(
+                kind not in sums or not (t.ndim == 1 and t.shape == h.shape == sd.shape)
+                or not w <= seen for w, kind, t, h, sd in waiting) \
+                or not isinstance(standing, bool):
+            raise ValueError('line must be 5 finite sums, full and thin 6 each, waiting '
+                             '[window, kind, torques, widths, sds] of windows seen, '
+                             'standing true or false')
+        self._line, self._sums, self._waiting, self._seen = line, sums, waiting, seen
+        self._standing = standing
+
     @property
     def reason(self):
         """Say when the play is still being taken up at the test torque, else None."""

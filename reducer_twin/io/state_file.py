@@ -206,7 +206,7 @@ def canonical_json(state):
     return json.dumps(state, sort_keys=True, separators=(',', ':'), allow_nan=False)
 
 
-def encode_state(state):
+def encode_state(state, kind=STATE_KIND):
     """
     Wrap a state dict with its checksum as the bytes of a state file.
 
@@ -214,6 +214,9 @@ def encode_state(state):
     ----------
     state : dict
         A state dict.
+    kind : str
+        What the state is of (the file's ``format`` is ``<kind>.file``): the estimator's
+        by default.
 
     Returns
     -------
@@ -226,12 +229,12 @@ def encode_state(state):
     # One key a line, the state as its canonical text: json's indenting encoder is the pure
     # Python one, which leaves reference cycles behind on every call (an estimator writes
     # its file after every window) and costs several times the C encoder's time.
-    text = (f'{{\n "format": {json.dumps(STATE_KIND + ".file")},\n "sha256": "{digest}",\n'
+    text = (f'{{\n "format": {json.dumps(kind + ".file")},\n "sha256": "{digest}",\n'
             f' "state": {body}\n}}\n')
     return text.encode('utf-8')
 
 
-def decode_state(data, path='<bytes>'):
+def decode_state(data, path='<bytes>', kind=STATE_KIND):
     """
     Check a state file's format and checksum and return its state dict.
 
@@ -241,6 +244,8 @@ def decode_state(data, path='<bytes>'):
         File content.
     path : str or Path
         File name, for messages.
+    kind : str
+        What the state must be of (:func:`encode_state`).
 
     Returns
     -------
@@ -258,10 +263,10 @@ def decode_state(data, path='<bytes>'):
     except (UnicodeDecodeError, ValueError) as err:
         raise StateFileError(
             f'{path} is not valid JSON (truncated or corrupt?): {err}') from err
-    if not isinstance(wrapper, dict) or wrapper.get('format') != STATE_KIND + '.file':
+    if not isinstance(wrapper, dict) or wrapper.get('format') != kind + '.file':
         found = wrapper.get('format') if isinstance(wrapper, dict) else type(wrapper).__name__
         raise StateFileError(
-            f'{path}: format must be {STATE_KIND + ".file"!r}, got {found!r}')
+            f'{path}: format must be {kind + ".file"!r}, got {found!r}')
     state = wrapper.get('state')
     try:
         digest = hashlib.sha256(canonical_json(state).encode('utf-8')).hexdigest()
@@ -274,7 +279,7 @@ def decode_state(data, path='<bytes>'):
     return state
 
 
-def write_state_file(path, data):
+def write_state_file(path, data, kind=STATE_KIND, what='estimator state'):
     """
     Write encoded state bytes atomically, keeping the previous good file as ``.bak``.
 
@@ -284,6 +289,11 @@ def write_state_file(path, data):
         Destination file.
     data : bytes
         Output of :func:`encode_state`.
+    kind : str
+        What the state is of: a primary file that is not a good one of it is never
+        made the backup.
+    what : str
+        What the file holds, for messages.
 
     Raises
     ------
@@ -297,7 +307,7 @@ def write_state_file(path, data):
         if path.exists():
             previous = path.read_bytes()
             try:
-                decode_state(previous, path)
+                decode_state(previous, path, kind)
             except StateFileError:
                 pass  # never replace a good backup by a corrupt primary
             else:
@@ -312,9 +322,9 @@ def write_state_file(path, data):
                 free = ''
             raise StateFileError(
                 f'{"disk quota exceeded" if err.errno == errno.EDQUOT else "no space left"} '
-                f'writing the estimator state {path}: {len(data):,} bytes needed{free}; the '
+                f'writing the {what} {path}: {len(data):,} bytes needed{free}; the '
                 'previous state file is kept') from err
-        raise StateFileError(f'cannot write estimator state to {path}: {err}') from err
+        raise StateFileError(f'cannot write {what} to {path}: {err}') from err
 
 
 def _atomic_write(path, data):
@@ -366,9 +376,9 @@ class StateWriter:
         self._thread = threading.Thread(target=self._run, name='state-writer', daemon=True)
         self._thread.start()
 
-    def submit(self, path, data):
-        """Queue ``data`` (encoded state) for ``path``."""
-        self._queue.put((path, data))
+    def submit(self, path, data, kind=STATE_KIND, what='estimator state'):
+        """Queue ``data`` (encoded state of ``kind``) for ``path``."""
+        self._queue.put((path, data, kind, what))
 
     def flush(self):
         """Wait until every queued state is written."""
@@ -376,9 +386,9 @@ class StateWriter:
 
     def _run(self):
         while True:
-            path, data = self._queue.get()
+            path, data, kind, what = self._queue.get()
             try:
-                write_state_file(path, data)
+                write_state_file(path, data, kind, what)
                 self.written += 1
                 if self.error is not None:
                     self.error = None

@@ -1,9 +1,11 @@
 """Each node's ``/diagnostics``: the period parameter, the publisher and the report timer."""
 
 import math
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from reducer_twin.core.ingest import PAIRING_FACTS
+from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.observability import derived_link_reason, link_from_motor
 from reducer_twin.core.service_time import service_note
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
@@ -202,6 +204,41 @@ def say_faults(logger, joint, twin, said):
         if line and kind not in said:
             said.add(kind)
             getattr(logger, level)(f'{joint}: {line}')
+
+
+def te_monitor_statuses(monitor, stale_after_s):
+    """
+    Return a ``te_monitor``'s ``/diagnostics`` statuses (one: its joint's TE).
+
+    Its counts, latency, last window and state file (a write that failed is ``ERROR``:
+    the file on disk is the last good state), at the level :func:`te_status` gives.
+
+    Parameters
+    ----------
+    monitor : TEMonitor
+        The node.
+    stale_after_s : float
+        Stream time [s] without a lost motion after which it is said.
+
+    """
+    f = monitor.last_features
+    values = {'samples': monitor.samples, 'windows': monitor.windows,
+              'rejected_messages': monitor.rejects.total,
+              'latency_p99_ms': monitor.latency.stats_since_report()['p99'] * 1e3}
+    if f is not None:
+        values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
+                       'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
+    last = monitor.last_pairs_at
+    quiet = None if last is None else time.monotonic() - last
+    error = monitor.state.values(values)
+    level, message = te_status(
+        monitor.twin, joint_topic(monitor.joint, 'encoder_pairs'),
+        'OK' if monitor.rejects.total == 0 else 'WARN', f'{monitor.windows} windows analysed',
+        values, stale_after_s, quiet, monitor.silent_after_s)
+    if error is not None:
+        level, message = 'ERROR', f'{error}; {message}'
+    return [(f'reducer_twin: {monitor.joint} transmission error', monitor.joint, level, message,
+             values)]
 
 
 def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silent_after_s):

@@ -139,25 +139,28 @@ def default_state_dir():
     return Path(base) / 'reducer_twin'
 
 
-def state_path(joint, state_file='', state_dir=''):
+def state_path(joint, state_file='', state_dir='', suffix='.json'):
     """
-    Return the estimator state file of a joint, or None to keep no state.
+    Return a node's state file of a joint, or None to keep no state.
 
     Parameters
     ----------
     joint : str
         The joint.
     state_file : str
-        A file; ``''`` = ``<state_dir>/<joint>.json``; ``'none'`` = no state.
+        A file; ``''`` = ``<state_dir>/<joint><suffix>``; ``'none'`` = no state.
     state_dir : str
         Directory of state files; ``''`` = :func:`default_state_dir`.
+    suffix : str
+        The node's own ending: ``.json`` for the ``wear_estimator``'s,
+        ``.te_monitor.json`` for the ``te_monitor``'s.
 
     """
     if state_file == 'none':
         return None
     if state_file:
         return Path(state_file)
-    return (Path(state_dir) if state_dir else default_state_dir()) / f'{joint}.json'
+    return (Path(state_dir) if state_dir else default_state_dir()) / f'{joint}{suffix}'
 
 
 def make_executor():

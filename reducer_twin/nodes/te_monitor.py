@@ -9,7 +9,10 @@ the joint's :class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the
 link-encoder time offset, the window analysis); each completed window is published on
 ``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost motion, order amplitudes,
 duty). Window length, gap bridging, aging and analysis period: the fields of
-:class:`~reducer_twin.core.joint_twin.TwinConfig`.
+:class:`~reducer_twin.core.joint_twin.TwinConfig`. What the front learnt of the reducer (the
+encoders' time offset, the soft-zone check) is kept in a state file after every batch of
+windows and continued from on start; a replaced reducer (the ``maintenance`` event) starts the
+window analysis afresh (:mod:`~reducer_twin.nodes.front_state`).
 
 In ``twin_bringup`` the ingest node of the same process hands the pairs over directly
 (:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE batches are published only
@@ -23,11 +26,12 @@ from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.joint_twin import joint_topic, TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, to_multiarray
 from reducer_twin.nodes.buffers import ArrivalBatches
-from reducer_twin.nodes.diagnostics import publish_diagnostics, say_faults, te_status
+from reducer_twin.nodes.diagnostics import publish_diagnostics, say_faults
+from reducer_twin.nodes.diagnostics import te_monitor_statuses
+from reducer_twin.nodes.front_state import FrontKeeper, PARAMETERS
 from reducer_twin.nodes.parameters import check_choice, declare_plain
 from reducer_twin.nodes.parameters import SpecParameters
 from reducer_twin.nodes.qos import encoder_qos, stream_qos, WINDOW_DEPTH
@@ -71,13 +75,15 @@ class TEMonitor(Node):
         super().__init__(node_name, **kwargs)
         p = declare_plain(self, {
             'joint': ('joint_1', 'joint whose encoder pairs are monitored'),
-            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)")})
+            'window': ('auto', "'auto', 'revolution' or 'duration' (see WindowAnalyzer)"),
+            **PARAMETERS})
         check_choice('window', p['window'], ('auto', 'revolution', 'duration'))
         s = SpecParameters(self, '', TEMonitorSettings()).value
         self.config = SpecParameters(self, '', TwinConfig()).value
         self.params = params or ReducerParams()
         self.joint = p['joint']
         self.twin = TwinFront(self.params, self.config, window=p['window'])
+        self.state = FrontKeeper(self, self.joint, self.twin, p['state_file'], p['state_dir'])
         self.rejects = RejectCounter(self)
         self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
                                             stream_qos())
@@ -97,7 +103,7 @@ class TEMonitor(Node):
         self.samples = 0
         self.last_features = None
         self.silent_after_s, self._said = s.silent_after_s, set()
-        self._last_pairs_at = None      # monotonic time of the latest encoder pairs
+        self.last_pairs_at = None      # monotonic time of the latest encoder pairs
 
     @property
     def windows(self):
@@ -125,7 +131,7 @@ class TEMonitor(Node):
         """
         if rows.shape[0]:
             self.samples += rows.shape[0]
-            self._last_pairs_at = time.monotonic()
+            self.last_pairs_at = time.monotonic()
             if self.batches.add(rows, time.time()):
                 self._publish_te()
 
@@ -159,10 +165,17 @@ class TEMonitor(Node):
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
         say_faults(self.get_logger(), self.joint, self.twin, self._said)
+        if windows:
+            self.state.save()
         for f in windows:
             self.last_features = f
             rec = self.twin.record(f)
             self.feat_pub.publish(to_multiarray(TE_FEATURES, record_values(TE_FEATURES, rec)))
+
+    def close(self):
+        """Let the analysis queued finish and its state reach the file before the node goes."""
+        WORKER.wait_idle()
+        self.state.close()
 
     flush_latency = _publish_te
     """Publish the pending TE batch now so its latencies are counted."""
@@ -172,20 +185,7 @@ class TEMonitor(Node):
         return self.latency.stats(last)
 
     def _statuses(self):
-        f = self.last_features
-        values = {'samples': self.samples, 'windows': self.windows,
-                  'rejected_messages': self.rejects.total,
-                  'latency_p99_ms': self.latency.stats_since_report()['p99'] * 1e3}
-        if f is not None:
-            values.update({'te_pp_arcmin': rad_to_arcmin(f.te_pp),
-                           'lost_motion_arcmin': rad_to_arcmin(f.lost_motion)})
-        quiet = None if self._last_pairs_at is None else time.monotonic() - self._last_pairs_at
-        level, message = te_status(
-            self.twin, joint_topic(self.joint, 'encoder_pairs'),
-            'OK' if self.rejects.total == 0 else 'WARN', f'{self.windows} windows analysed',
-            values, STALE_WINDOWS * self.twin.config.window_s, quiet, self.silent_after_s)
-        return [(f'reducer_twin: {self.joint} transmission error', self.joint, level, message,
-                 values)]
+        return te_monitor_statuses(self, STALE_WINDOWS * self.twin.config.window_s)
 
 
 def main(args=None):

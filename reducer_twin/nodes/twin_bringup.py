@@ -89,7 +89,7 @@ def build_nodes(config, sim_overrides=None):
         reducer, name = own.get(joint, params), node_token(joint)
         nodes['te'][joint] = TEMonitor(
             f'te_monitor_{name}', params=reducer, subscribe=not local, parameter_overrides=[
-                Parameter('joint', value=joint),
+                Parameter('joint', value=joint), Parameter('state_dir', value=twin['state_dir']),
                 *(Parameter(name, value=float(getattr(spec, name)))
                   for name in ('aging_factor', 'window_s', 'max_gap_s', 'effort_lag_s')),
                 Parameter('friction_in_effort', value=int(spec.friction_in_effort))])

@@ -1,14 +1,15 @@
 """
 wear_estimator: Kalman estimate of a reducer's combined wear, persisted across restarts.
 
-Subscribes to ``/reducer_twin/<joint>/te_features`` and steps the joint's estimator
-stage (:class:`~reducer_twin.core.pipeline.EstimatorStage`, the estimate half of a
-:class:`~reducer_twin.core.joint_twin.TwinBack`) with each window; publishes the
-estimate on ``/reducer_twin/<joint>/wear`` (reliable, transient-local). The state is
-written atomically after every window and restored on start (falling back to the
-previous good copy); a state file that cannot be used stops the node with an error.
-The service ``/reducer_twin/<joint>/reset`` (``std_srvs/Trigger``) records a
-maintenance event (reducer replaced) and restarts the filter.
+Subscribes to ``/reducer_twin/<joint>/te_features`` and steps the joint's estimator stage
+(:class:`~reducer_twin.core.pipeline.EstimatorStage`, the estimate half of a
+:class:`~reducer_twin.core.joint_twin.TwinBack`) with each window; publishes the estimate on
+``/reducer_twin/<joint>/wear`` (reliable, transient-local). The state is written atomically
+after every window and restored on start (falling back to the previous good copy); a state
+file that cannot be used stops the node with an error. The service
+``/reducer_twin/<joint>/reset`` (``std_srvs/Trigger``) records a maintenance event (reducer
+replaced) and restarts the filter; the latest event goes on ``maintenance``
+(``std_msgs/String``, transient-local) for ``te_monitor`` to start its windows afresh.
 
 With ``store`` and ``robot`` the node joins the reducer's history in a fleet store
 (:mod:`reducer_twin.fleet.live`): it starts from the stored state when that is newer,
@@ -20,7 +21,7 @@ or ERROR until a write succeeds).
 from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.estimator import EstimatorConfig
-from reducer_twin.core.joint_twin import joint_topic
+from reducer_twin.core.joint_twin import joint_topic, maintenance_event
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.io.state_file import StateFile
@@ -33,7 +34,7 @@ from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes, state_path, store_worker, WORKER
 from reducer_twin.nodes.settings import StoreSettings
 from reducer_twin.nodes.timers import create_spread_timer
-from std_msgs.msg import Float64MultiArray
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 CLOSE_FLUSH_TIMEOUT_S = 30.0
@@ -77,13 +78,14 @@ class WearEstimatorNode(Node):
         if p['store']:
             self._join_store(p['store'], p['robot'])
         self.rejects = RejectCounter(self)
-        self._rejected_seen = 0
-        self.statuses = {}
+        self._rejected_seen, self.statuses = 0, {}
         self.pub = self.create_publisher(Float64MultiArray, joint_topic(joint, 'wear'),
                                          latest_qos())
         self.create_subscription(Float64MultiArray, joint_topic(joint, 'te_features'),
                                  self._on_features, stream_qos(WINDOW_DEPTH))
         self.create_service(Trigger, joint_topic(joint, 'reset'), self._on_reset)
+        self.events = self.create_publisher(String, joint_topic(joint, 'maintenance'),
+                                            latest_qos())
         publish_diagnostics(self, self._statuses)
         self._flush_queued = False
         if self.live is not None:
@@ -175,6 +177,10 @@ class WearEstimatorNode(Node):
         return response
 
     def _publish(self, stamp_s=None, rec=None):
+        """Publish the estimate; at start and after a reset, the latest maintenance event."""
+        event = maintenance_event(self.stage.estimator.events) if stamp_s is None else None
+        if event is not None:
+            self.events.publish(String(data=event))
         stamp = self.get_clock().now().nanoseconds * 1e-9 if stamp_s is None else stamp_s
         rec = self.stage.record(stamp) if rec is None else rec
         self.pub.publish(to_multiarray(WEAR_ESTIMATE, record_values(WEAR_ESTIMATE, rec)))

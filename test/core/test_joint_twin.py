@@ -16,14 +16,16 @@ from hypothesis import given
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-from reducer_twin.core.errors import InvalidParameter
+from reducer_twin.core.errors import InvalidParameter, StateFileError
 from reducer_twin.core.joint_twin import check_topic_tokens, node_token, topic_token, TwinBack
 from reducer_twin.core.joint_twin import estimate_numbers, HealthSummary, joint_topic, JointTwin
+from reducer_twin.core.joint_twin import maintenance_event
 from reducer_twin.core.joint_twin import TwinConfig, TwinFront
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import lost_motion
 from reducer_twin.core.units import ARCMIN
+from te_streams import soft_zone_swing
 
 PARAMS = ReducerParams()
 AGING = 180_000.0
@@ -387,3 +389,106 @@ def test_a_held_link_on_a_topic_apart_from_the_motor_is_read_at_its_updates_too(
     assert front.extractor.held.held['link']
     np.testing.assert_allclose(np.median(lm[np.isfinite(lm)]), lost_motion(8e-6, PARAMS),
                                rtol=0.02)
+
+
+def _swing_stamped_apart(front, seed, offset_s, t0_s=0.0, seconds=60.0):
+    """
+    Return the windows of the soft-zone swing with the motor stamped ``offset_s`` late.
+
+    :func:`te_streams.soft_zone_swing` (1.5 arcmin to a knee at 5 %) fed in 0.5-s pieces.
+    """
+    t, theta, omega, te, effort = soft_zone_swing(1.5, 0.05, seed=seed)
+    keep = t < seconds
+    t, theta, omega, te, effort = t[keep] + t0_s, theta[keep], omega[keep], te[keep], effort[keep]
+    motor, windows = 81.0 * (theta - te), []
+    for k in range(0, t.size, 500):
+        piece = slice(k, k + 500)
+        stream = front.extractor.update(t[piece] + offset_s, motor[piece], t[piece],
+                                        theta[piece])
+        windows += front.analyze(stream, effort[piece], omega[piece])
+    return windows
+
+
+@pytest.fixture(scope='module')
+def learnt_front():
+    """Return a front that learnt a 10-ms time offset and said a soft zone, and its state."""
+    front = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    _swing_stamped_apart(front, 0, 0.01)
+    return front, json.dumps(front.state())
+
+
+def test_a_front_continued_from_its_state_has_the_offset_and_the_soft_zone_from_its_first_window(
+        learnt_front):
+    # A te_monitor restarted without its state learns the offset again (its first windows
+    # give no lost motion) and needs five standard errors over two windows to say the soft
+    # zone again, while its windows carry none: the estimator gave the play meanwhile.
+    learnt, state = learnt_front
+    assert learnt.calibration.applied == pytest.approx(0.01, abs=1e-4)
+    said = learnt.soft_zone
+    assert said is not None
+    front = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    lines = front.continue_from(json.loads(state))
+    assert lines[0].startswith(f'link encoder time offset {learnt.calibration.applied * 1e6:.1f}'
+                               ' us carried over (checked by the next windows')
+    assert 'soft-zone check continued' in lines[1] and 'said:' in lines[1]
+    assert front.calibration.applied == learnt.calibration.applied and front.soft_zone == said
+    windows = _swing_stamped_apart(front, 1, 0.01, t0_s=60.0, seconds=20.0)
+    shortfall = np.array([w.soft_zone_shortfall for w in windows])
+    np.testing.assert_allclose(shortfall, said['shortfall'], rtol=0.02)
+    fresh = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    again = _swing_stamped_apart(fresh, 1, 0.01, t0_s=60.0, seconds=20.0)
+    assert not any(w.soft_zone_shortfall for w in again[:5])
+    read = [np.isfinite(w.lost_motion) for w in windows]
+    assert sum(read) >= sum(np.isfinite(w.lost_motion) for w in again) + 4
+    assert all(read[1:])
+
+
+def test_a_front_state_of_another_reducers_check_starts_the_check_afresh(learnt_front):
+    state = json.loads(learnt_front[1])
+    state['soft_zone']['takeup_torque_nm'] = 50.0
+    front = TwinFront(PARAMS)
+    lines = front.continue_from(state)
+    assert 'starts afresh' in lines[-1] and 'made for another reducer (test torque 50.00' \
+        in lines[-1]
+    assert front.soft_zone is None and front.analyzer.fit.soft_zone.windows == 0
+    assert front.calibration.carried     # the encoders are the joint's, not the reducer's
+
+
+@pytest.mark.parametrize('change, message', [
+    (lambda s: s.update(kind='reducer_twin.estimator'), "must be 'reducer_twin.front_state'"),
+    (lambda s: s.update(version=2), 'version 1'),
+    (lambda s: s.update(time_offset_s='10 ms'), 'time_offset_s must be null or a finite'),
+    (lambda s: s.update(time_offset_s=float('inf')), 'time_offset_s must be null or a finite'),
+    (lambda s: s['soft_zone'].update(line=[0.0] * 4), "soft_zone is not a soft-zone check's"),
+    (lambda s: s['soft_zone'].update(full=[float('nan')] * 6), 'finite'),
+    (lambda s: s['soft_zone'].pop('standing'), "soft_zone is not a soft-zone check's"),
+    (lambda s: s.update(maintenance=3), 'maintenance must be null or an event text, got 3'),
+])
+def test_a_broken_front_state_is_refused_naming_the_value_and_changes_nothing(
+        learnt_front, change, message):
+    state = json.loads(learnt_front[1])
+    change(state)
+    front = TwinFront(PARAMS)
+    with pytest.raises(StateFileError, match=re.escape(message)):
+        front.continue_from(state)
+    assert front.calibration.applied is None and front.analyzer.fit.soft_zone.windows == 0
+
+
+def test_a_replaced_reducer_starts_the_window_analysis_afresh_and_keeps_the_time_offset(
+        learnt_front):
+    # What the windows learnt of the old reducer (its soft zone above all, which the
+    # estimator takes off the lost motion) must not be given to the new one; the encoders'
+    # time offset is not the reducer's.
+    front = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    front.continue_from(json.loads(learnt_front[1]))
+    assert front.soft_zone is not None
+    event = maintenance_event([{'exposure_s': 7200.0, 'reason': 'maintenance: reducer replaced'}])
+    assert event == 'maintenance event 1 after 2.000 h of operation: maintenance: reducer replaced'
+    front.new_reducer(event)
+    assert front.soft_zone is None and front.analyzer.fit.soft_zone.windows == 0
+    assert front.calibration.applied == learnt_front[0].calibration.applied
+    state = front.state()
+    assert state['maintenance'] == event
+    again = TwinFront(PARAMS)
+    again.continue_from(json.loads(json.dumps(state)))
+    assert again.maintenance == event and maintenance_event([]) is None

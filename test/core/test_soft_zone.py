@@ -1,5 +1,7 @@
 """A play still being taken up at the lost-motion test torque: found from the windows, and said."""
 
+import json
+
 import numpy as np
 import pytest
 from reducer_twin.core.soft_zone import SoftZoneCheck
@@ -253,3 +255,31 @@ def test_bins_of_a_flanks_worth_decide_once_there_are_enough_of_them():
     assert check.windows == 6 and check.shortfall[0] == pytest.approx(0.3 * ARCMIN, rel=0.05)
     check.observe(*_catalogue_bins(2.0, 0.05, windows=2), thin[:2])
     assert check.windows == 2 and check.shortfall[0] == pytest.approx(0.8 * ARCMIN, rel=0.05)
+
+
+def test_a_check_continued_from_its_state_goes_on_exactly_as_the_one_that_ran_on():
+    # te_monitor keeps the check's pools across a restart: the restarted check says what
+    # the running one says, with the same figures, window after window.
+    first, later = _catalogue_bins(2.0, 0.05, windows=3), _scattered(8, 0.7)
+    running = _checked(*first)
+    restarted = SoftZoneCheck(TEST_TORQUE, STIFFNESS)
+    restarted.continue_from(json.loads(json.dumps(running.state())))
+    assert restarted.said == running.said and restarted.said is not None
+    for k in range(8):
+        for check in (running, restarted):
+            check.observe(*(a[k:k + 1] for a in later))
+        assert restarted.said == running.said and restarted.shortfall == running.shortfall
+    assert restarted.other_reducer(running.state()) is None
+
+
+def test_a_check_state_of_another_reducer_is_said_and_a_broken_one_refused():
+    state = _checked(*_catalogue_bins(2.0, 0.05)).state()
+    other = SoftZoneCheck(2.0 * TEST_TORQUE, STIFFNESS)
+    assert 'made for another reducer (test torque' in other.other_reducer(state)
+    check = SoftZoneCheck(TEST_TORQUE, STIFFNESS)
+    for broken in ({**state, 'thin': [0.0] * 5}, {**state, 'line': [float('inf')] * 5},
+                   {**state, 'standing': 'yes'},
+                   {**state, 'waiting': [[state['seen'] + 1, 'full', [1.0], [1.0], [1.0]]]}):
+        with pytest.raises(ValueError, match='line must be 5 finite sums'):
+            check.continue_from(broken)
+    assert check.windows == 0 and check.said is None

@@ -149,12 +149,18 @@ def test_diagnostics_carry_the_reducer_status_of_every_joint(twin):
             assert found and found[-1].level == DiagnosticStatus.OK, name
 
 
-def test_each_estimator_saved_its_state_in_the_state_dir(twin):
+def test_each_estimator_and_te_monitor_saved_its_state_in_the_state_dir(twin):
     for joint in twin['joints']:
         path = twin['state_dir'] / f'{joint}.json'
         state = decode_state(path.read_bytes(), path)
         assert state['counters']['updates'] == (
             twin['nodes']['estimator'][joint].stage.estimator.updates)
+        monitor = twin['nodes']['te'][joint]
+        monitor.close()     # its last batch's state written
+        path = twin['state_dir'] / f'{joint}.te_monitor.json'
+        state = decode_state(path.read_bytes(), path, 'reducer_twin.front_state')
+        assert state['windows'] == monitor.windows > 0
+        assert state['time_offset_s'] == monitor.twin.calibration.to_carry
 
 
 def test_without_intra_process_the_pairs_cross_dds_and_none_is_lost(default_ros, tmp_path):

@@ -26,9 +26,12 @@ from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, from_multiarray, to_multiarray
 from reducer_twin.nodes.qos import encoder_qos
+from reducer_twin.nodes.runtime import WORKER
 from reducer_twin.nodes.te_monitor import TEMonitor
+from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from scipy.signal import butter, sosfiltfilt
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import Trigger
 from te_streams import soft_zone_swing
 
 pytestmark = pytest.mark.timeout(60, method='thread')
@@ -58,9 +61,9 @@ def simulated():
 class Monitor:
     """A TEMonitor of a fresh joint, and a probe that feeds it and listens to it."""
 
-    def __init__(self, ros, extra=()):
+    def __init__(self, ros, extra=(), joint=None):
         self.ros = ros
-        self.joint = f'wrist{next(_ids)}'
+        self.joint = joint or f'wrist{next(_ids)}'
         self.node = ros.add(TEMonitor(
             f'te_monitor_{self.joint}', params=PARAMS, context=ros.context,
             parameter_overrides=[
@@ -426,6 +429,85 @@ def test_a_play_still_taken_up_at_the_test_torque_is_said_with_its_width_as_a_ke
     assert float(values['soft_zone_play_arcmin']) == pytest.approx(1.5, rel=0.15)
     logged = [x for x in capfd.readouterr().err.splitlines() if 'narrower than the' in x]
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
+def _swing_rows(seed, t0, late_s):
+    """encoder_pairs rows of the soft-zone swing, the link encoder read ``late_s`` early."""
+    t, theta, omega, te, effort = soft_zone_swing(1.5, 0.05, seed=seed)
+    link, velocity = np.interp(t - late_s, t, theta), np.interp(t - late_s, t, omega)
+    return np.column_stack([t0 + t, RATIO * (theta - te), link, effort, velocity])
+
+
+def test_a_restarted_monitor_continues_with_the_time_offset_and_soft_zone_it_learnt(
+        ros, tmp_path, capfd):
+    # A controller restarts, the monitor with it. Without its state the next windows learnt
+    # the encoders' offset again (no lost motion meanwhile) and carried no soft zone until
+    # it was said again, five standard errors over two windows later: the estimator gave
+    # the play, 0.6 arcmin above the lost motion at the test torque, meanwhile.
+    path = tmp_path / 'wrist.te_monitor.json'
+    extra = [Parameter('friction_in_effort', value=0), Parameter('aging_factor', value=1.0),
+             Parameter('state_file', value=str(path))]
+    t0 = float(time.time() // 1 - 100.0)
+    first = Monitor(ros, extra)
+    rows = _swing_rows(0, t0, 0.004)
+    for start in range(0, rows.shape[0], 500):  # analysed every 0.5 s of stream, as live
+        first.feed(rows[start:start + 500])
+        first.node.analyze_now()
+    said = first.node.twin.soft_zone
+    offset = first.node.twin.calibration.to_carry
+    assert said is not None and offset == pytest.approx(-0.004, abs=2e-4)
+    first.node.close()
+    ros.remove(first.node)
+    assert path.exists()
+    capfd.readouterr()
+    again = Monitor(ros, extra, joint=first.joint)
+    logged = capfd.readouterr().err
+    assert f'{first.joint}: link encoder time offset {offset * 1e6:.1f} us carried over' in logged
+    assert 'soft-zone check continued' in logged and f'(state {path})' in logged
+    again.feed(_swing_rows(1, t0 + 60.0, 0.004)[:10000])
+    again.node.analyze_now()
+    ros.spin_until(lambda: len(again.features) >= 4, what='4 windows of the restarted monitor')
+    first_window = from_multiarray(again.features[0], TE_FEATURES)
+    assert first_window['soft_zone_shortfall_rad'] == pytest.approx(said['shortfall'], rel=0.05)
+    status = again.status(lambda s: 'narrower than the flanks' in s.message)
+    assert ros.key_values(status)['state_file'] == str(path)
+
+
+def test_a_reset_of_the_estimator_starts_the_monitors_window_analysis_afresh_once(
+        ros, tmp_path, capfd):
+    # A replaced reducer's windows carried the old one's soft zone, and the estimator, reset
+    # for the new reducer, took it off their lost motion.
+    path = tmp_path / 'wrist.te_monitor.json'
+    extra = [Parameter('friction_in_effort', value=0), Parameter('aging_factor', value=1.0),
+             Parameter('state_file', value=str(path))]
+    monitor = Monitor(ros, extra)
+    rows = _swing_rows(0, float(time.time() // 1 - 100.0), 0.0)
+    for start in range(0, rows.shape[0], 2000):
+        monitor.feed(rows[start:start + 2000])
+        monitor.node.analyze_now()
+    assert monitor.node.twin.soft_zone is not None
+    estimator = ros.add(WearEstimatorNode(
+        f'wear_estimator_{monitor.joint}', params=PARAMS, context=ros.context,
+        parameter_overrides=[Parameter('joint', value=monitor.joint),
+                             Parameter('state_file', value=str(tmp_path / 'est.json'))]))
+    client = monitor.probe.create_client(Trigger, joint_topic(monitor.joint, 'reset'))
+    assert ros.call(client, Trigger.Request()).success
+    twin = monitor.node.twin
+    ros.spin_until(lambda: twin.maintenance is not None, what='the maintenance event')
+    WORKER.wait_idle()
+    assert twin.maintenance.startswith('maintenance event 1 after ')
+    assert twin.soft_zone is None and twin.analyzer.fit.soft_zone.windows == 0
+    monitor.node.close()
+    assert 'window analysis started afresh, the time offset kept' in capfd.readouterr().err
+    # Restarted, the monitor hears the same event again (transient-local) and keeps what it
+    # learnt since: an event is followed once.
+    ros.remove(monitor.node)
+    again = Monitor(ros, extra, joint=monitor.joint)
+    ros.wait_matched(estimator.events)
+    ros.spin_for(0.5)
+    WORKER.wait_idle()
+    assert again.node.twin.maintenance == twin.maintenance
+    assert 'started afresh' not in capfd.readouterr().err
 
 
 def test_a_motor_that_turns_another_number_of_times_than_the_ratio_is_logged_once(

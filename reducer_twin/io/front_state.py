@@ -1,0 +1,111 @@
+"""
+``te_monitor``'s state file: what a joint's front learnt of its reducer, across restarts.
+
+:meth:`~reducer_twin.core.joint_twin.TwinFront.state` (the encoders' time offset and the
+soft-zone check's pools) in a file like the estimator's (:mod:`.state_file`): checksummed
+canonical JSON of format ``reducer_twin.front_state.file``, written atomically with the
+previous good copy kept as ``<path>.bak``, on a background thread for the live node.
+Restoring falls back to the backup, and a file that neither it nor its backup can
+continue from is an error naming both reasons, never a silent fresh start.
+"""
+
+from pathlib import Path
+
+from reducer_twin.core.errors import StateFileError
+from reducer_twin.core.joint_twin import FRONT_STATE_KIND
+from reducer_twin.io.state_file import backup_path, decode_state, encode_state
+from reducer_twin.io.state_file import StateWriter, write_state_file
+
+WHAT = 'te_monitor state'
+"""What the file holds, for messages."""
+
+
+class FrontStateFile:
+    """
+    The state file of one joint's ``te_monitor``.
+
+    Parameters
+    ----------
+    path : str or Path
+        State file: continued from on start (falling back to its ``.bak`` copy), written
+        atomically after every batch of windows.
+    background : bool
+        Write on a :class:`~reducer_twin.io.state_file.StateWriter` thread (live node)
+        instead of in :meth:`save`.
+
+    Attributes
+    ----------
+    writer : StateWriter or None
+        The background writer (``error``, ``failures``, ``recoveries``, ``written``).
+
+    Raises
+    ------
+    StateFileError
+        If the directory of the file cannot be created.
+
+    """
+
+    def __init__(self, path, background=False):
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as err:
+            raise StateFileError(f'cannot create the directory of the {WHAT} {self.path}: '
+                                 f'{err}') from err
+        self.writer = StateWriter() if background else None
+
+    def restore(self, front):
+        """
+        Continue ``front`` from the file, or from its backup when the file cannot be used.
+
+        Parameters
+        ----------
+        front : TwinFront
+            The joint's front (:meth:`~reducer_twin.core.joint_twin.TwinFront.continue_from`).
+
+        Returns
+        -------
+        tuple or None
+            ``(path used, lines)``: the file continued from and what was continued; None
+            when neither the file nor its backup exists (nothing learnt yet).
+
+        Raises
+        ------
+        StateFileError
+            If a file exists but neither it nor its backup can be continued from.
+
+        """
+        backup = backup_path(self.path)
+        if not (self.path.exists() or backup.exists()):
+            return None
+        errors = []
+        for path in (self.path, backup):
+            try:
+                state = decode_state(path.read_bytes(), path, FRONT_STATE_KIND)
+                return path, front.continue_from(state)
+            except OSError as err:
+                errors.append(f'cannot read {WHAT} {path}: {err}')
+            except StateFileError as err:
+                errors.append(str(err) if str(err).startswith(str(path)) else f'{path}: {err}')
+        raise StateFileError(f'no usable {WHAT}: {errors[0]}; backup: {errors[1]}')
+
+    def save(self, state):
+        """
+        Persist :meth:`TwinFront.state` now, or queue it for the writer thread.
+
+        Raises
+        ------
+        StateFileError
+            If writing in place fails.
+
+        """
+        data = encode_state(state, FRONT_STATE_KIND)
+        if self.writer is None:
+            write_state_file(self.path, data, FRONT_STATE_KIND, WHAT)
+        else:
+            self.writer.submit(self.path, data, FRONT_STATE_KIND, WHAT)
+
+    def flush(self):
+        """Wait until the queued states are written (a no-op without a writer)."""
+        if self.writer is not None:
+            self.writer.flush()
