@@ -26,9 +26,10 @@ instead of the node's 20 ms), ``te_features``, ``wear`` and ``remaining_life`` p
 counts at the end), and the input's ``ground_truth`` topics when it has them.
 Log times are the stamps of the data a message was computed from.
 
-Differences from a live run, on purpose: TE messages are longer; until the encoder time
-offset is learnt (or for ``CALIBRATION_WINDOWS`` windows) the stream is fed in
-0.1 s pieces (``CALIBRATION_PIECE_S``), then in large chunks, so a calibration
+Until the encoder time offset is learnt (or for ``joint_twin.CALIBRATION_WINDOWS``
+windows) the window analysis takes the stream in 0.1 s pieces
+(``joint_twin.CALIBRATION_PIECE_S``), as live. Differences from a live run, on purpose: TE
+messages are longer; after the calibration the stream goes in large chunks, so a calibration
 that is learnt late applies from the next chunk; the last, partial window is analysed
 (a node that stops drops it); the estimator starts from a new reducer and keeps no state
 file. Once the time offset applies, the motor angle of each piece's last link sample is

@@ -20,6 +20,7 @@ from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
+from reducer_twin.core.joint_twin import CALIBRATION_PIECE_S
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
 from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.units import HOUR
@@ -36,18 +37,6 @@ Every sample is in the bag whatever the batch; ``te_monitor``'s analysis period 
 per message makes a fifth of the messages 0.1 s did, and the derived bag's writing is
 per message (of 23 k messages of a 6-joint bag at 1 kHz, 18 k were TE at 0.1 s).
 """
-
-CALIBRATION_PIECE_S = 0.1
-"""
-Stream seconds per piece fed to the window analysis until the time offset is learnt.
-
-Live, ``te_monitor`` analyses what arrived every ``analysis_period_s`` (0.5 s by
-default); a learnt offset applies from the next piece on. Offline the pieces are
-0.1 s, so the offset applies as early as a node with a 0.1 s period would apply it.
-"""
-
-CALIBRATION_WINDOWS = 20
-"""Windows fed in 0.1 s pieces at most while the time offset is not learnt yet."""
 
 PAIR_HOLD_S = 60.0
 """How long [s of link stream] a link sample of a bag waits for its motor partner."""
@@ -199,8 +188,7 @@ class JointFront:
 
     def _calibrating(self):
         """Whether the stream still goes in calibration pieces (time offset not settled)."""
-        return not self.calibration.settled and self.windows < CALIBRATION_WINDOWS and \
-            bool(self.period_ns)
+        return self.twin.calibrating and bool(self.period_ns)
 
     def _piece(self):
         return max(1, int(round(CALIBRATION_PIECE_S * 1e9 / max(self.period_ns, 1.0))))

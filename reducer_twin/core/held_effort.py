@@ -29,6 +29,14 @@ one repeats all but one sample per update.
 HELD_MIN_PAIRS = 200
 """Successive pairs of effort samples seen before an effort is judged."""
 
+RATE_PAIRS = 2000
+"""
+Successive pairs over which a held effort's update rate is counted.
+
+Judged from the first :data:`HELD_MIN_PAIRS`, a 100 Hz loop on a 1 kHz stream read 96-99 Hz
+where the stream came in 0.1-s pieces (20 updates counted) and 100 Hz in 0.5-s ones.
+"""
+
 
 class HeldEffort:
     """
@@ -41,7 +49,8 @@ class HeldEffort:
         more successive pairs repeat (and the effort is not constant: an effort that
         never changes is said as such elsewhere).
     update_hz : float or None
-        Mean rate of the effort's changes while judged [Hz] once held, else None.
+        Mean rate of the effort's changes [Hz] once held (over the first
+        :data:`RATE_PAIRS` pairs), else None.
 
     """
 
@@ -54,6 +63,11 @@ class HeldEffort:
         self._varies = False
         self.held = False
         self.decided = False
+
+    @property
+    def watching(self):
+        """Whether samples are still wanted: not yet judged, or a held effort's rate counted."""
+        return not self.decided or (self.held and self._pairs < RATE_PAIRS)
 
     @property
     def update_hz(self):
@@ -82,7 +96,7 @@ class HeldEffort:
             Their effort (finite).
 
         """
-        if self.decided or t.size == 0:
+        if not self.watching or t.size == 0:
             return
         if self._last is not None:
             t = np.concatenate([[self._last[0]], t])
@@ -96,6 +110,6 @@ class HeldEffort:
         self._changes += int(same.size - np.count_nonzero(same))
         self._span += float(t[-1] - t[0])
         self._varies = self._varies or bool(np.ptp(effort) > 0.0)
-        if self._pairs >= HELD_MIN_PAIRS:
+        if self._pairs >= HELD_MIN_PAIRS and not self.decided:
             self.decided = True
             self.held = self._varies and self._repeats >= HELD_SHARE * self._pairs

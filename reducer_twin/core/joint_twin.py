@@ -37,6 +37,21 @@ from .window_analysis import WindowAnalyzer
 
 TOPIC_NAMESPACE = 'reducer_twin'
 
+CALIBRATION_PIECE_S = 0.1
+"""
+Stream seconds per piece fed to the window analysis until the time offset is learnt.
+
+A learnt offset applies from the next piece on (:meth:`TwinFront.update`, and the bag
+analysis): windows read before it carry the offset into the flank pool and the soft-zone
+check. ``te_monitor`` analyses what arrived every ``analysis_period_s`` (0.5 s), but a
+backlog (a stalled executor, a burst of messages) came as one piece: 60 s of a swing whose
+encoders are stamped 4 ms apart, taken as 0.5 s then 59.5 s, left its 0.6-arcmin soft
+zone unsaid (0.52 +- 0.10 arcmin pooled against 0.596 +- 0.004 in 0.5-s pieces).
+"""
+
+CALIBRATION_WINDOWS = 20
+"""Windows fed in :data:`CALIBRATION_PIECE_S` pieces at most while the offset is not learnt."""
+
 FRONT_STATE_KIND = 'reducer_twin.front_state'
 """Kind of :meth:`TwinFront.state` (``te_monitor``'s state file)."""
 
@@ -641,9 +656,19 @@ class TwinFront:
         said = (self.extractor.ratio_reason, self.calibration.reason)
         return '; '.join([reason] + [line for line in said if line is not None])
 
+    @property
+    def calibrating(self):
+        """Whether the stream goes in :data:`CALIBRATION_PIECE_S` pieces (offset not settled)."""
+        return not self.calibration.settled and self.windows < CALIBRATION_WINDOWS
+
     def update(self, t_s, motor, link, effort, velocity):
         """
         TE and windows of paired samples; return the completed windows.
+
+        While :attr:`calibrating`, the window analysis takes the chunk's TE in pieces of
+        :data:`CALIBRATION_PIECE_S` of stamps, and a learnt offset applies from the next
+        piece (the rest of the chunk's TE computed again with it) whatever the chunk's
+        length, as the bag analysis feeds its chunks.
 
         A link read ``delta`` after its stamp (a learnt ``link_time_offset_s`` beyond
         :data:`.te_extraction.TIME_OFFSET_LINEAR_S`) needs the motor angle ``delta``
@@ -653,20 +678,54 @@ class TwinFront:
         20 ms late read +8 % in 0.5 s chunks (``te_monitor``'s period) and +16 % in
         0.1 s ones against the whole recording.
         """
-        rows = (t_s, motor, link, effort, velocity)
+        rows = tuple(np.asarray(r, dtype=float) for r in (t_s, motor, link, effort, velocity))
         if self._waiting is not None:
-            rows = tuple(np.concatenate([w, np.asarray(r, dtype=float)])
-                         for w, r in zip(self._waiting, rows))
+            rows = tuple(np.concatenate([w, r]) for w, r in zip(self._waiting, rows))
             self._waiting = None
-        cut = self._ready(rows[0])
-        if cut is None:
-            return self.analyze(self.te(*rows[:3]), *rows[3:])
-        stream = self.te(*rows[:3])
-        self._waiting = tuple(np.array(r[cut:], dtype=float) for r in rows)
-        valid = np.flatnonzero(stream.valid[:cut])
-        if valid.size:      # the next chunk's TE continues from the last one used
-            self.extractor.last_te = float(stream.te[valid[-1]])
-        return self.analyze(stream.part(slice(0, cut)), *(r[:cut] for r in rows[3:]))
+        found = []
+        while True:
+            cut = self._ready(rows[0])
+            n = rows[0].shape[0] if cut is None else cut
+            stream = self.te(*rows[:3])     # (moves the offset along a drift first)
+            start = self._analyze_pieces(stream, rows, n, found)
+            if start >= n:
+                break
+            # Learnt (or refined) within the chunk: the rest again with it, its TE
+            # continuous with the last one used.
+            valid = np.flatnonzero(stream.valid[:start])
+            if valid.size:
+                self.extractor.last_te = float(stream.te[valid[-1]])
+            rows = tuple(r[start:] for r in rows)
+        if cut is not None:
+            self._waiting = tuple(r[cut:].copy() for r in rows)
+            valid = np.flatnonzero(stream.valid[:cut])
+            if valid.size:      # the next chunk's TE continues from the last one used
+                self.extractor.last_te = float(stream.te[valid[-1]])
+        return found
+
+    def _analyze_pieces(self, stream, rows, n, found):
+        """
+        Analyse the first ``n`` samples of a chunk's TE; return where it stopped.
+
+        Whole, or while :attr:`calibrating` in pieces of :data:`CALIBRATION_PIECE_S` until
+        the windows move the extractor's offset (then the rest waits for its TE).
+        """
+        t, start, offset = rows[0], 0, self.extractor.link_time_offset_s
+        pieces = self.calibrating and t.ndim == 1 and n > 1 and bool(np.all(np.diff(t) > 0.0))
+        while pieces and start < n and self.calibrating:
+            if self.extractor.link_time_offset_s != offset:
+                return start
+            end = int(np.searchsorted(t, t[start] + CALIBRATION_PIECE_S, side='left'))
+            end = min(max(end, start + 1), n)
+            found += self.analyze(stream.part(slice(start, end)), rows[3][start:end],
+                                  rows[4][start:end])
+            start = end
+        if start < n and self.extractor.link_time_offset_s != offset:
+            return start
+        if start < n:
+            found += self.analyze(stream.part(slice(start, n)), rows[3][start:n],
+                                  rows[4][start:n])
+        return n
 
     def _ready(self, t_s):
         """Return how many leading samples have their motor angle ``delta`` on, or None: all."""

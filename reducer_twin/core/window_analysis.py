@@ -274,7 +274,7 @@ class WindowAnalyzer:
             if steps.size:
                 self._period_s = float(np.median(steps))
         use = fresh & np.isfinite(effort)
-        if not self._held_effort.decided:
+        if self._held_effort.watching:
             self._held_effort.observe(stream.t[use], effort[use])
         without = int(np.count_nonzero(fresh & ~use))
         self.samples_without_effort += without

@@ -492,3 +492,24 @@ def test_a_replaced_reducer_starts_the_window_analysis_afresh_and_keeps_the_time
     again = TwinFront(PARAMS)
     again.continue_from(json.loads(json.dumps(state)))
     assert again.maintenance == event and maintenance_event([]) is None
+
+
+def test_until_the_offset_is_learnt_a_chunk_of_any_length_reads_as_short_pieces():
+    # A te_monitor's backlog (a stalled executor, a burst) came as one piece: its windows
+    # read after the offset was learnt within it still carried the offset into the flank
+    # pool and the soft-zone check, and this 0.6-arcmin soft zone went unsaid
+    # (0.52 +- 0.10 arcmin pooled).
+    t, theta, omega, te, effort = soft_zone_swing(1.5, 0.05)
+    rows = (t, 81.0 * (theta - te), np.interp(t - 0.004, t, theta), effort,
+            np.interp(t - 0.004, t, omega))
+    said = []
+    for cuts in ([500, t.size], [t.size]):
+        front, start = TwinFront(PARAMS, TwinConfig(friction_in_effort=0)), 0
+        for end in cuts:
+            front.update(*(r[start:end] for r in rows))
+            start = end
+        assert front.calibration.applied == pytest.approx(-0.004, abs=1e-5)
+        said.append(front.soft_zone)
+    assert said[0] is not None and said[1] is not None
+    assert said[1]['shortfall'] == pytest.approx(said[0]['shortfall'], rel=0.01)
+    assert said[1]['shortfall_sd'] == pytest.approx(said[0]['shortfall_sd'], rel=0.1)
