@@ -61,13 +61,13 @@ from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, stamp_ns
 from reducer_twin.analysis.stages import te_values, WorkerBacks
-from reducer_twin.core.errors import InvalidInput
+from reducer_twin.core.errors import InvalidInput, StateFileError
 from reducer_twin.core.ingest import motor_effort_scale
 from reducer_twin.core.ingest import pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS
 from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
-from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
+from reducer_twin.core.joint_twin import TOPIC_NAMESPACE, TwinFront
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
@@ -380,8 +380,9 @@ class _Run:
                      'starts with a digit)')
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
-        # The encoders' time offset each reducer's last bag ended with, if any.
-        carried = {j: (initial_states or {}).get(j, {}).get('time_offset_s')
+        # What each reducer's last bag left its front, if anything (checked here: a
+        # front in the worker must not fail on it).
+        carried = {j: self._carried(j, (initial_states or {}).get(j), settings)
                    for j in plan.joints}
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep,
                                      carried[j]) for j in plan.joints}
@@ -702,6 +703,26 @@ class _Run:
             warn(self.bag, f'{joint}: {line}')
         return said
 
+    def _carried(self, joint, state, settings):
+        """
+        Return what the reducer's last bag left its front (``JointFront``'s ``carried``).
+
+        The front's state, or from a store written before it was kept the time offset
+        alone; a front state this analysis cannot continue from (another version, or
+        values out of range) is said, and only its time offset is carried.
+        """
+        state = state or {}
+        front = state.get('front')
+        if front is None:
+            return {'time_offset_s': state.get('time_offset_s')}
+        try:
+            TwinFront(settings.params_of(joint)).continue_from(front)
+        except StateFileError as err:
+            warn(self.bag, f'{joint}: what its last bag learnt of the encoders and the soft '
+                 f'zone is not usable ({err}): learnt afresh from this bag')
+            return {'time_offset_s': state.get('time_offset_s')}
+        return {'front': front}
+
     def _soft_zone_carried(self, joint, res):
         """
         Say a soft zone carried over from the reducer's last bag that this one has not shown.
@@ -862,6 +883,7 @@ class _Run:
             res.soft_zone = front.twin.soft_zone
             res.inputs += self._soft_zone_carried(joint, res)
             res.time_offset_s = front.twin.calibration.to_carry
+            res.front_state = front.twin.state()
             self._rate_said(joint, res)
             self._service_said(joint, res, outputs)
             self._note_gaps(joint, front)
@@ -995,9 +1017,10 @@ def analyze_bag(path, out_dir, settings=None, overwrite=False, stage_worker=Fals
         raise
     if backs is not stage_worker:
         backs.close()
-    for joint, res in joints.items():   # the fronts' learnt time offsets go on too
+    for joint, res in joints.items():   # what the fronts learnt goes on too
         if states.get(joint) is not None:
-            states[joint] = {**states[joint], 'time_offset_s': res.time_offset_s}
+            states[joint] = {**states[joint], 'time_offset_s': res.time_offset_s,
+                             'front': res.front_state}
     return BagResult(Path(path), Path(out_dir), plan, joints, messages,
                      time.perf_counter() - start, aging, warnings,
                      any(is_damage(w) for w in warnings), states)

@@ -44,6 +44,9 @@ class JointResult:
     time_offset_s : float or None
         The encoders' time offset the joint's next bag may start from
         (:attr:`.pipeline.TimeOffsetCalibration.to_carry`).
+    front_state : dict or None
+        What the joint's next bag continues its front from (:meth:`.joint_twin.TwinFront.state`:
+        that offset and the soft-zone check), as a restarted ``te_monitor`` does.
 
     """
 
@@ -64,6 +67,7 @@ class JointResult:
     service: dict = None
     soft_zone: dict = None
     time_offset_s: float = None
+    front_state: dict = None
     inputs: list = field(default_factory=list)
 
     @property

@@ -56,16 +56,21 @@ FRONT_OUTPUT = '!front'
 class JointFront:
     """The ``te_monitor`` part of one joint, and the spike rule of ``encoder_ingest``."""
 
-    def __init__(self, joint, settings, aging_factor, motor_scale, keep_every,
-                 time_offset_s=None):
+    def __init__(self, joint, settings, aging_factor, motor_scale, keep_every, carried=None):
         params = settings.params_of(joint)
         self.joint = joint
         self.params = params
         self.twin = TwinFront(params, TwinConfig(
             aging_factor=aging_factor, window_s=settings.window_s, max_gap_s=settings.max_gap_s,
             friction_in_effort=settings.friction_in_effort, effort_lag_s=settings.effort_lag_s))
-        # The encoders' time offset the reducer's last bag ended with (BagResult.states).
-        self.twin.carry_time_offset(time_offset_s)
+        # What the reducer's last bag left (BagResult.states): the front's state (the time
+        # offset and the soft-zone check, as a restarted te_monitor continues), or from a
+        # store written before it was kept, the time offset alone.
+        carried = carried or {}
+        if carried.get('front') is not None:
+            self.twin.continue_from(carried['front'])
+        else:
+            self.twin.carry_time_offset(carried.get('time_offset_s'))
         self.ratio = self.twin.ratio
         self.extractor = self.twin.extractor
         self.calibration = self.twin.calibration
@@ -581,8 +586,7 @@ class WorkerBacks:
         self.states = {}
         self._inbox.put((_CONFIG, params, life_config, states, estimators))
 
-    def add_front(self, joint, settings, aging_factor, motor_scale, keep_every,
-                  time_offset_s=None):
+    def add_front(self, joint, settings, aging_factor, motor_scale, keep_every, carried=None):
         """
         Run the front of ``joint`` in the worker (a :class:`JointFront` of these arguments).
 
@@ -590,7 +594,7 @@ class WorkerBacks:
         windows to the worker's back stages directly (see :meth:`LocalBacks.submit`).
         """
         self._inbox.put((_ADD_FRONT, joint, settings, aging_factor, motor_scale, keep_every,
-                         time_offset_s))
+                         carried))
 
     def submit(self, joint, kind, items):
         """Send work (see :meth:`LocalBacks.submit`)."""

@@ -144,6 +144,7 @@ class SoftZoneCheck:
         self._seen = 0        # windows observed
         self._waiting = []    # (window, kind, torque, width, sd) of bins without a line yet
         self._standing = False  # said at the end of the last batch (KEEP_SIGMAS)
+        self._carried = {'full': 0, 'thin': 0}  # windows compared before continue_from
 
     @property
     def _pool(self):
@@ -352,6 +353,7 @@ class SoftZoneCheck:
                              'standing true or false')
         self._line, self._sums, self._waiting, self._seen = line, sums, waiting, seen
         self._standing = standing
+        self._carried = {kind: int(s[0]) for kind, s in sums.items()}
 
     @property
     def reason(self):
@@ -362,6 +364,10 @@ class SoftZoneCheck:
         short, play = said['shortfall'], said['play']
         few = (', from a few samples a bin: the load passes the test torque fast'
                if said['few_samples'] else '')
+        carried = self._carried['thin' if said['few_samples'] else 'full']
+        if carried:
+            few += (f'; {carried} of them carried over from earlier streams of this reducer '
+                    '(a restart, or its last recording)')
         return (f"the transmission error's hysteresis at the lost-motion test torque "
                 f'({self.takeup_torque:.1f} N·m) is {short / ARCMIN:.2f} arcmin narrower than '
                 f'the flanks of higher loads give ({self.windows} windows{few}): the play is '

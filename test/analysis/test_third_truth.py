@@ -126,8 +126,11 @@ def test_a_soft_zone_found_in_one_bag_gives_the_next_bags_lost_motion_at_the_tes
         tmp_path, monkeypatch):
     # The forearm above, then 20 s of it a day later: too short for its own check to say
     # the soft zone, so alone it reads its play (and is called worn out). Continued from
-    # the first bag's state (as the fleet store chains them) it keeps the shortfall found
-    # there, gives the lost motion at the test torque and says where that came from.
+    # the first bag's state (as the fleet store chains them) its soft-zone check goes on
+    # with the first bag's comparisons, as a restarted te_monitor's does: it says the soft
+    # zone, where that evidence came from, and gives the lost motion at the test torque.
+    # A state from before the check was kept (the estimator's alone) keeps the shortfall
+    # found there and says so.
     runs = {}
     for k, (hours, start) in enumerate(((300.0, 0.4), (20.0, 0.41))):
         monkeypatch.setattr(gen.indep, 'START_S', gen.indep.START_S + 86400 * k)
@@ -135,15 +138,26 @@ def test_a_soft_zone_found_in_one_bag_gives_the_next_bags_lost_motion_at_the_tes
                         aging_factor=3600.0, rate_hz=1000.0, start_fraction=start)
         truth = gen.generate_bag(spec, tmp_path / f'bag{k}')['joints']['joint_3']
         first = runs.get('first')
+        older = None if first is None else {
+            j: {k: v for k, v in state.items() if k != 'front'}
+            for j, state in first.states.items()}
         for name, states in ((('first', None),) if k == 0 else
-                             (('chained', first.states), ('alone', None))):
+                             (('chained', first.states), ('older', older), ('alone', None))):
             runs[name] = analyze_bag(tmp_path / f'bag{k}', tmp_path / f'out_{name}',
                                      initial_states=states)
     true_lm = truth['lost_motion_end_arcmin']
-    chained, alone = (runs[n].joints['joint_3'].summary() for n in ('chained', 'alone'))
-    assert chained['soft_zone'] is None and alone['soft_zone'] is None   # not seen in 20 s
+    chained, older, alone = (runs[n].joints['joint_3'].summary()
+                             for n in ('chained', 'older', 'alone'))
+    assert alone['soft_zone'] is None and older['soft_zone'] is None   # not seen in 20 s
     assert alone['lost_motion_arcmin'] > 1.5 * true_lm
-    assert chained['lost_motion_arcmin'] == pytest.approx(true_lm, rel=0.25)
-    said = [line for line in chained['inputs'] if 'an earlier recording of this' in line]
+    for run in (chained, older):
+        assert run['lost_motion_arcmin'] == pytest.approx(true_lm, rel=0.25)
+    said = [line for line in chained['inputs'] if 'narrower than the flanks' in line]
+    assert chained['soft_zone'] is not None and len(said) == 1
+    carried = runs['first'].joints['joint_3'].summary()['soft_zone']['windows']
+    assert f'; {carried} of them carried over from earlier streams of this reducer' in said[0]
+    assert chained['soft_zone']['windows'] >= carried
+    said = [line for line in older['inputs'] if 'an earlier recording of this' in line]
     assert len(said) == 1 and 'has not shown it yet' in said[0]
-    assert not any('an earlier recording' in line for line in alone['inputs'])
+    assert not any('an earlier recording' in line or 'narrower' in line
+                   for line in alone['inputs'])

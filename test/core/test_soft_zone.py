@@ -260,7 +260,7 @@ def test_bins_of_a_flanks_worth_decide_once_there_are_enough_of_them():
 def test_a_check_continued_from_its_state_goes_on_exactly_as_the_one_that_ran_on():
     # te_monitor keeps the check's pools across a restart: the restarted check says what
     # the running one says, with the same figures, window after window.
-    first, later = _catalogue_bins(2.0, 0.05, windows=3), _scattered(8, 0.7)
+    first, later = _catalogue_bins(2.0, 0.05), _scattered(8, 0.7)
     running = _checked(*first)
     restarted = SoftZoneCheck(TEST_TORQUE, STIFFNESS)
     restarted.continue_from(json.loads(json.dumps(running.state())))
@@ -270,6 +270,9 @@ def test_a_check_continued_from_its_state_goes_on_exactly_as_the_one_that_ran_on
             check.observe(*(a[k:k + 1] for a in later))
         assert restarted.said == running.said and restarted.shortfall == running.shortfall
     assert restarted.other_reducer(running.state()) is None
+    # Its line says how much of the evidence came before the restart.
+    assert '(12 windows; 4 of them carried over from earlier streams of this reducer' \
+        in restarted.reason and 'carried over' not in running.reason
 
 
 def test_a_check_state_of_another_reducer_is_said_and_a_broken_one_refused():
