@@ -9,50 +9,26 @@ Restoring falls back to the backup, and a file that neither it nor its backup ca
 continue from is an error naming both reasons, never a silent fresh start.
 """
 
-from pathlib import Path
-
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.joint_twin import FRONT_STATE_KIND
-from reducer_twin.io.state_file import backup_path, decode_state, encode_state
-from reducer_twin.io.state_file import StateWriter, write_state_file
+from reducer_twin.io.state_file import backup_path, decode_state, KeptStateFile
 
 WHAT = 'te_monitor state'
 """What the file holds, for messages."""
 
 
-class FrontStateFile:
+class FrontStateFile(KeptStateFile):
     """
     The state file of one joint's ``te_monitor``.
 
-    Parameters
-    ----------
-    path : str or Path
-        State file: continued from on start (falling back to its ``.bak`` copy), written
-        atomically after every batch of windows.
-    background : bool
-        Write on a :class:`~reducer_twin.io.state_file.StateWriter` thread (live node)
-        instead of in :meth:`save`.
-
-    Attributes
-    ----------
-    writer : StateWriter or None
-        The background writer (``error``, ``failures``, ``recoveries``, ``written``).
-
-    Raises
-    ------
-    StateFileError
-        If the directory of the file cannot be created.
+    Continued from on start (falling back to its ``.bak`` copy), written atomically after
+    every batch of windows (see :class:`~reducer_twin.io.state_file.KeptStateFile` for the
+    parameters and the writer).
 
     """
 
-    def __init__(self, path, background=False):
-        self.path = Path(path)
-        try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        except OSError as err:
-            raise StateFileError(f'cannot create the directory of the {WHAT} {self.path}: '
-                                 f'{err}') from err
-        self.writer = StateWriter() if background else None
+    kind = FRONT_STATE_KIND
+    what = WHAT
 
     def restore(self, front):
         """
@@ -88,24 +64,3 @@ class FrontStateFile:
             except StateFileError as err:
                 errors.append(str(err) if str(err).startswith(str(path)) else f'{path}: {err}')
         raise StateFileError(f'no usable {WHAT}: {errors[0]}; backup: {errors[1]}')
-
-    def save(self, state):
-        """
-        Persist :meth:`TwinFront.state` now, or queue it for the writer thread.
-
-        Raises
-        ------
-        StateFileError
-            If writing in place fails.
-
-        """
-        data = encode_state(state, FRONT_STATE_KIND)
-        if self.writer is None:
-            write_state_file(self.path, data, FRONT_STATE_KIND, WHAT)
-        else:
-            self.writer.submit(self.path, data, FRONT_STATE_KIND, WHAT)
-
-    def flush(self):
-        """Wait until the queued states are written (a no-op without a writer)."""
-        if self.writer is not None:
-            self.writer.flush()

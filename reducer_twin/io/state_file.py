@@ -400,21 +400,24 @@ class StateWriter:
                 self._queue.task_done()
 
 
-class StateFile:
+class KeptStateFile:
     """
-    The state file of one reducer's estimator, as an EstimatorStage uses it.
+    A state file written atomically with a backup: in place, or on a writer thread.
 
     Parameters
     ----------
     path : str or Path
-        State file: restored on start (falling back to its ``.bak`` copy),
-        written atomically after every window.
+        State file: written atomically (the previous good one kept as ``<path>.bak``).
     background : bool
         Write on a :class:`StateWriter` thread (live nodes) instead of in
         :meth:`save` (offline, tests).
 
     Attributes
     ----------
+    kind : str
+        What the state is of (the file's ``format`` is ``<kind>.file``).
+    what : str
+        What the file holds, for messages.
     writer : StateWriter or None
         The background writer (its ``error``, ``failures``, ``recoveries``
         and ``written`` tell how writing goes), None when writing in place.
@@ -426,6 +429,9 @@ class StateFile:
 
     """
 
+    kind = STATE_KIND
+    what = 'estimator state'
+
     def __init__(self, path, background=False):
         self.path = Path(path)
         # A fresh machine has no ~/.local/state/reducer_twin: make it now, so that the
@@ -433,9 +439,45 @@ class StateFile:
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as err:
-            raise StateFileError(f'cannot create the directory of the estimator state '
+            raise StateFileError(f'cannot create the directory of the {self.what} '
                                  f'{self.path}: {err}') from err
         self.writer = StateWriter() if background else None
+
+    def save(self, state):
+        """
+        Persist a state dict now, or queue it for the writer thread.
+
+        Parameters
+        ----------
+        state : dict
+            The state (:meth:`WearEstimator.state_dict`, ...), encoded at once.
+
+        Raises
+        ------
+        StateFileError
+            If writing in place fails.
+
+        """
+        data = encode_state(state, self.kind)
+        if self.writer is None:
+            write_state_file(self.path, data, self.kind, self.what)
+        else:
+            self.writer.submit(self.path, data, self.kind, self.what)
+
+    def flush(self):
+        """Wait until the queued states are written (a no-op without a writer)."""
+        if self.writer is not None:
+            self.writer.flush()
+
+
+class StateFile(KeptStateFile):
+    """
+    The state file of one reducer's estimator, as an EstimatorStage uses it.
+
+    Restored on start (falling back to its ``.bak`` copy), written atomically after every
+    window (see :class:`KeptStateFile` for the parameters).
+
+    """
 
     def restore(self, params, config=None):
         """
@@ -462,29 +504,3 @@ class StateFile:
         if not (self.path.exists() or backup_path(self.path).exists()):
             return None
         return load_with_fallback(self.path, params, config)
-
-    def save(self, state):
-        """
-        Persist a state dict now, or queue it for the writer thread.
-
-        Parameters
-        ----------
-        state : dict
-            :meth:`WearEstimator.state_dict`, encoded at once.
-
-        Raises
-        ------
-        StateFileError
-            If writing in place fails.
-
-        """
-        data = encode_state(state)
-        if self.writer is None:
-            write_state_file(self.path, data)
-        else:
-            self.writer.submit(self.path, data)
-
-    def flush(self):
-        """Wait until the queued states are written (a no-op without a writer)."""
-        if self.writer is not None:
-            self.writer.flush()
