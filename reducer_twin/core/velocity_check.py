@@ -208,9 +208,18 @@ def baseline_rate(t, theta, baseline_s=VELOCITY_CHECK_BASELINE_S):
     return out
 
 
+ANGLES_IN_DEGREES = 'angles in degrees, the velocity in radians per second'
+"""
+The form of a field that reads pi/180 times the angle's rate: the positions are published in
+degrees. The TE is then in degrees too, and the joint is refused as encoders that do not
+measure one motion (spans of degrees); :meth:`.joint_twin.TwinFront.refusal` names the units.
+"""
+
 _KNOWN_FORMS = ((-1.0, 'the other sense'),
                 (60.0 / (2.0 * math.pi), 'revolutions per minute'),
-                (180.0 / math.pi, 'degrees per second'))
+                (180.0 / math.pi, 'degrees per second'),
+                (math.pi / 180.0, ANGLES_IN_DEGREES),
+                (2.0 * math.pi, 'angles in revolutions, the velocity in radians per second'))
 
 
 class VelocityCheck:

@@ -263,6 +263,22 @@ def test_a_stream_too_slow_for_the_transmission_error_is_said_to_be(
         assert 'degrees' not in got['reason']
 
 
+def test_positions_published_in_degrees_are_declared_not_observed_naming_the_units(
+        original, tmp_path, capsys):
+    # A driver that publishes its joints' positions in degrees (the velocity in rad/s): the
+    # TE spans degrees. At 250 Hz its samples jump against each other as spikes, and the
+    # reason names degrees among their causes; at 1 kHz the velocity field names them
+    # (test_joint_twin.py). Never an estimate.
+    js = original[0]
+    bag = _rewrite(js, tmp_path, 'degrees', position=np.degrees(js.position))
+    code, out, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 3
+    for joint in ('joint_1', 'joint_2'):
+        got = out['joints'][joint]
+        assert got['observed'] is False and got['wear_um'] is None
+        assert 'positions in degrees' in got['reason']
+
+
 def _cli_json(bag, tmp_path, capsys, *extra, out='d'):
     code = main(['analyze', str(bag), '--out', str(tmp_path / out), '--json',
                  *(str(x) for x in extra)])

@@ -513,3 +513,22 @@ def test_until_the_offset_is_learnt_a_chunk_of_any_length_reads_as_short_pieces(
     assert said[0] is not None and said[1] is not None
     assert said[1]['shortfall'] == pytest.approx(said[0]['shortfall'], rel=0.01)
     assert said[1]['shortfall_sd'] == pytest.approx(said[0]['shortfall_sd'], rel=0.1)
+
+
+def test_angles_published_in_degrees_are_refused_naming_the_units():
+    # A driver that publishes positions in degrees beside a velocity in rad/s: the TE
+    # spans degrees and the joint is refused as encoders that do not measure one motion,
+    # whose causes named a frozen encoder, a reversed motor, swapped entries or a wrong
+    # ratio, none of which was the case. The velocity field reads pi/180 of the angle's rate.
+    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
+                                           initial_wear_m=8e-6, seed=4))
+    b = sim.step(30000)
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
+    for k in range(0, b.t.size, 500):
+        piece = slice(k, k + 500)
+        front.update(b.t[piece], np.degrees(b.motor_angle[piece]),
+                     np.degrees(b.link_angle[piece]), b.effort[piece], b.link_velocity[piece])
+    reason = front.refusal(front.analyzer.not_observed_reason('/joint_states'))
+    assert reason.startswith('the motor and link encoders do not measure the same motion')
+    assert 'the angles look published in degrees: the velocity field reads 0.0175 times the ' \
+        'rate of the link angle' in reason and reason.endswith('publish them in radians')
