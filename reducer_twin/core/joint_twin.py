@@ -33,7 +33,7 @@ from .pipeline import EstimatorStage, features_from_record, features_record, Lif
 from .pipeline import LifeStage, reducer_state, TimeOffsetCalibration
 from .te_extraction import TEExtractor, TIME_OFFSET_LINEAR_S
 from .units import HOUR, m_to_um, rad_to_arcmin
-from .velocity_check import ANGLES_IN_DEGREES
+from .velocity_check import ANGLE_UNITS, angles_in
 from .window_analysis import WindowAnalyzer
 
 TOPIC_NAMESPACE = 'reducer_twin'
@@ -649,23 +649,25 @@ class TwinFront:
         for what its TE then shows (an effort of the other sign, encoders that do not
         measure one motion); the line naming the ratio (:mod:`.travel_ratio`) follows, as
         does the one of encoders stamped milliseconds apart (whose TE follows the speed
-        until the offset is learnt), and the velocity field's when it shows the angles
-        published in degrees (:data:`.velocity_check.ANGLES_IN_DEGREES`: the TE then spans
-        degrees). ``None`` (observed) stays ``None``. The nodes' ``/diagnostics`` and the
-        analysis of recordings both give this reason.
+        until the offset is learnt). Where the velocity field shows the angles published
+        in degrees or revolutions (:data:`.velocity_check.ANGLE_UNITS`), that leads: the TE
+        is then in those units, and what it shows follows from them. ``None`` (observed)
+        stays ``None``. The nodes' ``/diagnostics`` and the analysis of recordings both
+        give this reason.
         """
         if reason is None:
             return None
-        velocity = self.analyzer.velocity_fault
-        units = None
-        if velocity is not None and ANGLES_IN_DEGREES in velocity:
-            units = ('the angles look published in degrees: the velocity field reads '
-                     f'{self.analyzer.velocity_scale:.4f} times the rate of the link angle '
-                     '(pi/180, a velocity in radians per second beside angles in degrees); '
-                     'positions are read in radians (REP 103), so the transmission error '
-                     'spans degrees: publish them in radians')
-        said = (self.extractor.ratio_reason, self.calibration.reason, units)
-        return '; '.join([reason] + [line for line in said if line is not None])
+        said = (self.extractor.ratio_reason, self.calibration.reason)
+        reason = '; '.join([reason] + [line for line in said if line is not None])
+        velocity = self.analyzer.velocity_fault or ''
+        for unit, (_, written) in ANGLE_UNITS.items():
+            if angles_in(unit) in velocity:
+                return (f'the angles look published in {unit}: the velocity field reads '
+                        f'{self.analyzer.velocity_scale:.4g} times the rate of the link '
+                        f'angle ({written}, a velocity in radians per second beside angles '
+                        f'in {unit}); positions are read in radians (REP 103): publish them '
+                        f'in radians. What the transmission error in {unit} shows: {reason}')
+        return reason
 
     @property
     def calibrating(self):

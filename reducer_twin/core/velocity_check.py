@@ -208,18 +208,25 @@ def baseline_rate(t, theta, baseline_s=VELOCITY_CHECK_BASELINE_S):
     return out
 
 
-ANGLES_IN_DEGREES = 'angles in degrees, the velocity in radians per second'
+ANGLE_UNITS = {'degrees': (math.pi / 180.0, 'pi/180'), 'revolutions': (2.0 * math.pi, '2 pi')}
 """
-The form of a field that reads pi/180 times the angle's rate: the positions are published in
-degrees. The TE is then in degrees too, and the joint is refused as encoders that do not
-measure one motion (spans of degrees); :meth:`.joint_twin.TwinFront.refusal` names the units.
+Units other than radians a controller may publish its positions in, by the ratio of a
+velocity field in radians per second to their rate (and how that ratio is written). The
+TE is then in those units too, and the joint is refused for what that TE shows (degrees:
+encoders that do not measure one motion; revolutions: an effort 6 times the torque):
+:meth:`.joint_twin.TwinFront.refusal` leads with the units.
 """
+
+
+def angles_in(unit):
+    """Return the name of the velocity form of positions published in ``unit``."""
+    return f'angles in {unit}, the velocity in radians per second'
+
 
 _KNOWN_FORMS = ((-1.0, 'the other sense'),
                 (60.0 / (2.0 * math.pi), 'revolutions per minute'),
                 (180.0 / math.pi, 'degrees per second'),
-                (math.pi / 180.0, ANGLES_IN_DEGREES),
-                (2.0 * math.pi, 'angles in revolutions, the velocity in radians per second'))
+                *((value, angles_in(unit)) for unit, (value, _) in ANGLE_UNITS.items()))
 
 
 class VelocityCheck:

@@ -515,20 +515,26 @@ def test_until_the_offset_is_learnt_a_chunk_of_any_length_reads_as_short_pieces(
     assert said[1]['shortfall_sd'] == pytest.approx(said[0]['shortfall_sd'], rel=0.1)
 
 
-def test_angles_published_in_degrees_are_refused_naming_the_units():
-    # A driver that publishes positions in degrees beside a velocity in rad/s: the TE
-    # spans degrees and the joint is refused as encoders that do not measure one motion,
-    # whose causes named a frozen encoder, a reversed motor, swapped entries or a wrong
-    # ratio, none of which was the case. The velocity field reads pi/180 of the angle's rate.
+@pytest.mark.parametrize('unit, scale, ratio, shows', [
+    ('degrees', 180.0 / np.pi, '0.01746 times', 'the motor and link encoders do not measure'),
+    ('revolutions', 0.5 / np.pi, '6.283 times', 'the effort is not the output torque'),
+])
+def test_angles_published_in_other_units_are_refused_naming_the_units_first(
+        unit, scale, ratio, shows):
+    # A driver that publishes positions in degrees (or revolutions) beside a velocity in
+    # rad/s: the TE is in those units. The joint was refused for what that TE shows, with
+    # its causes (a frozen encoder, swapped entries; an effort in other units, with the
+    # advice to set effort_scale), none of which was the case.
     sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
                                            initial_wear_m=8e-6, seed=4))
-    b = sim.step(30000)
+    b = sim.step(60000)
     front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
     for k in range(0, b.t.size, 500):
         piece = slice(k, k + 500)
-        front.update(b.t[piece], np.degrees(b.motor_angle[piece]),
-                     np.degrees(b.link_angle[piece]), b.effort[piece], b.link_velocity[piece])
+        front.update(b.t[piece], scale * b.motor_angle[piece], scale * b.link_angle[piece],
+                     b.effort[piece], b.link_velocity[piece])
     reason = front.refusal(front.analyzer.not_observed_reason('/joint_states'))
-    assert reason.startswith('the motor and link encoders do not measure the same motion')
-    assert 'the angles look published in degrees: the velocity field reads 0.0175 times the ' \
-        'rate of the link angle' in reason and reason.endswith('publish them in radians')
+    assert reason.startswith(f'the angles look published in {unit}: the velocity field reads '
+                             f'{ratio} the rate of the link angle')
+    assert f'publish them in radians. What the transmission error in {unit} shows: {shows}' \
+        in reason
