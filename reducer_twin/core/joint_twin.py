@@ -658,21 +658,42 @@ class TwinFront:
         if reason is None:
             return None
         said = (self.extractor.ratio_reason, self.calibration.reason)
-        reason = '; '.join([reason] + [line for line in said if line is not None])
         velocity = self.analyzer.velocity_fault or ''
         for unit, (_, written) in ANGLE_UNITS.items():
             if angles_in(unit) in velocity:
+                reason = '; '.join([reason] + [line for line in said if line is not None])
                 return (f'the angles look published in {unit}: the velocity field reads '
                         f'{self.analyzer.velocity_scale:.4g} times the rate of the link '
                         f'angle ({written}, a velocity in radians per second beside angles '
                         f'in {unit}); positions are read in radians (REP 103): publish them '
                         f'in radians. What the transmission error in {unit} shows: {reason}')
-        return reason
+        said += (self._in_degrees(reason),)
+        return '; '.join([reason] + [line for line in said if line is not None])
 
     @property
     def calibrating(self):
         """Whether the stream goes in :data:`CALIBRATION_PIECE_S` pieces (offset not settled)."""
         return not self.calibration.settled and self.windows < CALIBRATION_WINDOWS
+
+    def _in_degrees(self, reason):
+        """
+        Say when a TE of degrees comes with the configured ratio: the angles in degrees.
+
+        Encoders refused as not measuring one motion whose motor still turns the
+        configured number of times the link (within 1 %) do measure one; a TE span of
+        degrees is then arcminutes read in degrees (without a velocity field to show it).
+        """
+        travel = self.extractor.travel
+        measured = travel.measured if travel is not None else None
+        if measured is None or not reason.startswith(
+                'the motor and link encoders do not measure the same motion') or \
+                not abs(measured / self.ratio - 1.0) <= 0.01:
+            return None
+        span = math.degrees(self.analyzer.fit.largest_te_span)
+        return (f'but the motor turns {measured:.2f} times the link, the configured ratio '
+                f'({self.ratio:.4g}), so they do: read in degrees, a span of {span:.3g} is '
+                f"{span * 60.0 / math.degrees(1.0):.3g} arcmin, a reducer's. The angles look "
+                'published in degrees: publish them in radians (REP 103)')
 
     def update(self, t_s, motor, link, effort, velocity):
         """

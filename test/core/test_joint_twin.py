@@ -538,3 +538,21 @@ def test_angles_published_in_other_units_are_refused_naming_the_units_first(
                              f'{ratio} the rate of the link angle')
     assert f'publish them in radians. What the transmission error in {unit} shows: {shows}' \
         in reason
+
+
+def test_without_a_velocity_field_a_te_of_degrees_with_the_configured_ratio_says_degrees():
+    # The same positions in degrees without a velocity field: the motor still turns the
+    # configured ratio times the link, so the encoders do measure one motion, in degrees.
+    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
+                                           initial_wear_m=8e-6, seed=4))
+    b = sim.step(60000)
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
+    for k in range(0, b.t.size, 500):
+        piece = slice(k, k + 500)
+        front.update(b.t[piece], np.degrees(b.motor_angle[piece]),
+                     np.degrees(b.link_angle[piece]), b.effort[piece], np.full(500, np.nan))
+    reason = front.refusal(front.analyzer.not_observed_reason('/joint_states'))
+    assert reason.startswith('the motor and link encoders do not measure the same motion')
+    assert reason.endswith('the configured ratio (81), so they do: read in degrees, a span of '
+                           "5.41 is 5.67 arcmin, a reducer's. The angles look published in "
+                           'degrees: publish them in radians (REP 103)')
