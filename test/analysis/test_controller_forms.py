@@ -263,22 +263,6 @@ def test_a_stream_too_slow_for_the_transmission_error_is_said_to_be(
         assert 'degrees' not in got['reason']
 
 
-def test_positions_published_in_degrees_are_declared_not_observed_naming_the_units(
-        original, tmp_path, capsys):
-    # A driver that publishes its joints' positions in degrees (the velocity in rad/s): the
-    # TE spans degrees. At 250 Hz its samples jump against each other as spikes, and the
-    # reason names degrees among their causes; at 1 kHz the velocity field names them
-    # (test_joint_twin.py). Never an estimate.
-    js = original[0]
-    bag = _rewrite(js, tmp_path, 'degrees', position=np.degrees(js.position))
-    code, out, err = _cli_json(bag, tmp_path, capsys)
-    assert code == 3
-    for joint in ('joint_1', 'joint_2'):
-        got = out['joints'][joint]
-        assert got['observed'] is False and got['wear_um'] is None
-        assert 'positions in degrees' in got['reason']
-
-
 def _cli_json(bag, tmp_path, capsys, *extra, out='d'):
     code = main(['analyze', str(bag), '--out', str(tmp_path / out), '--json',
                  *(str(x) for x in extra)])
@@ -756,15 +740,23 @@ def test_a_link_encoder_coarse_for_an_early_growth_is_said(
         assert 'steps of 0.16 arcmin' in lines[0] and 'early in its life' in lines[0]
 
 
-def test_all_zero_header_stamps_are_declared_as_stamps_that_do_not_advance(
-        original, tmp_path, capsys):
+@pytest.mark.parametrize('rewrite, said', [
+    (lambda js: {'stamps_ns': np.zeros_like(js.stamps_ns)},
+     'stamps do not advance on /joint_states'),
+    # Positions in degrees (the velocity in rad/s): the TE spans degrees. At 250 Hz the
+    # samples jump against each other as spikes, whose reason names degrees among their
+    # causes; at 1 kHz the velocity field names them (test_joint_twin.py).
+    (lambda js: {'position': np.degrees(js.position)}, 'positions in degrees'),
+], ids=['all-zero header stamps', 'positions in degrees'])
+def test_a_form_that_cannot_be_read_is_declared_not_observed_naming_it(
+        original, tmp_path, capsys, rewrite, said):
     js = original[0]
-    bag = _rewrite(js, tmp_path, 'zero', stamps_ns=np.zeros_like(js.stamps_ns))
+    bag = _rewrite(js, tmp_path, 'form', **rewrite(js))
     code, out, err = _cli_json(bag, tmp_path, capsys)
     assert code == 3
     for got in out['joints'].values():
-        assert got['observed'] is False
-        assert 'stamps do not advance on /joint_states' in got['reason']
+        assert got['observed'] is False and got['wear_um'] is None
+        assert said in got['reason']
 
 
 def test_an_observed_joint_reports_its_windows_and_no_reason(original):

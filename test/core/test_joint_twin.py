@@ -515,6 +515,20 @@ def test_until_the_offset_is_learnt_a_chunk_of_any_length_reads_as_short_pieces(
     assert said[1]['shortfall_sd'] == pytest.approx(said[0]['shortfall_sd'], rel=0.1)
 
 
+def _refused_in_units(scale, velocity=True):
+    """Return the refusal of a joint whose angles are published ``scale`` times radians."""
+    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
+                                           initial_wear_m=8e-6, seed=4))
+    b = sim.step(60000)
+    field = b.link_velocity if velocity else np.full(b.t.size, np.nan)
+    front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
+    for k in range(0, b.t.size, 500):
+        piece = slice(k, k + 500)
+        front.update(b.t[piece], scale * b.motor_angle[piece], scale * b.link_angle[piece],
+                     b.effort[piece], field[piece])
+    return front.refusal(front.analyzer.not_observed_reason('/joint_states'))
+
+
 @pytest.mark.parametrize('unit, scale, ratio, shows', [
     ('degrees', 180.0 / np.pi, '0.01746 times', 'the motor and link encoders do not measure'),
     ('revolutions', 0.5 / np.pi, '6.283 times', 'the effort is not the output torque'),
@@ -525,15 +539,7 @@ def test_angles_published_in_other_units_are_refused_naming_the_units_first(
     # rad/s: the TE is in those units. The joint was refused for what that TE shows, with
     # its causes (a frozen encoder, swapped entries; an effort in other units, with the
     # advice to set effort_scale), none of which was the case.
-    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
-                                           initial_wear_m=8e-6, seed=4))
-    b = sim.step(60000)
-    front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
-    for k in range(0, b.t.size, 500):
-        piece = slice(k, k + 500)
-        front.update(b.t[piece], scale * b.motor_angle[piece], scale * b.link_angle[piece],
-                     b.effort[piece], b.link_velocity[piece])
-    reason = front.refusal(front.analyzer.not_observed_reason('/joint_states'))
+    reason = _refused_in_units(scale)
     assert reason.startswith(f'the angles look published in {unit}: the velocity field reads '
                              f'{ratio} the rate of the link angle')
     assert f'publish them in radians. What the transmission error in {unit} shows: {shows}' \
@@ -543,15 +549,7 @@ def test_angles_published_in_other_units_are_refused_naming_the_units_first(
 def test_without_a_velocity_field_a_te_of_degrees_with_the_configured_ratio_says_degrees():
     # The same positions in degrees without a velocity field: the motor still turns the
     # configured ratio times the link, so the encoders do measure one motion, in degrees.
-    sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
-                                           initial_wear_m=8e-6, seed=4))
-    b = sim.step(60000)
-    front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
-    for k in range(0, b.t.size, 500):
-        piece = slice(k, k + 500)
-        front.update(b.t[piece], np.degrees(b.motor_angle[piece]),
-                     np.degrees(b.link_angle[piece]), b.effort[piece], np.full(500, np.nan))
-    reason = front.refusal(front.analyzer.not_observed_reason('/joint_states'))
+    reason = _refused_in_units(180.0 / np.pi, velocity=False)
     assert reason.startswith('the motor and link encoders do not measure the same motion')
     assert reason.endswith('the configured ratio (81), so they do: read in degrees, a span of '
                            "5.41 is 5.67 arcmin, a reducer's. The angles look published in "
