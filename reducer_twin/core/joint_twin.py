@@ -28,6 +28,7 @@ import numpy as np
 from .errors import InvalidParameter, StateFileError
 from .ingest import IngestConfig
 from .kinematics import total_ratio
+from .observability import UNLIKE_MOTIONS
 from .params import _Validated, spec
 from .pipeline import EstimatorStage, features_from_record, features_record, LifeConfig
 from .pipeline import LifeStage, reducer_state, TimeOffsetCalibration
@@ -685,8 +686,7 @@ class TwinFront:
         """
         travel = self.extractor.travel
         measured = travel.measured if travel is not None else None
-        if measured is None or not reason.startswith(
-                'the motor and link encoders do not measure the same motion') or \
+        if measured is None or not reason.startswith(UNLIKE_MOTIONS) or \
                 not abs(measured / self.ratio - 1.0) <= 0.01:
             return None
         span = math.degrees(self.analyzer.fit.largest_te_span)

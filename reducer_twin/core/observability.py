@@ -17,6 +17,9 @@ from .units import ARCMIN, ARCSEC
 from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ
 from .window_fit import PLAUSIBLE_TE_SPAN_RAD
 
+UNLIKE_MOTIONS = 'the motor and link encoders do not measure the same motion'
+"""How the reason for windows whose TE spans degrees begins (:func:`not_observed_reason`)."""
+
 DERIVED_LINK_SPAN_RAD = 0.1 * ARCMIN
 """
 Transmission-error span [rad] below which a link angle is the motor's divided by the ratio.
@@ -69,7 +72,7 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
     if analyzer.windows_emitted == 0:
         return f'no complete analysis window yet ({seen} samples)'
     if analyzer.fit.windows_implausible:
-        return (f'the motor and link encoders do not measure the same motion: the '
+        return (f'{UNLIKE_MOTIONS}: the '
                 f'transmission error spans up to {math.degrees(analyzer.fit.largest_te_span):.3g} '
                 f'deg in {analyzer.fit.windows_implausible} of {analyzer.windows_emitted} windows '
                 f"(a reducer's moves by arcminutes; at most "

@@ -343,11 +343,12 @@ class SoftZoneCheck:
         waiting = [(int(w), str(kind), *(np.array(v, dtype=float) for v in arrays))
                    for w, kind, *arrays in state['waiting']]
         seen, standing = int(state['seen']), state['standing']
-        if line.shape != (5,) or any(s.shape != (6,) for s in sums.values()) or not all(
-                np.all(np.isfinite(a)) for a in [line, *sums.values()]) or any(
-                kind not in sums or not (t.ndim == 1 and t.shape == h.shape == sd.shape)
-                or not w <= seen for w, kind, t, h, sd in waiting) \
-                or not isinstance(standing, bool):
+        sizes = line.shape == (5,) and all(s.shape == (6,) for s in sums.values())
+        bins = all(kind in sums and w <= seen and t.ndim == 1 and t.shape == h.shape == sd.shape
+                   for w, kind, t, h, sd in waiting)
+        arrays = [line, *sums.values(), *(a for w in waiting for a in w[2:])]
+        if not (sizes and bins and all(np.all(np.isfinite(a)) for a in arrays)
+                and isinstance(standing, bool)):
             raise ValueError('line must be 5 finite sums, full and thin 6 each, waiting '
                              '[window, kind, torques, widths, sds] of windows seen, '
                              'standing true or false')

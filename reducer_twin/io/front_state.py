@@ -12,6 +12,7 @@ continue from is an error naming both reasons, never a silent fresh start.
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.joint_twin import FRONT_STATE_KIND
 from reducer_twin.io.state_file import backup_path, decode_state, KeptStateFile
+from reducer_twin.io.state_file import read_with_fallback
 
 WHAT = 'te_monitor state'
 """What the file holds, for messages."""
@@ -51,16 +52,20 @@ class FrontStateFile(KeptStateFile):
             If a file exists but neither it nor its backup can be continued from.
 
         """
-        backup = backup_path(self.path)
-        if not (self.path.exists() or backup.exists()):
+        if not (self.path.exists() or backup_path(self.path).exists()):
             return None
-        errors = []
-        for path in (self.path, backup):
-            try:
-                state = decode_state(path.read_bytes(), path, FRONT_STATE_KIND)
-                return path, front.continue_from(state)
-            except OSError as err:
-                errors.append(f'cannot read {WHAT} {path}: {err}')
-            except StateFileError as err:
-                errors.append(str(err) if str(err).startswith(str(path)) else f'{path}: {err}')
-        raise StateFileError(f'no usable {WHAT}: {errors[0]}; backup: {errors[1]}')
+        lines, used, _ = read_with_fallback(self.path, lambda p: _continue(p, front), WHAT)
+        return used, lines
+
+
+def _continue(path, front):
+    """Continue ``front`` from one file; a StateFileError names the file."""
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise StateFileError(f'cannot read {WHAT} {path}: {err}') from err
+    state = decode_state(data, path, FRONT_STATE_KIND)
+    try:
+        return front.continue_from(state)
+    except StateFileError as err:
+        raise StateFileError(f'{path}: {err}') from err

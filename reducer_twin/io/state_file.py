@@ -174,18 +174,45 @@ def load_with_fallback(path, params, config=None):
         If neither the primary nor the backup file can be used.
 
     """
+    (est, shortfall), used, primary = read_with_fallback(
+        path, lambda p: _load(p, params, config), 'estimator state')
+    return LoadedState(est, used, primary is not None, primary, shortfall)
+
+
+def read_with_fallback(path, load, what):
+    """
+    Read a state file with ``load``, falling back to ``<path>.bak`` if the primary fails.
+
+    Parameters
+    ----------
+    path : str or Path
+        Primary state file.
+    load : callable
+        Reads one file (a Path); raises :class:`StateFileError` naming it when unusable.
+    what : str
+        What the file holds, for the message when neither can be used.
+
+    Returns
+    -------
+    tuple
+        ``(load's result, the file used, why the primary was not used or None)``.
+
+    Raises
+    ------
+    StateFileError
+        If neither file can be used: both reasons.
+
+    """
     path = Path(path)
     try:
-        est, shortfall = _load(path, params, config)
+        return load(path), path, None
     except StateFileError as primary:
         backup = backup_path(path)
         try:
-            est, shortfall = _load(backup, params, config)
+            return load(backup), backup, str(primary)
         except StateFileError as secondary:
-            raise StateFileError(
-                f'no usable estimator state: {primary}; backup: {secondary}') from primary
-        return LoadedState(est, backup, True, str(primary), shortfall)
-    return LoadedState(est, path, False, None, shortfall)
+            raise StateFileError(f'no usable {what}: {primary}; backup: {secondary}') \
+                from primary
 
 
 def canonical_json(state):

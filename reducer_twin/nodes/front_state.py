@@ -51,6 +51,8 @@ class FrontKeeper:
     ----------
     file : FrontStateFile or None
         The state file, written on a background thread; None to keep no state.
+    heard : int
+        Maintenance events heard (each is followed once; one heard again is not).
 
     Raises
     ------
@@ -63,6 +65,7 @@ class FrontKeeper:
     def __init__(self, node, joint, twin, state_file, state_dir):
         self.log = node.get_logger()
         self.joint, self.twin = joint, twin
+        self.heard = 0
         path = state_path(joint, state_file, state_dir, SUFFIX)
         self.file = None if path is None else FrontStateFile(path, background=True)
         restored = self.file.restore(twin) if self.file is not None else None
@@ -75,6 +78,7 @@ class FrontKeeper:
 
     def _follow(self, event):
         """Start the window analysis afresh for a replaced reducer, once per event (worker)."""
+        self.heard += 1
         if event == self.twin.maintenance:
             return
         self.twin.new_reducer(event)

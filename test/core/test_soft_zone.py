@@ -282,7 +282,8 @@ def test_a_check_state_of_another_reducer_is_said_and_a_broken_one_refused():
     check = SoftZoneCheck(TEST_TORQUE, STIFFNESS)
     for broken in ({**state, 'thin': [0.0] * 5}, {**state, 'line': [float('inf')] * 5},
                    {**state, 'standing': 'yes'},
-                   {**state, 'waiting': [[state['seen'] + 1, 'full', [1.0], [1.0], [1.0]]]}):
+                   {**state, 'waiting': [[state['seen'] + 1, 'full', [1.0], [1.0], [1.0]]]},
+                   {**state, 'waiting': [[state['seen'], 'full', [1.0], [float('nan')], [1.0]]]}):
         with pytest.raises(ValueError, match='line must be 5 finite sums'):
             check.continue_from(broken)
     assert check.windows == 0 and check.said is None

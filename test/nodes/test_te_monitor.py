@@ -504,7 +504,7 @@ def test_a_reset_of_the_estimator_starts_the_monitors_window_analysis_afresh_onc
     ros.remove(monitor.node)
     again = Monitor(ros, extra, joint=monitor.joint)
     ros.wait_matched(estimator.events)
-    ros.spin_for(0.5)
+    ros.spin_until(lambda: again.node.state.heard > 0, what='the event heard again')
     WORKER.wait_idle()
     assert again.node.twin.maintenance == twin.maintenance
     assert 'started afresh' not in capfd.readouterr().err
