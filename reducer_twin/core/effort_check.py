@@ -59,6 +59,16 @@ then 0.11; at five times 0.22 + 0.09, below :data:`EFFORT_SLOPE_REACH`;
 """
 
 
+TORQUE_SLOPES = (0.68, 1.18)
+"""
+Slope ratios measured at the torque's own scale, across the three generators (least, most).
+
+The range :data:`EFFORT_SLOPE_RANGE` leaves room around. Angles published in revolutions
+(2·pi times smaller than radians) with the effort in N·m read these divided by 2·pi: an
+effort 5.3-9.2 times the torque, which the refusal names beside an effort in other units.
+"""
+
+
 EFFORT_SLOPE_REACH = 0.5
 """
 Slope ratio a window's 1x allowance must lift a ratio below the range to, to spare it.
@@ -359,7 +369,8 @@ class EffortCheck:
                 f'{lo:g}-{hi:g}), so the effort reads about {1.0 / slope:.3g} times the '
                 'torque (a motor current in A, or a motor torque taken for joint units or '
                 'the other way round: motor_effort_units): set effort_scale '
-                '(twin.effort_scale in --config) to the torque per unit of effort')
+                '(twin.effort_scale in --config) to the torque per unit of effort'
+                + _in_revolutions(slope))
 
     def _offset_fault(self, near, far, step, windows):
         """Say that the effort is offset from the torque (medians of the check), or None."""
@@ -375,3 +386,14 @@ class EffortCheck:
                 f"taken its play up (at {self.takeup_torque:.3g} N*m): the effort's zero lies "
                 f"about {step:.3g} N*m from the torque's (a drive's current or torque sensor "
                 'offset, or a load taken off the effort); zero the effort at the drive')
+
+
+def _in_revolutions(slope):
+    """Name angles in revolutions where a slope ratio reads as they give (else '')."""
+    least, most = (r / (2.0 * math.pi) for r in TORQUE_SLOPES)
+    if not least <= slope <= most:
+        return ''
+    return ('; or, if the effort is in N*m, the angles are published in revolutions (a '
+            'transmission error in revolutions grows 2*pi = 6.28 times slower with the '
+            'torque than in radians, and reads so): positions are read in radians (REP '
+            '103), publish them in radians')

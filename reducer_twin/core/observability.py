@@ -79,7 +79,8 @@ def not_observed_reason(analyzer, effort_source='the joint states'):
                 f'{math.degrees(PLAUSIBLE_TE_SPAN_RAD):g} deg and a lost motion of '
                 f'{math.degrees(PLAUSIBLE_LOST_MOTION_RAD) * 60:g} arcmin are read): a '
                 'frozen encoder, a motor encoder that counts against the link, link and '
-                'motor entries swapped, or a wrong reduction ratio or motor_angles')
+                'motor entries swapped, a wrong reduction ratio or motor_angles, or angles '
+                'in degrees or revolutions')
     if fault is not None:
         return fault
     if analyzer.windows_observed:       # every one censored

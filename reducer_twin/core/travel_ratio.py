@@ -13,8 +13,13 @@ itself, the slope of the motor's moves (the link's less the TE's) on the link's 
 a motor move the link does not follow, weighs nothing; a TE step of a turn count restored
 at a wrap, far beyond any move, is left out; the link's noise, in the regressor, is taken off
 its moves' squares), and says when it differs from the configured one by more than
-:data:`RATIO_TOLERANCE`.
+:data:`RATIO_TOLERANCE`. A motor more than half as far off changes the TE by more than
+half of every move, which that gate leaves out: the median ratio of those moves is taken
+instead, and a factor of encoders in mixed units or of the other sense is named
+(:data:`UNIT_FACTORS`).
 """
+
+import math
 
 import numpy as np
 
@@ -44,6 +49,40 @@ _PLAY_RAD = 1e-3
 JUDGE_TRAVEL_RAD = 3.0
 """Link travel [rad] over compared moves before the ratio is judged."""
 
+_IN_RADIANS = 'publish both angles in radians (REP 103)'
+
+UNIT_FACTORS = (
+    (180.0 / math.pi, 'a motor angle in degrees beside a link angle in radians', _IN_RADIANS),
+    (math.pi / 180.0, 'a link angle in degrees beside a motor angle in radians', _IN_RADIANS),
+    (2.0 * math.pi, 'a link angle in revolutions beside a motor angle in radians',
+     _IN_RADIANS),
+    (0.5 / math.pi, 'a motor angle in revolutions beside a link angle in radians',
+     _IN_RADIANS),
+    (-1.0, 'a motor encoder that counts against the link (a negative reduction)',
+     'set motor_direction (twin.motor_direction in --config) to -1'))
+"""
+Measured over configured ratio that encoders in mixed units (or senses) give, what, and the remedy.
+
+Such a motor turns the ratio times a units factor "times the link", far beyond the
+:data:`RATIO_TOLERANCE` a ratio is measured within; a ratio of another reducer lies within
+a factor 0.5-2 of the configured one for the frame sizes' usual ratios (81-185), so none is
+taken for units.
+"""
+
+FACTOR_TOLERANCE = 0.02
+"""Relative difference within which a measured factor is read as one of :data:`UNIT_FACTORS`."""
+
+WIDE_SPREAD = 0.05
+"""
+Interquartile range of the left-out moves' ratios, as a share of their median, read from.
+
+Encoders in mixed units (the model's simulator, 1 kHz): 0.2-1 %; a motor in degrees whose
+moves the turn counts restored fold: quartiles of the ratio at -359 and 640 for 4641.
+"""
+
+_WIDE_MOVES = 100_000
+"""Most ratios of moves the TE gate leaves out that are kept (a stream of another ratio)."""
+
 
 class TravelRatio:
     """
@@ -65,6 +104,8 @@ class TravelRatio:
         self.ratio = float(ratio)
         self.measured = None
         self._sums = np.zeros(3)     # Σ Δl·Δm, Σ Δl², Σ |Δl|
+        self._wide = []              # Δm/Δl of moves the TE gate leaves out
+        self._wide_travel = 0.0      # Σ |Δl| of those
 
     def observe(self, t, link_angle, te):
         """
@@ -89,6 +130,8 @@ class TravelRatio:
         d_te = te[k:] - te[:-k]
         with np.errstate(invalid='ignore'):
             ok = np.abs(d_te) <= 0.5 * np.abs(d_link) + _PLAY_RAD    # NaN: not valid
+        self._left_out(d_link[~ok & (np.abs(d_link) > _PLAY_RAD)],
+                       d_te[~ok & (np.abs(d_link) > _PLAY_RAD)], k)
         d_link, d_motor = d_link[ok], d_link[ok] - d_te[ok]     # the motor's, over i
         # The link's noise is in the regressor: its variance (twice the samples') is taken
         # off the moves' squares, or a noisy link encoder reads a ratio too low.
@@ -96,15 +139,39 @@ class TravelRatio:
         self._sums += [d_link @ d_motor, d_link @ d_link - noise, np.abs(d_link).sum() / k]
         if self._sums[2] >= JUDGE_TRAVEL_RAD and self._sums[1] > 0.0:
             self.measured = float(self.ratio * self._sums[0] / self._sums[1])
+        elif self._wide_travel >= JUDGE_TRAVEL_RAD and self._wide_travel > 2.0 * self._sums[2]:
+            # Most moves change the TE by more than half the link's: a motor that turns
+            # another number of times by far (another frame's ratio, angles in other
+            # units). Their median ratio, which the turn counts restored at wraps (a few
+            # moves) do not move; none where they scatter (a motor in degrees moves by
+            # more than half a turn a sample, and the turn counts restored fold it).
+            quartiles = np.percentile(np.concatenate(self._wide), [25.0, 50.0, 75.0])
+            if quartiles[2] - quartiles[0] <= WIDE_SPREAD * abs(quartiles[1]):
+                self.measured = float(self.ratio * quartiles[1])
+
+    def _left_out(self, d_link, d_te, k):
+        """Keep the ratios of moves beyond the play that the TE gate leaves out."""
+        finite = np.isfinite(d_te)
+        if not finite.any() or sum(a.size for a in self._wide) >= _WIDE_MOVES:
+            return
+        d_link, d_te = d_link[finite], d_te[finite]
+        self._wide.append(1.0 - d_te / d_link)
+        self._wide_travel += float(np.abs(d_link).sum()) / k
 
     def reason(self):
         """Say when the motor turns another number of times than the ratio, else None."""
         if self.measured is None or abs(self.measured / self.ratio - 1.0) <= RATIO_TOLERANCE:
             return None
-        off = 100.0 * (self.measured / self.ratio - 1.0)
-        return (f'the motor encoder turns {self.measured:.5g} times the link where the '
+        factor = self.measured / self.ratio
+        off = 100.0 * (factor - 1.0)
+        said = (f'the motor encoder turns {self.measured:.5g} times the link where the '
                 f'configured reduction ratio is {self.ratio:g} ({off:+.2g} %): the '
                 'transmission error then grows with the angle by that share of it, which no '
-                "reducer's play or twist does; give this reducer's geometry, whose tooth "
-                'counts set the ratio (i = 1 + Zpl/Zs*Zp), in its parameter file or in '
-                '`reducer` / `reducers` of the configuration')
+                "reducer's play or twist does")
+        for value, what, remedy in UNIT_FACTORS:
+            if abs(factor / value - 1.0) <= FACTOR_TOLERANCE:
+                return (f'{said}. That is {value:.4g} times the configured ratio, which '
+                        f'{what} gives: {remedy}')
+        return (f"{said}; give this reducer's geometry, whose tooth counts set the ratio "
+                '(i = 1 + Zpl/Zs*Zp), in its parameter file or in `reducer` / `reducers` of '
+                'the configuration')

@@ -390,6 +390,9 @@ class WindowFit:
             self.windows_implausible += int(implausible.sum())
             self.largest_te_span = max(self.largest_te_span,
                                        float(np.max((te_max - te_min)[implausible])))
+        # Nor a time offset: fitted to a TE no reducer has, it says nothing of the clocks
+        # (encoders in other units read as stamped 0.1-1 s apart, and it was learnt).
+        offset[implausible] = np.nan
         fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant

@@ -44,6 +44,18 @@ def test_an_effort_or_angles_in_other_units_stop_the_lost_motion_with_the_reason
     assert bad.windows_observed + bad.fit.windows_effort_fault <= bad.windows_emitted
 
 
+@pytest.mark.parametrize('effort, angles, named', [
+    (1.0, 0.5 / math.pi, True), (5.0, 1.0, False), (0.1, 1.0, False),
+], ids=['angles in revolutions', 'five times the torque', 'a tenth of the torque'])
+def test_angles_in_revolutions_are_named_where_the_effort_reads_as_they_give(
+        effort, angles, named):
+    # Angles in revolutions grow the TE 2 pi times slower with the torque: without the
+    # units named, the only advice was to scale a right effort by 6.2.
+    fault = _fault_of(simulated()[1], effort, angles).effort_fault
+    assert fault.startswith('the effort is not the output torque')
+    assert ('the angles are published in revolutions' in fault) is named
+
+
 @pytest.mark.parametrize('fraction', [-0.19, -0.1, 0.1, 0.19])
 def test_an_effort_offset_from_the_torque_stops_the_lost_motion_and_names_the_offset(fraction):
     # An effort 80 or 150 N·m off the torque read the wear 22-71 % low, or up to 2.8 times

@@ -515,16 +515,24 @@ def test_until_the_offset_is_learnt_a_chunk_of_any_length_reads_as_short_pieces(
     assert said[1]['shortfall_sd'] == pytest.approx(said[0]['shortfall_sd'], rel=0.1)
 
 
-def _refused_in_units(scale, velocity=True):
-    """Return the refusal of a joint whose angles are published ``scale`` times radians."""
+def _refused_in_units(scale, velocity=True, motor=None):
+    """
+    Return the refusal of a joint whose angles are published ``scale`` times radians.
+
+    ``motor``: the motor angles' own scale, where it differs (the velocity field is the
+    link's, in the link's units).
+    """
     sim = JointSimulator(PARAMS, SimConfig(profile='robot', exact_mesh=False, aging_factor=3.6e3,
                                            initial_wear_m=8e-6, seed=4))
     b = sim.step(60000)
-    field = b.link_velocity if velocity else np.full(b.t.size, np.nan)
+    field = scale * b.link_velocity if velocity else np.full(b.t.size, np.nan)
+    if velocity and motor is None:
+        field = b.link_velocity     # a velocity in rad/s beside angles in other units
+    motor = scale if motor is None else motor
     front = TwinFront(PARAMS, TwinConfig(aging_factor=3.6e3))
     for k in range(0, b.t.size, 500):
         piece = slice(k, k + 500)
-        front.update(b.t[piece], scale * b.motor_angle[piece], scale * b.link_angle[piece],
+        front.update(b.t[piece], motor * b.motor_angle[piece], scale * b.link_angle[piece],
                      b.effort[piece], field[piece])
     return front.refusal(front.analyzer.not_observed_reason('/joint_states'))
 
@@ -544,6 +552,46 @@ def test_angles_published_in_other_units_are_refused_naming_the_units_first(
                              f'{ratio} the rate of the link angle')
     assert f'publish them in radians. What the transmission error in {unit} shows: {shows}' \
         in reason
+
+
+@pytest.mark.parametrize('motor, link, named', [
+    (1.0, 180.0 / np.pi, 'a link angle in degrees beside a motor angle in radians'),
+    (0.5 / np.pi, 1.0, 'a motor angle in revolutions beside a link angle in radians'),
+    (1.0, 0.5 / np.pi, 'a link angle in revolutions beside a motor angle in radians'),
+])
+def test_encoders_in_mixed_units_are_refused_naming_them_and_no_clock_offset(
+        motor, link, named):
+    # One encoder in degrees or revolutions, the other in radians: the TE grows with the
+    # angle by degrees. The refusal named no ratio (the moves fell outside the travel
+    # ratio's gate), and the windows' fits of that TE were learnt as the encoders being
+    # stamped 40-1090 ms apart, said as a fact.
+    reason = _refused_in_units(link, motor=motor)
+    assert reason.startswith('the motor and link encoders do not measure the same motion')
+    assert f'That is {motor / link:.4g} times the configured ratio, which {named} gives: ' \
+        'publish both angles in radians (REP 103)' in reason
+    assert 'stamped' not in reason
+
+
+def test_a_motor_in_degrees_whose_moves_fold_into_turns_is_refused_without_a_ratio():
+    # At 1 kHz such a motor moves more than half a "turn" a sample: no ratio is measured
+    # (rather than a wrong one), and the causes named include angles in degrees.
+    reason = _refused_in_units(1.0, motor=180.0 / np.pi)
+    assert reason.endswith('a wrong reduction ratio or motor_angles, or angles in degrees or '
+                           'revolutions')
+
+
+def test_without_a_velocity_field_angles_in_revolutions_are_named_beside_an_effort_scale():
+    # Positions in revolutions without a velocity field: the TE grows 2 pi times slower with
+    # the torque, read as an effort 6.2 times the torque, and the only advice was to set
+    # effort_scale; nothing in the stream tells the two apart, so both are named.
+    reason = _refused_in_units(0.5 / np.pi, velocity=False)
+    assert reason.startswith('the effort is not the output torque in N*m')
+    assert 'so the effort reads about 6.23 times the torque' in reason
+    assert reason.endswith('; or, if the effort is in N*m, the angles are published in '
+                           'revolutions (a transmission error in revolutions grows 2*pi = '
+                           '6.28 times slower with the torque than in radians, and reads '
+                           'so): positions are read in radians (REP 103), publish them in '
+                           'radians')
 
 
 def test_without_a_velocity_field_a_te_of_degrees_with_the_configured_ratio_says_degrees():

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from reducer_twin.core.te_extraction import compute_te
 from reducer_twin.core.travel_ratio import RATIO_TOLERANCE, TravelRatio
 
 RATIO = 81.0
@@ -74,3 +75,42 @@ def test_a_link_held_between_slower_updates_is_no_noise_to_take_off():
         travel.observe(T[part], held[part], (held - LINK)[part])
     assert travel.measured == pytest.approx(RATIO, rel=1e-4)
     assert travel.reason() is None
+
+
+@pytest.mark.parametrize('ratio_true, said, remedy', [
+    (171.0, 'the motor encoder turns 171 times the link where the configured reduction '
+            'ratio is 81 (+1.1e+02 %)', '`reducer` / `reducers` of the configuration'),
+    (RATIO * 180.0 / math.pi, 'That is 57.3 times the configured ratio, which a motor angle '
+                              'in degrees beside a link angle in radians gives',
+     'publish both angles in radians (REP 103)'),
+    (RATIO * math.pi / 180.0, 'a link angle in degrees beside a motor angle in radians',
+     'publish both angles in radians (REP 103)'),
+    (RATIO / (2.0 * math.pi), 'a motor angle in revolutions beside a link angle in radians',
+     'publish both angles in radians (REP 103)'),
+    (-RATIO, 'That is -1 times the configured ratio, which a motor encoder that counts '
+             'against the link (a negative reduction) gives',
+     'set motor_direction (twin.motor_direction in --config) to -1'),
+], ids=['another frame ratio', 'motor in degrees', 'link in degrees', 'motor in revolutions',
+        'motor reversed'])
+def test_a_motor_far_off_the_ratio_is_measured_from_the_moves_the_te_gate_leaves_out(
+        ratio_true, said, remedy):
+    # Such a TE changes by more than half the link's move on every move, which the gate
+    # against restored turn counts left out: the joint was refused as encoders that do not
+    # measure one motion, with no ratio said.
+    travel = TravelRatio(RATIO)
+    for part in np.array_split(np.arange(T.size), 40):
+        travel.observe(T[part], LINK[part], _te(ratio_true)[part])
+    assert travel.measured == pytest.approx(ratio_true, rel=1e-3)
+    assert said in travel.reason() and travel.reason().endswith(remedy)
+
+
+def test_a_motor_whose_moves_fold_into_turns_is_not_given_a_ratio():
+    # A motor in degrees moves more than half a "turn" a sample at 1 kHz: unwrapped, its
+    # moves fold, their ratios scatter (quartiles -359 and 640 for 4641 on the model's
+    # simulator), and the ratio they would give is no measurement.
+    motor = RATIO * np.degrees(LINK)
+    stream = compute_te(T, motor, T, LINK, RATIO)
+    travel = TravelRatio(RATIO)
+    for part in np.array_split(np.arange(T.size), 40):
+        travel.observe(stream.t[part], stream.output_angle[part], stream.te[part])
+    assert travel.measured is None and travel.reason() is None
