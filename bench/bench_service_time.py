@@ -46,10 +46,13 @@ import time
 
 import independent_generator as gen
 import numpy as np
+from reducer_twin.core.pipeline import LifeConfig
 import third_generator
 
 GENERATORS = {'independent': gen, 'third': third_generator}
 HOUR = 3600.0
+ERROR_H, WARN_H = LifeConfig().error_s / HOUR, LifeConfig().warn_s / HOUR
+"""The default error and warning thresholds on the remaining life P10 [h] (fleet verdicts)."""
 
 
 def analyze(bag, out, config):
@@ -168,6 +171,15 @@ def summarise(name, rows):
               f'{100 * np.mean(abs(ratio - 1) <= 0.3):.0f} %, '
               f'within a factor 2 {100 * np.mean((ratio >= 0.5) & (ratio <= 2)):.0f} %; rate '
               f'resolved {100 * np.mean([r[case]["resolved"] for r in seen]):.0f} %')
+        # A REPLACE the truth does not call for: P10 at or below the fleet's error
+        # threshold on a unit with more than the warning threshold left, its rate resolved
+        # (unresolved, the fleet says WATCH).
+        healthy = truth > WARN_H
+        low = healthy & (p10 <= ERROR_H)
+        resolved = np.array([r[case]['resolved'] for r in seen])
+        print(f'           P10 <= {ERROR_H:g} h on {np.sum(low)} of {np.sum(healthy)} joints with '
+              f'more than {WARN_H:g} h left: {np.sum(low & resolved)} with the rate resolved '
+              f'(REPLACE), {np.sum(low & ~resolved)} not (WATCH)')
     for kind in ('base', 'shoulder', 'forearm', 'model'):
         part = [r for r in rows if r['kind'] == kind and math.isfinite(r['with']['p50'])]
         if part:

@@ -740,15 +740,14 @@ class _Run:
         return [line]
 
     def _rate_said(self, joint, res):
-        """Say when an observed joint's remaining life is the model's wear rate, not its own."""
+        """Say when an observed joint's wear rate is not yet its own (not resolved)."""
         if not (res.observed and len(res.wear)):
             return
         last = dict(zip(WEAR_ESTIMATE.fields, res.wear[-1]))
         if not rate_resolved(last):
-            warn(self.bag, f"{joint}: its remaining life is the model's wear rate at this duty: "
-                 f'{rate_unresolved(last)}; watch it longer, analyse its recordings in '
-                 'time order with --store, or give its operating time before the recording '
-                 '(service_time_s in --config: the hour meter)')
+            warn(self.bag, f'{joint}: {rate_unresolved(last)}; watch it longer, analyse its '
+                 'recordings in time order with --store, or give its operating time before '
+                 'the recording (service_time_s in --config: the hour meter)')
 
     def _service_said(self, joint, res, outputs):
         """

@@ -2,7 +2,7 @@
 The analysis report: PNG plots and one self-contained HTML page per bag.
 
 The page starts with the date, the input path and the verdict table of the fleet view
-(:mod:`reducer_twin.fleet.verdict`: REPLACE / PLAN / OK / NOT OBSERVED with the rule
+(:mod:`reducer_twin.fleet.verdict`: REPLACE / PLAN / WATCH / OK / NOT OBSERVED with the rule
 that gave it). Plots (matplotlib, Agg backend, no display needed): TE over the output
 angle (thinned to :data:`~reducer_twin.analysis.pipeline.REPORT_TE_POINTS` samples per
 joint; the hysteresis the lost motion is read from), the lost-motion trend (observed

@@ -68,6 +68,17 @@ MAX_MESSAGES = 500_000_000
 
 MAX_JOINTS = 12
 
+MAX_REPLAY_SAMPLES = 3_000_000_000
+"""
+Most samples of the joints' life (all joints) passed over to reach ``start_hours``.
+
+A bag continues its seed's life exactly, so the life before its first sample is replayed
+(the wear and the noise draws, about 6 M samples a second per joint: this is some 8
+minutes). At aging factor 1 an 8 000-h unit at 1 kHz would be 2.9e10 samples, hours of
+work without a word: such a request is refused, naming ``start_wear_um`` (a unit met at a
+given wear, its life before not simulated).
+"""
+
 LATEST_QOS = (QosProfile(durability='transient_local'),)
 """QoS rosbag2 records for the nodes' transient-local topics (estimates, truth)."""
 
@@ -105,7 +116,11 @@ class SimulationSpec:
         default (and reads fastest: decompression would double the read cost).
     start_hours : float
         Operating hours of the joints' life at the bag's first sample [h]; the bag
-        continues the life of the same seed from there.
+        continues the life of the same seed from there (replayed up to
+        :data:`MAX_REPLAY_SAMPLES`).
+    start_wear_um : float
+        Combined wear of every joint at the bag's first sample [µm] (0-100): a used unit met
+        at that wear, its life before not simulated (with ``start_hours`` 0).
     robot : str
         The robot's name ('' for none), recorded in ``custom_data``.
 
@@ -124,6 +139,7 @@ class SimulationSpec:
     compression: str = 'none'
     start_hours: float = 0.0
     robot: str = ''
+    start_wear_um: float = 0.0
 
     def __post_init__(self):
         """Check the ranges (the CLI's values arrive here unchanged)."""
@@ -138,6 +154,12 @@ class SimulationSpec:
         finite('--aging-factor', self.aging_factor, '', 0.0, 1e9)
         finite('--rate-hz', self.rate_hz, 'Hz', 0.0, 1e5)
         finite('--start-hours', self.start_hours, 'h', 0.0, 1e6, lo_open=False)
+        finite('--start-wear-um', self.start_wear_um, 'um', 0.0, 100.0, lo_open=False)
+        if self.start_wear_um and self.start_hours:
+            raise InvalidParameter(
+                f'--start-wear-um {self.start_wear_um:g} with --start-hours '
+                f'{self.start_hours:g}: expected one of them (a unit met at a given wear, or '
+                "the continuation of its seed's life from an hour)")
         if not isinstance(self.robot, str) or len(self.robot) > MAX_ROBOT_NAME or \
                 any(c.isspace() or not c.isprintable() for c in self.robot):
             raise InvalidParameter(out_of_range(
@@ -174,6 +196,14 @@ class SimulationSpec:
                 f'--hours {self.hours:g} at --aging-factor {self.aging_factor:g} and --rate-hz '
                 f'{self.rate_hz:g} would write {n:,} messages; expected at most '
                 f'{MAX_MESSAGES:,} (raise the aging factor or lower the rate)')
+        replay = self.first_sample * self.joints
+        if replay > MAX_REPLAY_SAMPLES:
+            raise InvalidParameter(
+                f'--start-hours {self.start_hours:g} at --aging-factor {self.aging_factor:g} and '
+                f'--rate-hz {self.rate_hz:g} continues the life of {self.joints} joint(s) from '
+                f'its first sample: {replay:.3g} samples to replay; expected at most '
+                f'{MAX_REPLAY_SAMPLES:.3g} (some minutes): raise the aging factor, or meet a '
+                'used unit at its wear with --start-wear-um (its life before is not simulated)')
 
     @property
     def stream_s(self):
@@ -235,7 +265,7 @@ def _simulators(spec, params):
         extra = {} if spec.load_torque_nm is None else {'load_torque_nm': spec.load_torque_nm}
         cfg = SimConfig(name=name, profile=spec.profile, exact_mesh=False, rate_hz=spec.rate_hz,
                         aging_factor=spec.aging_factor, wear_rate_scale=spec.wear_rate_scales[k],
-                        seed=spec.seed + k, **extra)
+                        seed=spec.seed + k, initial_wear_m=spec.start_wear_um * 1e-6, **extra)
         sims.append(JointSimulator(params, cfg, lost_motion_limit=spec.lost_motion_limit))
     return sims
 

@@ -922,8 +922,11 @@ class LifeStage:
             'event_state': pred.event_state, 'threshold_met': float(pred.threshold_met),
             'catalogue_life_s': cat, 'lost_motion_rad': wear_record['lost_motion_rad'],
             'lost_motion_limit_rad': self.limit}
-        if pred.threshold_met or pred.limit_reached or pred.p10 <= self.error_s:
+        if pred.threshold_met or pred.limit_reached:
             level = 'ERROR'
+        elif pred.p10 <= self.error_s:
+            # A P10 that spans the rates the windows cannot tell apart is not the wear.
+            level = 'ERROR' if rate_resolved(wear_record) else 'WARN'
         elif pred.p10 <= self.warn_s:
             level = 'WARN'
         else:
@@ -990,13 +993,16 @@ Sd of ``ln s`` up to which the unit's own wear rate counts as resolved by its wi
 The prior's is 2 (the model's rate may be off by 7 times either way at 1 sd); at 0.5 the
 rate alone spans the remaining life's P10-P90 over a factor 3.6. A twin from new gets
 there within 10-25 % of a life (``bench_accuracy.py``); one started on a used unit with
-a short recording may not: its remaining life is then the model's rate at this duty.
+a short recording may not: its remaining life then spans the rates its windows cannot
+tell apart, the model's at this duty among them. A P10 that does so is not the unit's wear:
+the life level goes no higher than ``'WARN'`` for it (:meth:`LifeStage.process`), and the
+fleet's verdict is ``WATCH`` (:mod:`reducer_twin.fleet.verdict`).
 """
 
 
 def rate_note(wear_record):
     """
-    Say when the remaining life rests on the model's wear rate, not the unit's own.
+    Say when the remaining life rests on rates the windows cannot tell apart, not the unit's own.
 
     Parameters
     ----------
@@ -1012,24 +1018,46 @@ def rate_note(wear_record):
     """
     if rate_resolved(wear_record):
         return ''
-    return f"; from the model's wear rate at this duty: {rate_unresolved(wear_record)}"
+    return f'; {rate_unresolved(wear_record)}'
+
+
+def _growth_seen(wear_record):
+    """Whether the law's growth to date lies :data:`GROWTH_SEEN_SIGMAS` sds above none."""
+    k = float(wear_record.get('trend_growth_rad', math.nan))
+    var = float(wear_record.get('var_trend_growth_rad2', math.nan))
+    return var > 0.0 and k >= GROWTH_SEEN_SIGMAS * math.sqrt(var)
 
 
 def rate_unresolved(wear_record):
-    """Return how far the unit's own wear rate is from resolved, in words."""
+    """Return how far the unit's own wear rate is from resolved, and what that means, in words."""
     sd = math.sqrt(max(float(wear_record['var_log_rate']), 0.0))
-    return (f"this unit's own is not yet resolved (ln-rate sd {sd:.2f}, resolved at "
-            f'{RATE_RESOLVED_SD:g})')
+    return (f"this unit's own wear rate is not yet resolved (ln-rate sd {sd:.2f}, resolved at "
+            f'{RATE_RESOLVED_SD:g}): its remaining life spans the rates its windows cannot '
+            "tell apart, the model's at this duty among them")
+
+
+GROWTH_SEEN_SIGMAS = 3.0
+"""
+The law's growth to date over its sd from which the law has seen the lost motion grow.
+
+The growth ``k`` is cut to ``k >= 0``: windows that cannot tell it from none give the
+half-normal's mean over its sd, 1.33 (measured 1.15-1.43: a used unit recorded for 6
+minutes in real time, and for 60 s at aging factor 3600).
+"""
 
 
 def rate_resolved(wear_record):
     """
     Return whether a ``wear`` record's remaining life rests on the unit's own growth.
 
-    True once ``ln s`` has an sd of at most :data:`RATE_RESOLVED_SD` or the observed
-    growth law is the likelier (it is fitted to the unit's windows).
+    True once ``ln s`` has an sd of at most :data:`RATE_RESOLVED_SD`, or the observed
+    growth law is the likelier (it is fitted to the unit's windows) and has seen the lost
+    motion grow (:data:`GROWTH_SEEN_SIGMAS`): a law that won its score on minutes of a
+    real-time recording, whose growth its windows cannot tell from none, resolves no rate
+    (3 of 51 such joints of the independent generator were called resolved, their P10 at
+    hours: REPLACE for units with thousands of hours left).
     """
-    if float(wear_record.get('trend_probability', 0.0)) > 0.5:
+    if float(wear_record.get('trend_probability', 0.0)) > 0.5 and _growth_seen(wear_record):
         return True
     var = float(wear_record.get('var_log_rate', math.nan))
     return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.core.units import ARCMIN, HOUR
 
-COLOURS = {'REPLACE': '#f4b6b6', 'PLAN': '#f9dc9c', 'OK': '#bfe3bf',
+COLOURS = {'REPLACE': '#f4b6b6', 'PLAN': '#f9dc9c', 'WATCH': '#c9dcf2', 'OK': '#bfe3bf',
            'NOT OBSERVED': '#d9d9d9', 'RETIRED': '#eeeeee'}
 """Background of each verdict's cells."""
 

@@ -8,6 +8,12 @@ analysed with (``life.error_s``, ``life.warn_s``; 200 h and 1000 h by default):
 * ``REPLACE``: P10 at or below the error threshold, or the lost motion already past
   the limit (remaining life negative: how many operating hours past it);
 * ``PLAN``: P10 at or below the warning threshold: order the reducer, plan the stop;
+* ``WATCH``: P10 at or below the warning threshold while the unit's own wear rate is not
+  yet resolved (``rate_resolved`` false: a reducer met used and seen briefly, without its
+  service time): the P10 rests on rates its recordings cannot tell apart, not on its wear;
+  record it longer or give its service time. A used unit recorded for minutes in real
+  time shows no growth of its lost motion, and its P10 came out at hours (REPLACE for a
+  unit halfway to its limit on a fleet's first day);
 * ``OK``: P10 above the warning threshold;
 * ``NOT OBSERVED``: no bag analysed and no live window since installation, or no window
   whose lost motion the estimator could use (the joint never reversed under load, or no
@@ -24,7 +30,7 @@ from reducer_twin.core.pipeline import SOFT_ZONE_KEY
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from reducer_twin.fleet.store import iso_from_ns
 
-VERDICTS = ('REPLACE', 'PLAN', 'OK', 'NOT OBSERVED', 'RETIRED')
+VERDICTS = ('REPLACE', 'PLAN', 'WATCH', 'OK', 'NOT OBSERVED', 'RETIRED')
 """Verdicts, most urgent first."""
 
 RULES = (
@@ -32,6 +38,10 @@ RULES = (
                 'motion past its limit: replace at the next stop'),
     ('PLAN', 'remaining life P10 at or below the warning threshold (default 1000 h): order '
              'the reducer and plan the replacement'),
+    ('WATCH', "remaining life P10 at or below the warning threshold while the unit's own "
+              'wear rate is not yet resolved (seen briefly, without its service time): the '
+              'P10 rests on rates its recordings cannot tell apart; record it longer or give '
+              'its service time'),
     ('OK', 'remaining life P10 above the warning threshold'),
     ('NOT OBSERVED', 'no usable lost-motion observation since installation (no bag, no live '
                      'window, or the joint never reversed under load): the twin cannot tell'),
@@ -209,13 +219,19 @@ def _judge(row, r, state, params):
         row['verdict'] = 'OK'
         row['reason'] = f'remaining life P10 {text} > {warn_h:,.0f} h (warning threshold)'
     if row['rate_resolved'] is False:
-        # Never an OK that is the physics alone without saying so.
+        # Never an OK that is the physics alone without saying so, nor a REPLACE or PLAN
+        # that is the rates a short recording cannot rule out rather than the wear.
         # A unit the twin has known since new only needs watching longer; one met used
         # without its service time may also be told it (the robot's hour meter).
         remedy = 'watch it longer' if r.installed_ns is not None or row['service_hours'] \
             else 'watch it longer, or give its service time: service_time_s, the hour meter'
-        row['reason'] += ("; the remaining life is the model's wear rate at this duty, the "
-                          f"unit's own not yet resolved ({remedy})")
+        if row['verdict'] != 'OK':
+            row['verdict'] = 'WATCH'
+            if lm is not None and limit is not None:
+                row['reason'] += f' with lost motion {lm:.2f} of {limit:.2f} arcmin'
+        row['reason'] += ("; the unit's own wear rate is not yet resolved, so the remaining "
+                          'life spans the rates its recordings cannot tell apart, the '
+                          f"model's at this duty among them ({remedy})")
     law = row['growth_law']
     if law and law.get('extrapolation'):
         # The law is weighed by predictions a few windows ahead, not by how far it carries.
@@ -248,7 +264,7 @@ def rank(rows):
     """
     def key(row):
         group = VERDICTS.index(row['verdict'])
-        observed = row['verdict'] in ('REPLACE', 'PLAN', 'OK')
+        observed = row['verdict'] in ('REPLACE', 'PLAN', 'WATCH', 'OK')
         p10 = row['rul_p10_h']
         return (0 if observed else group, p10 if observed and p10 is not None else math.inf,
                 row['robot'], row['joint'], row['installed_at'] or '')

@@ -691,9 +691,9 @@ def test_a_used_unit_seen_briefly_is_said_to_have_the_models_remaining_life(tmp_
     assert code == 0
     joint = json.loads(out)['joints']['joint_1']
     assert joint['observed'] and joint['rate_resolved'] is False
-    (line,) = [x for x in err.splitlines() if 'joint_1: its remaining life' in x]
+    (line,) = [x for x in err.splitlines() if "joint_1: this unit's own wear rate" in x]
     assert line.startswith('WARNING: ')
-    assert "is the model's wear rate at this duty: this unit's own is not yet resolved" in line
+    assert 'is not yet resolved (ln-rate sd' in line and 'cannot tell apart' in line
     assert line.endswith('analyse its recordings in time order with --store, or give its '
                          'operating time before the recording (service_time_s in --config: the '
                          'hour meter)')

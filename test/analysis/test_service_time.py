@@ -35,7 +35,7 @@ def test_the_service_time_resolves_a_used_units_rate_and_brings_its_life_to_the_
         runs[name] = (json.loads(done.stdout)['joints'], done.stderr)
     # Without: the short stretch leaves some unit's rate unresolved, and it is said.
     assert not all(j['rate_resolved'] for j in runs['plain'][0].values())
-    assert "this unit's own is not yet resolved" in runs['plain'][1]
+    assert "this unit's own wear rate is not yet resolved" in runs['plain'][1]
     assert 'not yet resolved' not in runs['served'][1]
     # What was taken is in --json; a time in hours written as seconds is refused, and said.
     for joint, t in truth['joints'].items():

@@ -309,3 +309,25 @@ def test_the_cli_records_robot_and_start_hours_and_refuses_bad_ones(tmp_path, ca
         errors = [line for line in err.splitlines() if line.startswith('ERROR:')]
         assert code == 1 and len(errors) == 1 and fragment in errors[0], err
         assert not (tmp_path / 'bad').exists()
+
+
+def test_a_start_that_would_replay_a_life_for_hours_is_refused_naming_start_wear(
+        tmp_path, capsys):
+    # An 8 000-h unit at aging factor 1 continues its seed's life from the first sample:
+    # 2.9e10 samples a joint, over an hour of work with nothing said.
+    code, _, err = _run(['simulate', '--out', str(tmp_path / 'rt'), '--hours', '0.1',
+                         '--aging-factor', '1', '--start-hours', '8000'], capsys)
+    (line,) = [x for x in err.splitlines() if x.startswith('ERROR:')]
+    assert code == 1 and not (tmp_path / 'rt').exists()
+    assert '--start-hours 8000 at --aging-factor 1' in line and '2.88e+10 samples' in line
+    assert 'expected at most 3e+09' in line and '--start-wear-um' in line
+    # A used unit met at its wear instead: the life before is not simulated.
+    code, _, err = _run(['simulate', '--out', str(tmp_path / 'rt'), '--hours', '0.01',
+                         '--aging-factor', '1', '--start-wear-um', '6.8', '--json'], capsys)
+    assert code == 0, err
+    _, truth, _ = _contents(tmp_path / 'rt')
+    wear = truth['/reducer_twin/joint_1/ground_truth'][:, GROUND_TRUTH.fields.index('wear_m')]
+    assert wear[0] == pytest.approx(6.8e-6, rel=1e-6) and wear[-1] < 6.801e-6
+    code, _, err = _run(['simulate', '--out', str(tmp_path / 'both'), '--hours', '1',
+                         '--start-wear-um', '6.8', '--start-hours', '10'], capsys)
+    assert code == 1 and 'expected one of them' in err

@@ -475,6 +475,20 @@ def test_the_law_weight_what_if_gives_each_models_remaining_life_alone(worn_reco
         stage.prediction(law, law_weight=1.5)
 
 
+def test_a_p10_on_rates_not_yet_resolved_warns_but_is_no_error(windows, worn_record):
+    # A used unit recorded for minutes in real time: its P10 spans rates its windows cannot
+    # rule out (hours, for a unit halfway to its limit), and /diagnostics said ERROR for
+    # every reducer of a robot the twin had just met.
+    stage = LifeStage(PARAMS, LifeConfig(warn_s=1e6 * HOUR, error_s=1e6 * HOUR))
+    stage.observe_duty(windows[-1].duty)
+    unresolved = {**worn_record, 'var_log_rate': 1.83 ** 2, 'trend_probability': 0.1}
+    _, level, message = stage.process(unresolved)
+    assert level == 'WARN' and 'not yet resolved' in message
+    assert stage.process(worn_record)[1] == 'ERROR'
+    _, level, _ = stage.process({**unresolved, 'wear_m': 150e-6})
+    assert level == 'ERROR', 'a reducer worn out is one, whatever its rate'
+
+
 def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn_record):
     # A twin started on a used unit with a short recording: its rate is the prior's
     # (ln s sd near 2) and its remaining life the model's at this duty (P10 24 000 h on a
@@ -482,13 +496,19 @@ def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn
     stage = LifeStage(PARAMS)
     _, _, unresolved = stage.process({**worn_record, 'var_log_rate': 1.83 ** 2,
                                       'trend_probability': 0.1})
-    assert unresolved.endswith("; from the model's wear rate at this duty: this unit's own is "
-                               'not yet resolved (ln-rate sd 1.83, resolved at 0.5)')
+    assert unresolved.endswith("; this unit's own wear rate is not yet resolved (ln-rate sd "
+                               '1.83, resolved at 0.5): its remaining life spans the rates its '
+                               "windows cannot tell apart, the model's at this duty among them")
     assert not rate_resolved({**worn_record, 'var_log_rate': 1.83 ** 2, 'trend_probability': 0.1})
     for resolved in ({'var_log_rate': 0.49 ** 2}, {'var_log_rate': 4.0, 'trend_probability': 0.9}):
         record = {**worn_record, 'trend_exponent': 1.0, **resolved}
         assert rate_resolved(record)
-        assert 'wear rate at this duty' not in stage.process(record)[2]
+        assert 'not yet resolved' not in stage.process(record)[2]
+    # A law that won its score on windows whose growth it cannot tell from none (minutes of
+    # a real-time recording: 0.00087 +- 0.00066 arcmin) resolves no rate.
+    flat = {'trend_growth_rad': 0.00087 * ARCMIN, 'var_trend_growth_rad2': (0.00066 * ARCMIN) ** 2}
+    assert not rate_resolved({**worn_record, 'var_log_rate': 4.0, 'trend_probability': 0.9,
+                              **flat})
 
 
 def test_the_record_widens_the_rate_by_how_far_the_lagged_predictions_fell_short(windows):

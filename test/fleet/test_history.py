@@ -224,3 +224,20 @@ def test_two_writers_at_once_serialise_and_count_every_bag_once(bags, tmp_path, 
     notes = sum(err.decode().count('already in the fleet store') for _, err in outputs)
     assert notes == 3
     assert [r['bags'] for r in _fleet(store, capsys)] == [3, 3]
+
+
+def test_a_fleet_first_recorded_in_real_time_is_watched_not_called_worn_out(tmp_path, capsys):
+    # A used unit (6.8 um, 17 500 h left) recorded for 6 minutes in real time, the usual
+    # first bag of a robot: its lost motion cannot grow measurably in that time, so its
+    # remaining life spans the rates the recording cannot rule out, P10 some 100 h. That
+    # P10 made it REPLACE, a unit halfway to its lost-motion limit.
+    spec = SimulationSpec(hours=0.1, aging_factor=1.0, joints=1, seed=3, robot='r1',
+                          start_wear_um=6.8)
+    truth = simulate_bag(tmp_path / 'rt', spec).truth['joint_1']['true_rul_h']
+    code, out, err = _analyze([str(tmp_path / 'rt')], tmp_path / 'f.db', tmp_path / 'd',
+                              capsys)
+    assert code == 0, err
+    (row,) = _fleet(tmp_path / 'f.db', capsys)
+    assert row['verdict'] == 'WATCH' and row['rate_resolved'] is False
+    assert row['rul_p10_h'] <= 200.0 and row['rul_p10_h'] < truth < row['rul_p90_h']
+    assert 'with lost motion 1.6' in row['reason'] and 'give its service time' in row['reason']

@@ -147,7 +147,7 @@ def test_a_live_reducer_says_what_its_remaining_life_rests_on_as_a_bag_s_would(
     # Three windows of a unit met without its service time: the rate is the model's.
     early = _fleet_row(tmp_path / 'f.db', records[:3], capsys)
     assert early['rate_resolved'] is False and early['curve_extrapolation'] is None
-    assert "the remaining life is the model's wear rate at this duty" in early['reason']
+    assert "the unit's own wear rate is not yet resolved" in early['reason']
     assert 'give its service time' in early['reason']
     # Twelve windows: the unit's own rate, the remaining life on the model's curve beyond
     # the span it was compared with the growth over.

@@ -112,12 +112,35 @@ def test_an_ok_that_is_the_models_rate_says_so():
     reducer.summary['rate_resolved'] = False
     row = fleet_row(reducer, PARAMS)
     assert row['verdict'] == 'OK' and row['rate_resolved'] is False
-    assert row['reason'].endswith("the remaining life is the model's wear rate at this duty, "
-                                  "the unit's own not yet resolved (watch it longer, or give "
-                                  'its service time: service_time_s, the hour meter)')
+    assert row['reason'].endswith("; the unit's own wear rate is not yet resolved, so the "
+                                  'remaining life spans the rates its recordings cannot tell '
+                                  "apart, the model's at this duty among them (watch it longer, "
+                                  'or give its service time: service_time_s, the hour meter)')
     reducer.summary['rate_resolved'] = True
     row = fleet_row(reducer, PARAMS)
     assert row['rate_resolved'] is True and 'wear rate' not in row['reason']
+
+
+@pytest.mark.parametrize('p10_h', [150.0, 900.0])
+def test_a_replace_or_plan_on_rates_not_yet_resolved_is_a_watch(p10_h):
+    # A used unit recorded for minutes in real time: its lost motion cannot grow in that
+    # time, the rates it cannot rule out reach hundreds of times the model's, and its P10
+    # came out at hours: REPLACE for a unit halfway to its limit, on a fleet's first day.
+    reducer = _reducer(p10_h, lm=1.63)
+    reducer.summary['rate_resolved'] = False
+    row = fleet_row(reducer, PARAMS)
+    assert row['verdict'] == 'WATCH' and row['rul_p10_h'] == p10_h
+    assert f'{p10_h:,.0f} h <= ' in row['reason']
+    assert "with lost motion 1.63 of 3.00 arcmin; the unit's own wear rate is not yet " \
+        'resolved' in row['reason'] and row['reason'].endswith('the hour meter)')
+    assert 'record it longer or give its service time' in row['rule']
+    # Resolved, the same P10 is the wear's.
+    reducer.summary['rate_resolved'] = True
+    assert fleet_row(reducer, PARAMS)['verdict'] == ('REPLACE' if p10_h <= 200.0 else 'PLAN')
+    # Past its limit, a reducer is replaced whatever its rate.
+    past = _reducer(p10_h, lm=3.2)
+    past.summary['rate_resolved'] = False
+    assert fleet_row(past, PARAMS)['verdict'] == 'REPLACE'
 
 
 def test_a_life_that_follows_the_observed_growth_says_how_far_it_is_extrapolated():
@@ -153,7 +176,8 @@ def test_a_unit_known_since_new_is_only_told_to_be_watched_longer():
     # meter is no remedy.
     reducer = dataclasses.replace(_reducer(24000.0), installed_ns=10 ** 18)
     reducer.summary['rate_resolved'] = False
-    assert fleet_row(reducer, PARAMS)['reason'].endswith('not yet resolved (watch it longer)')
+    assert fleet_row(reducer, PARAMS)['reason'].endswith('at this duty among them (watch it '
+                                                         'longer)')
 
 
 def test_the_row_carries_how_the_latest_analysis_read_the_inputs():

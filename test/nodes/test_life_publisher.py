@@ -161,7 +161,7 @@ def test_the_diagnostics_level_follows_the_thresholds(ros, estimate, warn_h, err
     assert values['rejected_messages'] == '0'
 
 
-def test_the_diagnostics_say_when_the_life_is_the_models_rate_not_the_units_own(
+def test_the_diagnostics_say_when_the_life_spans_rates_not_the_units_own(
         ros, estimate):
     # A twin met without state on a used reducer, a short while: ln s is still the
     # prior's, and the remaining life the physics' at this duty.
@@ -170,8 +170,10 @@ def test_the_diagnostics_say_when_the_life_is_the_models_rate_not_the_units_own(
     life.send({**wear_record, 'var_log_rate': 1.9 ** 2, 'trend_probability': 0.1}, features)
     status = life.status(lambda s: 'not yet resolved' in s.message)
     assert status.message.startswith('remaining life P10')
-    assert status.message.endswith("; from the model's wear rate at this duty: this unit's own "
-                                   'is not yet resolved (ln-rate sd 1.90, resolved at 0.5)')
+    assert status.message.endswith("; this unit's own wear rate is not yet resolved (ln-rate "
+                                   'sd 1.90, resolved at 0.5): its remaining life spans the '
+                                   "rates its windows cannot tell apart, the model's at this "
+                                   'duty among them')
 
 
 def test_a_worn_out_reducer_is_an_error_with_no_life_left(ros, estimate):
