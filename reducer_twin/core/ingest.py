@@ -442,6 +442,8 @@ class StreamCleaner:
         self.period_ns = None
         self._raw_prev_t = None
         self._diffs = []
+        self._rows = 0          # rows that arrived so far
+        self._period_row = None  # the row from which the wrap rule knows the period
         self._last_t = None
         self._max_t = None
         self._segment = 0
@@ -480,6 +482,7 @@ class StreamCleaner:
         t = self.clock.retime(np.asarray(t_ns, dtype=np.int64).ravel())
         pos = np.asarray(position, dtype=float)
         n = t.size
+        base = self._rows
         one_d = pos.ndim == 1
         if one_d and pos.shape[0] == n:
             pos = pos.reshape(n, 1)
@@ -499,17 +502,20 @@ class StreamCleaner:
         if n <= FAST_ROWS and not undecided:
             out = self._fast(t, pos, vel, eff)
             if out is not None:
+                self._rows += n
                 return _squeeze(out) if one_d else out
+        self._rows += n
         if undecided and self.clock.active:
             # The deciding stamps scattered: their holes are those of the clock's line,
             # the later ones those of the re-timed stamps.
             head = self.clock.raw_head
             self.missing, self.period_ns, self._diffs = self.clock.window_missing, \
                 self.clock.period_ns, []
+            self._period_row = base
             self._raw_prev_t = int(t[head - 1])
-            self._count_missing(t[head:])
+            self._count_missing(t[head:], base + head)
         else:
-            self._count_missing(t)
+            self._count_missing(t, base)
         finite = np.isfinite(pos)
         self.counts['non_finite'] += int(finite.size - np.count_nonzero(finite))
         if self.column_counts is None:
@@ -519,8 +525,8 @@ class StreamCleaner:
         all_finite = bool((per_column == pos.shape[0]).all())
         if not all_finite:
             pos = np.where(finite, pos, np.nan)
-        t, pos, vel, eff, seg = self._order(t, pos, vel, eff)
-        pos = self._unwrap_positions(pos, t, seg, all_finite)
+        t, pos, vel, eff, seg, kept = self._order(t, pos, vel, eff)
+        pos = self._unwrap_positions(pos, t, seg, base + kept, all_finite)
         self.accepted += t.size
         out = CleanStream(t, pos, vel, eff, seg)
         return _squeeze(out) if one_d else out
@@ -586,46 +592,54 @@ class StreamCleaner:
                 out[reason] = int(per_column[list(columns)].sum())
         return out
 
-    def _count_missing(self, t):
+    def _count_missing(self, t, first_row):
         """
         Count samples missing from the stream (stamp holes at the nominal period).
 
         Holes are measured from the newest stamp so far (since the last clock
         jump): a sample that arrives late, and is dropped as out of order, leaves
-        one hole, not one before it and another after it.
+        one hole, not one before it and another after it. ``first_row`` is the
+        arrival index of ``t[0]`` in the stream.
         """
         if t.size == 0:
             return
         prev = t[0] if self._raw_prev_t is None else self._raw_prev_t
         if t[0] >= prev and (t.size < 2 or bool((np.diff(t) > 0).all())):
             d = np.diff(t, prepend=prev)
+            rows = np.arange(t.size)
             self._raw_prev_t = int(t[-1])
         else:
-            d, self._raw_prev_t = self._steps_past_newest(t, int(prev))
+            d, rows, self._raw_prev_t = self._steps_past_newest(t, int(prev))
+        rows = rows[d > 0]
         d = d[d > 0]
         if self.period_ns is None:
             # Steps seen before the period is known are kept, and their holes counted once
             # it is: the count and the period do not depend on how the stream is chunked.
+            kept = len(self._diffs)
             d = np.concatenate([np.asarray(self._diffs, dtype=d.dtype), d])
             if d.size < PERIOD_STEPS:
                 self._diffs = d.tolist()
                 return
             self.period_ns = float(np.median(d[:PERIOD_STEPS]))
+            # The wrap rule knows the period from the row whose step completed them on,
+            # however the stream is chunked.
+            self._period_row = first_row + int(rows[PERIOD_STEPS - 1 - kept])
             self._diffs = []
         holes = d[(d > 1.5 * self.period_ns) & (d < self.config.max_gap_s * 1e9 * 200)]
         self.missing += int(np.sum(np.round(holes / self.period_ns) - 1))
 
     def _steps_past_newest(self, t, newest):
-        """Return the steps by which stamps pass the newest one, and the newest stamp."""
+        """Return the steps by which stamps pass the newest one, their rows, and the newest."""
         jump_ns = int(self.config.clock_jump_s * 1e9)
-        steps = []
-        for tk in t.tolist():
+        steps, rows = [], []
+        for k, tk in enumerate(t.tolist()):
             if tk <= newest - jump_ns:     # the clock was reset: the stream starts over
                 newest = tk
             elif tk > newest:
                 steps.append(tk - newest)
+                rows.append(k)
                 newest = tk
-        return np.array(steps, dtype=np.int64), newest
+        return np.array(steps, dtype=np.int64), np.array(rows, dtype=np.int64), newest
 
     def flush(self):
         """
@@ -641,7 +655,11 @@ class StreamCleaner:
                                  (0 if self._raw_last is None else self._raw_last.size))
 
     def _order(self, t, pos, vel, eff):
-        """Drop duplicate/out-of-order stamps, split segments at gaps and clock jumps."""
+        """
+        Drop duplicate/out-of-order stamps, split segments at gaps and clock jumps.
+
+        Returns the rows kept, their segments and their indices in the chunk.
+        """
         cfg = self.config
         jump_ns = int(cfg.clock_jump_s * 1e9)
         gap_ns = int(cfg.max_gap_s * 1e9)
@@ -659,7 +677,7 @@ class StreamCleaner:
             seg[:] = segment + np.cumsum(breaks)
             self._last_t = self._max_t = int(t[-1])
             self._segment = int(seg[-1])
-            return t, pos, vel, eff, seg
+            return t, pos, vel, eff, seg, np.arange(n)
         for k in range(n):
             tk = int(t[k])
             if last is not None:
@@ -682,16 +700,20 @@ class StreamCleaner:
             max_t = tk if max_t is None else max(max_t, tk)
             seg[k] = segment
         self._last_t, self._max_t, self._segment = last, max_t, segment
-        return t[keep], pos[keep], vel[keep], eff[keep], seg[keep]
+        return t[keep], pos[keep], vel[keep], eff[keep], seg[keep], np.flatnonzero(keep)
 
-    def _unwrap_positions(self, pos, t, seg, all_finite=False):
+    def _unwrap_positions(self, pos, t, seg, arrival, all_finite=False):
         """
         Unwrap jumps of about 2·pi between close neighbours (within and across calls).
 
         Only neighbours of one segment and at most :data:`WRAP_PERIODS` nominal
         periods apart are compared: across a longer hole a fast motor may move
         about a whole turn, and the turn count is restored downstream by
-        keeping the TE continuous. ``all_finite`` says that ``pos`` holds no NaN
+        keeping the TE continuous. Until the period is known (``arrival`` gives each
+        sample's arrival index in the stream) neighbours up to ``max_gap_s`` apart are:
+        the same rows whether the stream came in one chunk or many (a 4-period hole
+        among a stream's first steps was unwrapped when it came in small pieces, a
+        turn apart from the one piece). ``all_finite`` says that ``pos`` holds no NaN
         (nothing to forward-fill).
         """
         n, k = pos.shape
@@ -716,8 +738,9 @@ class StreamCleaner:
             self._raw_last = np.where(np.isfinite(filled[-1]), filled[-1], self._raw_last)
             return pos + self._unwrap
         dt = np.diff(t, prepend=prev_t)
-        span = (WRAP_PERIODS * self.period_ns if self.period_ns
-                else self.config.max_gap_s * 1e9)
+        span = self.config.max_gap_s * 1e9
+        if self.period_ns:
+            span = np.where(arrival >= self._period_row, WRAP_PERIODS * self.period_ns, span)
         close = ((dt <= span) & (seg == np.concatenate([[prev_seg], seg[:-1]])))[:, None]
         d = np.where(np.isfinite(d), d, 0.0)
         turns = np.round(d / (2.0 * math.pi))

@@ -12,7 +12,7 @@ gives.
 
 import math
 
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
@@ -489,6 +489,11 @@ streams = st.tuples(st.integers(0, 2 ** 32 - 1), st.integers(20, 400),
 
 @settings(max_examples=60)
 @given(stream=streams, chunk_seed=st.integers(0, 2 ** 32 - 1))
+# Found by this test: a 4-period hole after a clock reset among a stream's first 16 steps.
+# In small pieces its wrap was judged before the period was known (neighbours up to
+# max_gap_s apart unwrapped), in one piece after (3 periods): the turn count of a wrapped
+# encoder came out a turn apart.
+@example(stream=(16006843, 20, 0.1, 3), chunk_seed=1)
 def test_cleaning_does_not_depend_on_how_the_stream_is_chunked(stream, chunk_seed):
     t, pos, vel, eff = event_stream(*stream)
     whole = StreamCleaner()
