@@ -104,7 +104,7 @@ class TravelRatio:
         self.ratio = float(ratio)
         self.measured = None
         self._sums = np.zeros(3)     # Σ Δl·Δm, Σ Δl², Σ |Δl|
-        self._wide = []              # Δm/Δl of moves the TE gate leaves out
+        self._wide = []              # Δm/Δl of moves the TE gate leaves out (None: scattered)
         self._wide_travel = 0.0      # Σ |Δl| of those
 
     def observe(self, t, link_angle, te):
@@ -130,8 +130,8 @@ class TravelRatio:
         d_te = te[k:] - te[:-k]
         with np.errstate(invalid='ignore'):
             ok = np.abs(d_te) <= 0.5 * np.abs(d_link) + _PLAY_RAD    # NaN: not valid
-        self._left_out(d_link[~ok & (np.abs(d_link) > _PLAY_RAD)],
-                       d_te[~ok & (np.abs(d_link) > _PLAY_RAD)], k)
+        wide = ~ok & (np.abs(d_link) > _PLAY_RAD)
+        self._left_out(d_link[wide], d_te[wide], k)
         d_link, d_motor = d_link[ok], d_link[ok] - d_te[ok]     # the motor's, over i
         # The link's noise is in the regressor: its variance (twice the samples') is taken
         # off the moves' squares, or a noisy link encoder reads a ratio too low.
@@ -139,20 +139,25 @@ class TravelRatio:
         self._sums += [d_link @ d_motor, d_link @ d_link - noise, np.abs(d_link).sum() / k]
         if self._sums[2] >= JUDGE_TRAVEL_RAD and self._sums[1] > 0.0:
             self.measured = float(self.ratio * self._sums[0] / self._sums[1])
-        elif self._wide_travel >= JUDGE_TRAVEL_RAD and self._wide_travel > 2.0 * self._sums[2]:
+        elif self._wide is not None and self._wide_travel >= JUDGE_TRAVEL_RAD and \
+                self._wide_travel > 2.0 * self._sums[2]:
             # Most moves change the TE by more than half the link's: a motor that turns
             # another number of times by far (another frame's ratio, angles in other
             # units). Their median ratio, which the turn counts restored at wraps (a few
             # moves) do not move; none where they scatter (a motor in degrees moves by
             # more than half a turn a sample, and the turn counts restored fold it).
-            quartiles = np.percentile(np.concatenate(self._wide), [25.0, 50.0, 75.0])
+            ratios = np.concatenate(self._wide)
+            quartiles = np.percentile(ratios, [25.0, 50.0, 75.0])
             if quartiles[2] - quartiles[0] <= WIDE_SPREAD * abs(quartiles[1]):
                 self.measured = float(self.ratio * quartiles[1])
+            elif ratios.size >= _WIDE_MOVES:
+                self._wide = None     # as many as are kept, and scattered: never judged
 
     def _left_out(self, d_link, d_te, k):
         """Keep the ratios of moves beyond the play that the TE gate leaves out."""
         finite = np.isfinite(d_te)
-        if not finite.any() or sum(a.size for a in self._wide) >= _WIDE_MOVES:
+        if self._wide is None or not finite.any() or \
+                sum(a.size for a in self._wide) >= _WIDE_MOVES:
             return
         d_link, d_te = d_link[finite], d_te[finite]
         self._wide.append(1.0 - d_te / d_link)
