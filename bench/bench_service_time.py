@@ -51,6 +51,9 @@ import third_generator
 
 GENERATORS = {'independent': gen, 'third': third_generator}
 HOUR = 3600.0
+REPLAY_AGING = 3600.0
+"""Aging factor of the model's lives replayed to their start (``simulate --start-hours``)."""
+
 ERROR_H, WARN_H = LifeConfig().error_s / HOUR, LifeConfig().warn_s / HOUR
 """The default error and warning thresholds on the remaining life P10 [h] (fleet verdicts)."""
 
@@ -123,24 +126,34 @@ def run_model(tmp, seed, fraction, hours, aging_factor):
     :func:`run_one` on the model's simulator: two joints, rate scales drawn in 1-8.
 
     The life at each scale is read from a first, one-hour recording (its remaining life
-    plus the hour); the recording then starts at ``fraction`` of the shorter life.
+    plus the hour); the recording then starts at ``fraction`` of the shorter life. Below
+    :data:`REPLAY_AGING` (a life too long to replay sample by sample: ``simulate`` refuses
+    it) the joints' wear at the start is read from a recording ending there at the default
+    aging factor, and the recording meets them at it (``--start-wear-um``).
     """
     scales = np.exp(np.random.default_rng([seed, 11]).uniform(0.0, math.log(8.0), 2))
-    common = ['--joints', '2', '--seed', str(seed), '--aging-factor', repr(aging_factor),
+    common = ['--joints', '2', '--seed', str(seed),
               '--wear-rate-scale', ','.join(f'{k:.4f}' for k in scales), '--json']
 
-    def simulate(out, run_hours, start):
+    def simulate(out, run_hours, start, aging=aging_factor, wear=None):
+        where = ['--start-hours', repr(start)] if wear is None else \
+            ['--start-wear-um', ','.join(f'{w!r}' for w in wear)]
         proc = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'simulate', '--out',
-                               str(out), '--hours', repr(run_hours), '--start-hours',
-                               repr(start), *common], capture_output=True, text=True,
+                               str(out), '--hours', repr(run_hours), '--aging-factor',
+                               repr(aging), *where, *common], capture_output=True, text=True,
                               check=True)
         return json.loads(proc.stdout)['joints']
 
-    probe = simulate(tmp / 'life', 1.0, 0.0)
+    probe = simulate(tmp / 'life', 1.0, 0.0, REPLAY_AGING)
     shutil.rmtree(tmp / 'life', ignore_errors=True)
     start = fraction * min(1.0 + j['true_rul_h'] for j in probe.values())
     bag = tmp / f'model-{seed}-{fraction}'
-    truth = simulate(bag, hours, start)
+    if aging_factor >= REPLAY_AGING:
+        truth = simulate(bag, hours, start)
+    else:
+        before = simulate(tmp / 'before', start, 0.0, REPLAY_AGING)
+        shutil.rmtree(tmp / 'before', ignore_errors=True)
+        truth = simulate(bag, hours, 0.0, wear=[j['true_wear_um'] for j in before.values()])
     reports = {}
     for case, given in (('without', None), ('with', {j: start * HOUR for j in truth})):
         config = tmp / f'{case}.yaml'

@@ -118,9 +118,10 @@ class SimulationSpec:
         Operating hours of the joints' life at the bag's first sample [h]; the bag
         continues the life of the same seed from there (replayed up to
         :data:`MAX_REPLAY_SAMPLES`).
-    start_wear_um : float
-        Combined wear of every joint at the bag's first sample [µm] (0-100): a used unit met
-        at that wear, its life before not simulated (with ``start_hours`` 0).
+    start_wear_um : float or tuple of float
+        Combined wear at the bag's first sample [µm] (0-100), one for all joints or one per
+        joint: a used unit met at that wear, its life before not simulated (with
+        ``start_hours`` 0).
     robot : str
         The robot's name ('' for none), recorded in ``custom_data``.
 
@@ -139,7 +140,7 @@ class SimulationSpec:
     compression: str = 'none'
     start_hours: float = 0.0
     robot: str = ''
-    start_wear_um: float = 0.0
+    start_wear_um: object = 0.0
 
     def __post_init__(self):
         """Check the ranges (the CLI's values arrive here unchanged)."""
@@ -154,12 +155,6 @@ class SimulationSpec:
         finite('--aging-factor', self.aging_factor, '', 0.0, 1e9)
         finite('--rate-hz', self.rate_hz, 'Hz', 0.0, 1e5)
         finite('--start-hours', self.start_hours, 'h', 0.0, 1e6, lo_open=False)
-        finite('--start-wear-um', self.start_wear_um, 'um', 0.0, 100.0, lo_open=False)
-        if self.start_wear_um and self.start_hours:
-            raise InvalidParameter(
-                f'--start-wear-um {self.start_wear_um:g} with --start-hours '
-                f'{self.start_hours:g}: expected one of them (a unit met at a given wear, or '
-                "the continuation of its seed's life from an hour)")
         if not isinstance(self.robot, str) or len(self.robot) > MAX_ROBOT_NAME or \
                 any(c.isspace() or not c.isprintable() for c in self.robot):
             raise InvalidParameter(out_of_range(
@@ -171,15 +166,19 @@ class SimulationSpec:
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or \
                 not 0 <= self.seed < 2**63 - MAX_JOINTS:
             raise InvalidParameter(out_of_range('--seed', self.seed, '', 'a whole number >= 0'))
-        scales = tuple(self.wear_rate_scales)
-        if len(scales) == 1 and self.joints > 1:
-            scales = scales * self.joints
-        if len(scales) != self.joints:
-            raise InvalidParameter(out_of_range('--wear-rate-scale', ','.join(map(str, scales)),
-                                                '', f'one value or {self.joints} values'))
+        scales = self._per_joint('--wear-rate-scale', self.wear_rate_scales)
         for s in scales:
             finite('--wear-rate-scale', s, '', 0.0, 100.0)
         object.__setattr__(self, 'wear_rate_scales', tuple(float(s) for s in scales))
+        wears = self._per_joint('--start-wear-um', self.start_wear_um)
+        for w in wears:
+            finite('--start-wear-um', w, 'um', 0.0, 100.0, lo_open=False)
+        object.__setattr__(self, 'start_wear_um', tuple(float(w) for w in wears))
+        if any(wears) and self.start_hours:
+            raise InvalidParameter(
+                f'--start-wear-um {",".join(f"{w:g}" for w in wears)} with --start-hours '
+                f'{self.start_hours:g}: expected one of them (a unit met at a given wear, or '
+                "the continuation of its seed's life from an hour)")
         if self.load_torque_nm is not None:
             finite('--load-torque-nm', self.load_torque_nm, 'N*m', 0.0, 1e5, lo_open=False)
         if self.layout not in ('combined', 'split'):
@@ -204,6 +203,16 @@ class SimulationSpec:
                 f'its first sample: {replay:.3g} samples to replay; expected at most '
                 f'{MAX_REPLAY_SAMPLES:.3g} (some minutes): raise the aging factor, or meet a '
                 'used unit at its wear with --start-wear-um (its life before is not simulated)')
+
+    def _per_joint(self, flag, values):
+        """Return one value per joint of one for all or one each, else refuse."""
+        values = tuple(values) if isinstance(values, (tuple, list)) else (values,)
+        if len(values) == 1 and self.joints > 1:
+            values = values * self.joints
+        if len(values) != self.joints:
+            raise InvalidParameter(out_of_range(flag, ','.join(map(str, values)), '',
+                                                f'one value or {self.joints} values'))
+        return values
 
     @property
     def stream_s(self):
@@ -265,7 +274,7 @@ def _simulators(spec, params):
         extra = {} if spec.load_torque_nm is None else {'load_torque_nm': spec.load_torque_nm}
         cfg = SimConfig(name=name, profile=spec.profile, exact_mesh=False, rate_hz=spec.rate_hz,
                         aging_factor=spec.aging_factor, wear_rate_scale=spec.wear_rate_scales[k],
-                        seed=spec.seed + k, initial_wear_m=spec.start_wear_um * 1e-6, **extra)
+                        seed=spec.seed + k, initial_wear_m=spec.start_wear_um[k] * 1e-6, **extra)
         sims.append(JointSimulator(params, cfg, lost_motion_limit=spec.lost_motion_limit))
     return sims
 

@@ -12,8 +12,8 @@ truth every stream second. ``--hours`` of wear exposure are compressed into
 ``--robot NAME --start-hours H`` continues the same joints' life (same seed) from hour H,
 so consecutive bags join exactly; both are stored in ``custom_data`` for the fleet store.
 The life before hour H is replayed (at most 3e9 samples, some minutes); ``--start-wear-um W``
-meets every joint at wear W instead, its life before not simulated (a used unit recorded
-in real time, at aging factor 1).
+meets the joints at wear W instead (one for all or one per joint), their life before not
+simulated (a used unit recorded in real time, at aging factor 1).
 
 The size of the bag is estimated before anything is written; above ``--max-size`` (default
 5 GB) or the free space of the device the request is refused with the estimate. The bag is
@@ -77,9 +77,10 @@ def add_parser(sub):
     p.add_argument('--start-hours', type=float, default=0.0, metavar='H',
                    help='operating hours at the first sample: continues the life of the same '
                         'seed from hour H (default 0)')
-    p.add_argument('--start-wear-um', type=float, default=0.0, metavar='W',
-                   help='combined wear of every joint at the first sample [um], 0 .. 100: a '
-                        'used unit met at that wear, its life before not simulated (default 0)')
+    p.add_argument('--start-wear-um', type=_scales, default=(0.0,), metavar='W[,W...]',
+                   help='combined wear at the first sample [um], 0 .. 100, one for all joints '
+                        'or one per joint: a used unit met at that wear, its life before not '
+                        'simulated (default 0)')
     p.add_argument('--wear-rate-scale', type=_scales, default=(1.0,), metavar='K[,K...]',
                    help='hidden Archard-rate multiplier, one for all joints or one per joint '
                         '(default 1)')

@@ -331,3 +331,12 @@ def test_a_start_that_would_replay_a_life_for_hours_is_refused_naming_start_wear
     code, _, err = _run(['simulate', '--out', str(tmp_path / 'both'), '--hours', '1',
                          '--start-wear-um', '6.8', '--start-hours', '10'], capsys)
     assert code == 1 and 'expected one of them' in err
+    # One wear per joint, as --wear-rate-scale takes one scale per joint.
+    code, out, err = _run(['simulate', '--out', str(tmp_path / 'two'), '--hours', '0.01',
+                           '--aging-factor', '1', '--joints', '2', '--start-wear-um', '3,9',
+                           '--json'], capsys)
+    assert code == 0, err
+    assert [round(j['true_wear_um'], 3) for j in json.loads(out)['joints'].values()] == [3.0, 9.0]
+    code, _, err = _run(['simulate', '--out', str(tmp_path / 'three'), '--hours', '1',
+                         '--joints', '2', '--start-wear-um', '3,9,4'], capsys)
+    assert code == 1 and '--start-wear-um' in err and 'one value or 2 values' in err
