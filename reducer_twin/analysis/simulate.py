@@ -120,8 +120,8 @@ class SimulationSpec:
         :data:`MAX_REPLAY_SAMPLES`).
     start_wear_um : float or tuple of float
         Combined wear at the bag's first sample [µm] (0-100), one for all joints or one per
-        joint: a used unit met at that wear, its life before not simulated (with
-        ``start_hours`` 0).
+        joint (kept as a tuple of either; :meth:`start_wear`): a used unit met at that wear,
+        its life before not simulated (with ``start_hours`` 0).
     robot : str
         The robot's name ('' for none), recorded in ``custom_data``.
 
@@ -173,7 +173,11 @@ class SimulationSpec:
         wears = self._per_joint('--start-wear-um', self.start_wear_um)
         for w in wears:
             finite('--start-wear-um', w, 'um', 0.0, 100.0, lo_open=False)
-        object.__setattr__(self, 'start_wear_um', tuple(float(w) for w in wears))
+        # Kept as given (one for all, or one per joint), so that a copy for other joints
+        # keeps one wear for all.
+        given = self.start_wear_um
+        given = tuple(given) if isinstance(given, (tuple, list)) else (given,)
+        object.__setattr__(self, 'start_wear_um', tuple(float(w) for w in given))
         if any(wears) and self.start_hours:
             raise InvalidParameter(
                 f'--start-wear-um {",".join(f"{w:g}" for w in wears)} with --start-hours '
@@ -203,6 +207,11 @@ class SimulationSpec:
                 f'its first sample: {replay:.3g} samples to replay; expected at most '
                 f'{MAX_REPLAY_SAMPLES:.3g} (some minutes): raise the aging factor, or meet a '
                 'used unit at its wear with --start-wear-um (its life before is not simulated)')
+
+    def start_wear(self, k):
+        """Return the start wear of joint ``k`` (0-based) [µm]."""
+        wears = self.start_wear_um
+        return wears[k] if len(wears) > 1 else wears[0]
 
     def _per_joint(self, flag, values):
         """Return one value per joint of one for all or one each, else refuse."""
@@ -274,7 +283,7 @@ def _simulators(spec, params):
         extra = {} if spec.load_torque_nm is None else {'load_torque_nm': spec.load_torque_nm}
         cfg = SimConfig(name=name, profile=spec.profile, exact_mesh=False, rate_hz=spec.rate_hz,
                         aging_factor=spec.aging_factor, wear_rate_scale=spec.wear_rate_scales[k],
-                        seed=spec.seed + k, initial_wear_m=spec.start_wear_um[k] * 1e-6, **extra)
+                        seed=spec.seed + k, initial_wear_m=spec.start_wear(k) * 1e-6, **extra)
         sims.append(JointSimulator(params, cfg, lost_motion_limit=spec.lost_motion_limit))
     return sims
 
