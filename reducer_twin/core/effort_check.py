@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from .velocity_check import ANGLE_UNITS
+
 PLAUSIBLE_LOST_MOTION_RAD = math.radians(1.0)
 """
 Largest lost motion [rad] read as one: 60 arcmin, 20 times the usual wear limit (3 arcmin).
@@ -390,7 +392,8 @@ class EffortCheck:
 
 def _in_revolutions(slope):
     """Name angles in revolutions where a slope ratio reads as they give (else '')."""
-    least, most = (r / (2.0 * math.pi) for r in TORQUE_SLOPES)
+    turn = ANGLE_UNITS['revolutions'][0]
+    least, most = (r / turn for r in TORQUE_SLOPES)
     if not least <= slope <= most:
         return ''
     return ('; or, if the effort is in N*m, the angles are published in revolutions (a '

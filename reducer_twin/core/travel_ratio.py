@@ -19,11 +19,9 @@ instead, and a factor of encoders in mixed units or of the other sense is named
 (:data:`UNIT_FACTORS`).
 """
 
-import math
-
 import numpy as np
 
-from .velocity_check import angle_noise
+from .velocity_check import angle_noise, ANGLE_UNITS
 
 BASELINE_S = 0.01
 """Span [s] of the moves compared (a few samples at 100 Hz-1 kHz, quiet of encoder noise)."""
@@ -52,18 +50,18 @@ JUDGE_TRAVEL_RAD = 3.0
 _IN_RADIANS = 'publish both angles in radians (REP 103)'
 
 UNIT_FACTORS = (
-    (180.0 / math.pi, 'a motor angle in degrees beside a link angle in radians', _IN_RADIANS),
-    (math.pi / 180.0, 'a link angle in degrees beside a motor angle in radians', _IN_RADIANS),
-    (2.0 * math.pi, 'a link angle in revolutions beside a motor angle in radians',
-     _IN_RADIANS),
-    (0.5 / math.pi, 'a motor angle in revolutions beside a link angle in radians',
-     _IN_RADIANS),
+    *((1.0 / radian, f'a motor angle in {unit} beside a link angle in radians', _IN_RADIANS)
+      for unit, (radian, _) in ANGLE_UNITS.items()),
+    *((radian, f'a link angle in {unit} beside a motor angle in radians', _IN_RADIANS)
+      for unit, (radian, _) in ANGLE_UNITS.items()),
     (-1.0, 'a motor encoder that counts against the link (a negative reduction)',
      'set motor_direction (twin.motor_direction in --config) to -1'))
 """
 Measured over configured ratio that encoders in mixed units (or senses) give, what, and the remedy.
 
-Such a motor turns the ratio times a units factor "times the link", far beyond the
+A unit of :data:`.velocity_check.ANGLE_UNITS` is ``radian`` radians' worth of its own (pi/180
+for degrees, 2 pi for revolutions): a motor in it reads ``1/radian`` of the ratio, a link in
+it ``radian``. Such a motor turns the ratio times a units factor "times the link", far beyond the
 :data:`RATIO_TOLERANCE` a ratio is measured within; a ratio of another reducer lies within
 a factor 0.5-2 of the configured one for the frame sizes' usual ratios (81-185), so none is
 taken for units.
