@@ -128,8 +128,8 @@ def run_model(tmp, seed, fraction, hours, aging_factor):
     The life at each scale is read from a first, one-hour recording (its remaining life
     plus the hour); the recording then starts at ``fraction`` of the shorter life. Below
     :data:`REPLAY_AGING` (a life too long to replay sample by sample: ``simulate`` refuses
-    it) the joints' wear at the start is read from a recording ending there at the default
-    aging factor, and the recording meets them at it (``--start-wear-um``).
+    it) the joints' wear at the start is read from a one-hour recording ending there at
+    that aging factor, and the recording meets them at it (``--start-wear-um``).
     """
     scales = np.exp(np.random.default_rng([seed, 11]).uniform(0.0, math.log(8.0), 2))
     common = ['--joints', '2', '--seed', str(seed),
@@ -151,7 +151,8 @@ def run_model(tmp, seed, fraction, hours, aging_factor):
     if aging_factor >= REPLAY_AGING:
         truth = simulate(bag, hours, start)
     else:
-        before = simulate(tmp / 'before', start, 0.0, REPLAY_AGING)
+        # The last hour before the start, replayed to it (not written): its end is the start.
+        before = simulate(tmp / 'before', 1.0, max(start - 1.0, 0.0), REPLAY_AGING)
         shutil.rmtree(tmp / 'before', ignore_errors=True)
         truth = simulate(bag, hours, 0.0, wear=[j['true_wear_um'] for j in before.values()])
     reports = {}
