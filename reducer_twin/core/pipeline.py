@@ -1038,8 +1038,64 @@ def _growth_seen(wear_record):
     return var > 0.0 and k >= GROWTH_SEEN_SIGMAS * math.sqrt(var)
 
 
+_PRIOR = EstimatorConfig()
+
+LOG_RATE_PLAUSIBLE = math.log(_PRIOR.initial_rate_scale) + 3.0 * _PRIOR.initial_log_rate_scale_std
+"""
+``ln s`` beyond which a rate is faster than wear: the estimator's prior mean plus 3 sds (6).
+
+The prior holds a rate 400 times the model's at the duty to 0.13 %. A unit met used and
+recorded for minutes in real time shows no growth its windows can read (0.0001 arcmin
+true), yet their reading drifts by 0.001-0.02 arcmin (a start-up, a cycle's loads) and
+their mix of flanks changes (a base whose knee lies above its loads' reach: 0.4-5 arcmin
+from window to window): taken as wear that is a rate e^6-e^18 times the model's
+(``bench_service_time.py --aging-factor 1 --hours 0.1``, every joint of both generators
+above e^6; at 150 h and over whole lives the independent generator's fastest units read
+ln s up to 4.6), and the law or a released rate took it as this unit's own: P50 minutes
+to hours on units with 1 500-7 000 h left, resolved, REPLACE.
+"""
+
+
+def implied_log_rate(wear_record):
+    """
+    Return ``ln s`` of the rate the remaining life rests on (NaN where it cannot be read).
+
+    Where the observed growth law is the likelier, its growth to date ``k`` over the
+    Archard exposure ``A`` seen (wear at the model's rate [m]) as a rate on the wear
+    model's curve, through the curve's secant from the new unit::
+
+        ln s = ln(k / (A · (LM - LM_new) / w))
+
+    else the wear model's own ``ln s``.
+    """
+    if float(wear_record.get('trend_probability', 0.0)) <= 0.5:
+        return float(wear_record.get('log_rate_scale', math.nan))
+    k = float(wear_record.get('trend_growth_rad', math.nan))
+    exposure = float(wear_record.get('archard_exposure_m', math.nan))
+    wear = float(wear_record.get('wear_m', math.nan))
+    play = float(wear_record.get('lost_motion_rad', math.nan)) \
+        + float(wear_record.get('soft_zone_shortfall_rad', 0.0))
+    growth = play - float(wear_record.get('lost_motion_new_rad', math.nan))
+    if not (k > 0.0 and exposure > 0.0 and wear > 0.0 and growth > 0.0):
+        return math.nan
+    return math.log(k * wear / (growth * exposure))
+
+
+def faster_than_wear(wear_record):
+    """Return :func:`implied_log_rate` where it exceeds :data:`LOG_RATE_PLAUSIBLE`, else None."""
+    log_rate = implied_log_rate(wear_record)
+    return log_rate if log_rate > LOG_RATE_PLAUSIBLE else None
+
+
 def rate_unresolved(wear_record):
     """Return how far the unit's own wear rate is from resolved, and what that means, in words."""
+    log_rate = faster_than_wear(wear_record)
+    if log_rate is not None:
+        return (f"this unit's lost motion reads as growing faster than wear can (e^{log_rate:.1f} "
+                f"times the model's wear rate at this duty; its prior allows up to "
+                f'e^{LOG_RATE_PLAUSIBLE:g}): that is a change in what its windows read, or '
+                'damage (a step, not wear; inspect it if the lost motion stays high), not a wear '
+                'rate, so its remaining life spans rates its windows do not resolve')
     sd = math.sqrt(max(float(wear_record['var_log_rate']), 0.0))
     return (f"this unit's own wear rate is not yet resolved (ln-rate sd {sd:.2f}, resolved at "
             f'{RATE_RESOLVED_SD:g}): its remaining life spans the rates its windows cannot '
@@ -1056,8 +1112,11 @@ def rate_resolved(wear_record):
     real-time recording, whose growth its windows cannot tell from none, resolves no rate
     (``bench_service_time.py --aging-factor 1 --hours 0.1``: of the joints called resolved
     with P10 at hours, REPLACE for units with thousands of hours left, 1 of 3 on the
-    independent generator and 5 of 10 on the third were such).
+    independent generator and 5 of 10 on the third were such). Never a rate faster than
+    wear can be (:func:`faster_than_wear`).
     """
+    if faster_than_wear(wear_record) is not None:
+        return False
     if float(wear_record.get('trend_probability', 0.0)) > 0.5 and _growth_seen(wear_record):
         return True
     var = float(wear_record.get('var_log_rate', math.nan))
@@ -1212,14 +1271,18 @@ def life_basis(wear_record, life_record, observed):
     Returns
     -------
     dict
-        ``rate_resolved`` (:func:`rate_resolved`), ``growth_law`` (:func:`growth_law` at
-        the record's lost-motion limit) and ``curve_extrapolation``
-        (:func:`curve_extrapolation`); each None when not observed or without a record.
+        ``rate_resolved`` (:func:`rate_resolved`), ``faster_than_wear``
+        (:func:`faster_than_wear`: the ``ln s`` of a growth faster than wear, else None),
+        ``growth_law`` (:func:`growth_law` at the record's lost-motion limit) and
+        ``curve_extrapolation`` (:func:`curve_extrapolation`); each None when not observed
+        or without a record.
 
     """
     if not (observed and wear_record):
-        return {'rate_resolved': None, 'growth_law': None, 'curve_extrapolation': None}
+        return {'rate_resolved': None, 'faster_than_wear': None, 'growth_law': None,
+                'curve_extrapolation': None}
     return {'rate_resolved': rate_resolved(wear_record),
+            'faster_than_wear': faster_than_wear(wear_record),
             'growth_law': growth_law(wear_record, life_record.get('lost_motion_limit_rad')),
             'curve_extrapolation': curve_extrapolation(wear_record, life_record)}
 

@@ -229,9 +229,16 @@ def _judge(row, r, state, params):
             row['verdict'] = 'WATCH'
             if lm is not None and limit is not None:
                 row['reason'] += f' with lost motion {lm:.2f} of {limit:.2f} arcmin'
-        row['reason'] += ("; the unit's own wear rate is not yet resolved, so the remaining "
-                          'life spans the rates its recordings cannot tell apart, the '
-                          f"model's at this duty among them ({remedy})")
+        fast = (r.summary or {}).get('faster_than_wear')
+        if fast is not None:
+            row['reason'] += ('; its lost motion reads as growing faster than wear can '
+                              f"(e^{fast:.1f} times the model's wear rate at this duty): a "
+                              'change in what its windows read, or damage (inspect it if the '
+                              f'lost motion stays high), not a wear rate ({remedy})')
+        else:
+            row['reason'] += ("; the unit's own wear rate is not yet resolved, so the "
+                              'remaining life spans the rates its recordings cannot tell '
+                              f"apart, the model's at this duty among them ({remedy})")
     law = row['growth_law']
     if law and law.get('extrapolation'):
         # The law is weighed by predictions a few windows ahead, not by how far it carries.

@@ -42,8 +42,8 @@ SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0,
                       wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
 JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
              'lost_motion_arcmin', 'messages', 'rejected', 'observed', 'windows', 'reason',
-             'partial', 'pairing', 'velocity', 'rate_resolved', 'growth_law',
-             'curve_extrapolation', 'service', 'inputs', 'soft_zone'}
+             'partial', 'pairing', 'velocity', 'rate_resolved', 'faster_than_wear',
+             'growth_law', 'curve_extrapolation', 'service', 'inputs', 'soft_zone'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
              'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',

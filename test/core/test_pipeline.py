@@ -23,6 +23,7 @@ from reducer_twin.core.pipeline import CLOCK_RESET_S, curve_extrapolation, duty_
 from reducer_twin.core.pipeline import EstimatorStage
 from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
 from reducer_twin.core.pipeline import life_trend_probability, LifeStage
+from reducer_twin.core.pipeline import faster_than_wear, implied_log_rate, LOG_RATE_PLAUSIBLE
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
 from reducer_twin.core.pipeline import reducer_state, taken_off
 from reducer_twin.core.transmission_error import model_tables
@@ -509,6 +510,48 @@ def test_the_life_message_says_when_it_is_the_models_rate_not_the_units_own(worn
     flat = {'trend_growth_rad': 0.00087 * ARCMIN, 'var_trend_growth_rad2': (0.00066 * ARCMIN) ** 2}
     assert not rate_resolved({**worn_record, 'var_log_rate': 4.0, 'trend_probability': 0.9,
                               **flat})
+
+
+def test_a_growth_faster_than_wear_resolves_no_rate(worn_record):
+    # Used units recorded for 6 minutes in real time (bench_service_time.py --aging-factor 1
+    # --hours 0.1): windows whose reading drifted by 0.02 arcmin, or a base whose mix of
+    # flanks moved it by arcmin, read as wear at e^10-e^18 times the model's rate; the law
+    # (or a rate released to follow it) took that as the unit's own: P50 of minutes to
+    # hours, resolved, REPLACE, on units with 1 500-7 000 h left.
+    stage = LifeStage(PARAMS, LifeConfig(warn_s=1e6 * HOUR, error_s=1e6 * HOUR))
+    # A law the likelier whose growth to date is 3.2 sds above none (as such a base's).
+    seen = {'trend_probability': 0.97, 'var_log_rate': 0.3 ** 2,
+            'trend_growth_rad': 3.2 * math.sqrt(worn_record['var_trend_growth_rad2'])}
+    record = {**worn_record, **seen}
+    # The growth to date as a rate on the wear model's curve (its secant from new).
+    secant = (record['lost_motion_rad'] - record['lost_motion_new_rad']) / record['wear_m']
+    model_growth = secant * record['archard_exposure_m']
+
+    def at(log_rate):
+        scale = record['trend_growth_rad'] / model_growth / math.exp(log_rate)
+        return {**record, 'archard_exposure_m': record['archard_exposure_m'] * scale}
+
+    fast = at(10.1)
+    assert implied_log_rate(fast) == pytest.approx(10.1, abs=1e-9)
+    assert faster_than_wear(fast) == pytest.approx(10.1, abs=1e-9)
+    assert not rate_resolved(fast)
+    _, level, message = stage.process(fast)
+    assert level == 'WARN'
+    assert message.endswith("; this unit's lost motion reads as growing faster than wear can "
+                            "(e^10.1 times the model's wear rate at this duty; its prior allows "
+                            'up to e^6): that is a change in what its windows read, or damage '
+                            '(a step, not wear; inspect it if the lost motion stays high), not a '
+                            'wear rate, so its remaining life spans rates its windows do not '
+                            'resolve')
+    # The same growth over an exposure that makes it a rate wear can have (the independent
+    # generator's fastest units read ln s up to 4.6) resolves it, as before.
+    assert faster_than_wear(at(4.6)) is None and rate_resolved(at(4.6))
+    # The wear model's own rate, where the law is not the likelier, alike.
+    model = {**worn_record, 'trend_probability': 0.1, 'var_log_rate': 0.3 ** 2}
+    assert not rate_resolved({**model, 'log_rate_scale': 10.5})
+    assert faster_than_wear({**model, 'log_rate_scale': 10.5}) == 10.5
+    assert rate_resolved({**model, 'log_rate_scale': 4.6})
+    assert LOG_RATE_PLAUSIBLE == pytest.approx(6.0)
 
 
 def test_the_record_widens_the_rate_by_how_far_the_lagged_predictions_fell_short(windows):

@@ -143,6 +143,22 @@ def test_a_replace_or_plan_on_rates_not_yet_resolved_is_a_watch(p10_h):
     assert fleet_row(past, PARAMS)['verdict'] == 'REPLACE'
 
 
+def test_a_growth_faster_than_wear_is_a_watch_that_says_so():
+    # A third-generator base recorded for 6 minutes in real time: its windows' mix of
+    # flanks read as 2.7 arcmin of growth, e^16.5 times the model's rate; P50 8 minutes,
+    # REPLACE, on a unit with 2 800 h left.
+    reducer = _reducer(0.07, lm=1.50)
+    reducer.summary.update(rate_resolved=False, faster_than_wear=16.54)
+    row = fleet_row(reducer, PARAMS)
+    assert row['verdict'] == 'WATCH'
+    assert row['reason'].endswith('with lost motion 1.50 of 3.00 arcmin; its lost motion reads '
+                                  "as growing faster than wear can (e^16.5 times the model's "
+                                  'wear rate at this duty): a change in what its windows read, '
+                                  'or damage (inspect it if the lost motion stays high), not a '
+                                  'wear rate (watch it longer, or give its service time: '
+                                  'service_time_s, the hour meter)')
+
+
 def test_a_life_that_follows_the_observed_growth_says_how_far_it_is_extrapolated():
     # A 300-h recording of a 25 000-h life: the law that won on predictions a few windows
     # ahead carries the remaining life twenty times the exposure it was learnt on.
