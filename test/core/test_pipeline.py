@@ -20,10 +20,10 @@ from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, curve_extrapolation, duty_to_record
-from reducer_twin.core.pipeline import EstimatorStage
-from reducer_twin.core.pipeline import features_from_record, growth_law, LifeConfig
-from reducer_twin.core.pipeline import life_trend_probability, LifeStage
-from reducer_twin.core.pipeline import faster_than_wear, implied_log_rate, LOG_RATE_PLAUSIBLE
+from reducer_twin.core.pipeline import EstimatorStage, faster_than_wear
+from reducer_twin.core.pipeline import features_from_record, growth_law, implied_log_rate
+from reducer_twin.core.pipeline import life_trend_probability, LifeConfig, LifeStage
+from reducer_twin.core.pipeline import LOG_RATE_PLAUSIBLE
 from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
 from reducer_twin.core.pipeline import reducer_state, taken_off
 from reducer_twin.core.transmission_error import model_tables
