@@ -1052,7 +1052,7 @@ from window to window): taken as wear that is a rate e^6-e^18 times the model's
 (``bench_service_time.py --aging-factor 1 --hours 0.1``, every joint of both generators
 above e^6; at 150 h and over whole lives the independent generator's fastest units read
 ln s up to 4.6), and the law or a released rate took it as this unit's own: P50 minutes
-to hours on units with 1 500-7 000 h left, resolved, REPLACE.
+to hours on units with 1 400-7 200 h left, resolved, REPLACE.
 """
 
 
