@@ -1031,6 +1031,11 @@ minutes in real time, and for 60 s at aging factor 3600).
 """
 
 
+def _law_likelier(wear_record):
+    """Whether the observed growth law is the likelier model of the record (probability > 0.5)."""
+    return float(wear_record.get('trend_probability', 0.0)) > 0.5
+
+
 def _growth_seen(wear_record):
     """Whether the law's growth to date lies :data:`GROWTH_SEEN_SIGMAS` sds above none."""
     k = float(wear_record.get('trend_growth_rad', math.nan))
@@ -1046,13 +1051,13 @@ LOG_RATE_PLAUSIBLE = math.log(_PRIOR.initial_rate_scale) + 3.0 * _PRIOR.initial_
 
 The prior holds a rate 400 times the model's at the duty to 0.13 %. A unit met used and
 recorded for minutes in real time shows no growth its windows can read (0.0001 arcmin
-true), yet their reading drifts by 0.001-0.02 arcmin (a start-up, a cycle's loads) and
-their mix of flanks changes (a base whose knee lies above its loads' reach: 0.4-5 arcmin
-from window to window): taken as wear that is a rate e^6-e^18 times the model's
-(``bench_service_time.py --aging-factor 1 --hours 0.1``, every joint of both generators
-above e^6; at 150 h and over whole lives the independent generator's fastest units read
-ln s up to 4.6), and the law or a released rate took it as this unit's own: P50 minutes
-to hours on units with 1 400-7 200 h left, resolved, REPLACE.
+true), yet their reading drifts by up to 0.03 arcmin (the first windows, those after a cycle's
+pauses) and their mix of flanks changes (a base whose knee lies above its loads' reach:
+0.4-5 arcmin from window to window): taken as wear that is a rate e^6-e^18 times the
+model's (one-off scripts over the derived bags of ``bench_service_time.py --aging-factor
+1 --hours 0.1``: every joint of both generators above e^6; the independent generator's
+fastest units read ln s up to 4.6), and the law or a released rate took it as this unit's
+own: P50 minutes to hours on units with 1 400-7 200 h left, resolved, REPLACE.
 """
 
 
@@ -1068,7 +1073,7 @@ def implied_log_rate(wear_record):
 
     else the wear model's own ``ln s``.
     """
-    if float(wear_record.get('trend_probability', 0.0)) <= 0.5:
+    if not _law_likelier(wear_record):
         return float(wear_record.get('log_rate_scale', math.nan))
     k = float(wear_record.get('trend_growth_rad', math.nan))
     exposure = float(wear_record.get('archard_exposure_m', math.nan))
@@ -1087,12 +1092,17 @@ def faster_than_wear(wear_record):
     return log_rate if log_rate > LOG_RATE_PLAUSIBLE else None
 
 
+def faster_than_wear_words(log_rate):
+    """Return the clause that says a growth is faster than wear, at ``ln s`` (bracket open)."""
+    return (f'lost motion reads as growing faster than wear can (e^{log_rate:.1f} times the '
+            "model's wear rate at this duty")
+
+
 def rate_unresolved(wear_record):
     """Return how far the unit's own wear rate is from resolved, and what that means, in words."""
     log_rate = faster_than_wear(wear_record)
     if log_rate is not None:
-        return (f"this unit's lost motion reads as growing faster than wear can (e^{log_rate:.1f} "
-                f"times the model's wear rate at this duty; its prior allows up to "
+        return (f"this unit's {faster_than_wear_words(log_rate)}; its prior allows up to "
                 f'e^{LOG_RATE_PLAUSIBLE:g}): that is a change in what its windows read, or '
                 'damage (a step, not wear; inspect it if the lost motion stays high), not a wear '
                 'rate, so its remaining life spans rates its windows do not resolve')
@@ -1117,13 +1127,13 @@ def rate_resolved(wear_record):
     """
     if faster_than_wear(wear_record) is not None:
         return False
-    if float(wear_record.get('trend_probability', 0.0)) > 0.5 and _growth_seen(wear_record):
+    if _law_likelier(wear_record) and _growth_seen(wear_record):
         return True
     var = float(wear_record.get('var_log_rate', math.nan))
     return math.isfinite(var) and var <= RATE_RESOLVED_SD ** 2
 
 
-TREND_PRIOR = EstimatorConfig().trend_probability
+TREND_PRIOR = _PRIOR.trend_probability
 """Prior probability of the observed growth law (the estimator's default)."""
 
 SCORED_FROM = SCORE_AFTER + SCORE_LAG
@@ -1206,9 +1216,9 @@ def growth_law(wear_record, limit=None):
         the law does not reach it or has passed it).
 
     """
-    p = float(wear_record.get('trend_probability', 0.0))
-    if not p > 0.5:
+    if not _law_likelier(wear_record):
         return None
+    p = float(wear_record['trend_probability'])
     reach = _law_reach(wear_record, limit)    # None without a limit: the weight is p
     return {'probability': p, 'weight': _weighed(wear_record, reach),
             'exponent': float(wear_record['trend_exponent']), 'extrapolation': reach}

@@ -26,7 +26,7 @@ Rows are ranked by P10, most urgent first; not observed and retired reducers fol
 import math
 
 import numpy as np
-from reducer_twin.core.pipeline import SOFT_ZONE_KEY
+from reducer_twin.core.pipeline import faster_than_wear_words, SOFT_ZONE_KEY
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from reducer_twin.fleet.store import iso_from_ns
 
@@ -231,10 +231,9 @@ def _judge(row, r, state, params):
                 row['reason'] += f' with lost motion {lm:.2f} of {limit:.2f} arcmin'
         fast = (r.summary or {}).get('faster_than_wear')
         if fast is not None:
-            row['reason'] += ('; its lost motion reads as growing faster than wear can '
-                              f"(e^{fast:.1f} times the model's wear rate at this duty): a "
-                              'change in what its windows read, or damage (inspect it if the '
-                              f'lost motion stays high), not a wear rate ({remedy})')
+            row['reason'] += (f'; its {faster_than_wear_words(fast)}): a change in what its '
+                              'windows read, or damage (inspect it if the lost motion stays '
+                              f'high), not a wear rate ({remedy})')
         else:
             row['reason'] += ("; the unit's own wear rate is not yet resolved, so the "
                               'remaining life spans the rates its recordings cannot tell '
