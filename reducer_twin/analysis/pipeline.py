@@ -71,6 +71,7 @@ from reducer_twin.core.joint_twin import TOPIC_NAMESPACE, TwinFront
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
+from reducer_twin.core.travel_ratio import mixed_units
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -403,6 +404,7 @@ class _Run:
         self.messages_read = 0
         self.angles = {}     # joint -> 'raw' / 'output', as the data show them
         self.swapped = {}    # joint -> the link entry's travel over the motor entry's, >> 1
+        self.mixed = {}      # joint -> (motor travel over link travel, core mixed_units)
         self.span = {}       # joint -> [first, last] stamp of its paired samples [ns]
         self.entries = _EntryCounts(plan)
         for joint, front in self.fronts.items():
@@ -448,6 +450,12 @@ class _Run:
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
                 warn(self.bag, f'the motor encoder of {joint} counts against '
                      'the link (a negative reduction): its angles are taken reversed')
+            units = mixed_units(r, ratio)
+            if units is not None:
+                # Neither raw nor output in one unit: the joint's reason, never read.
+                self.mixed[joint] = (r, units)
+                self._set_angles(joint, 'raw' if units[3] else 'output', sense)
+                continue
             if r < 1.0 / math.sqrt(ratio):
                 # The link entry moves about the ratio times the motor's: a swap, said as
                 # the joint's reason (never read as encoders that jump, a ratio off, or
@@ -624,6 +632,21 @@ class _Run:
                 f'{self.fronts[joint].ratio:g} times its link: the two are swapped (the '
                 "motor encoder published under the joint's name); the twin reads the link "
                 'from the joint entry and the motor from the motor entry')
+
+    def _units_reason(self, joint):
+        """Say that a joint's encoders read in mixed units (None when they do not)."""
+        if joint not in self.mixed:
+            return None
+        travel, (factor, what, remedy, raw) = self.mixed[joint]
+        plan = self.plan
+        motor = plan.motor_names[plan.joints.index(joint)]
+        where = f'{plan.motor_topic} ' if plan.motor_topic else ''
+        ratio = self.fronts[joint].ratio
+        form = f'{ratio:g} x {factor:.4g}' if raw else f'{factor:.4g}'
+        return (f'its motor entry {where}{motor} moves {travel:.4g} times its link entry '
+                f'{joint}, where a motor in radians moves {ratio:g} times its link (raw '
+                f'angles) or once (divided by the ratio): {form}, which {what} gives; no '
+                f'transmission error can be read from the two: {remedy}')
 
     def _not_observed(self, joint, front, counts, sides):
         """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
@@ -874,7 +897,8 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._swap_reason(joint) or self._effort_said(
+            res.reason = self._swap_reason(joint) or self._units_reason(joint) or \
+                self._effort_said(
                 front.twin.refusal(self._not_observed(joint, front, counts, sides)))
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)

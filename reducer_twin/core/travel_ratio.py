@@ -19,6 +19,8 @@ instead, and a factor of encoders in mixed units or of the other sense is named
 (:data:`UNIT_FACTORS`).
 """
 
+import math
+
 import numpy as np
 
 from .velocity_check import angle_noise, ANGLE_UNITS
@@ -70,6 +72,17 @@ taken for units.
 FACTOR_TOLERANCE = 0.02
 """Relative difference within which a measured factor is read as one of :data:`UNIT_FACTORS`."""
 
+TRAVEL_TOLERANCE = 0.05
+"""
+Relative difference within which a motor's travel over its link's is read as a form.
+
+Motor and link travel as their sums of absolute steps, over a chunk of a recording: within
+0.1 % of the ratio and of a link in degrees beside a raw motor in radians on the model's
+simulator at 250 Hz and 1 kHz (80.90 for 80.9; 1.412 for 1.412). The forms a raw or an
+output motor of an 81-ratio reducer gives in :data:`UNIT_FACTORS`' units lie at least 35 %
+apart (1 and 1.41, 57.3 and 81, 1/81 and 1/57.3).
+"""
+
 WIDE_SPREAD = 0.05
 """
 Interquartile range of the left-out moves' ratios, as a share of their median, read from.
@@ -80,6 +93,47 @@ moves the turn counts restored fold: quartiles of the ratio at -359 and 640 for 
 
 _WIDE_MOVES = 100_000
 """Most ratios of moves the TE gate leaves out that are kept (a stream of another ratio)."""
+
+
+def mixed_units(travel, ratio):
+    """
+    Name encoders in mixed units from how far the motor travels for the link, or None.
+
+    A raw motor angle in radians travels the reduction ratio ``i`` times its link, one divided
+    by the ratio once; a factor of :data:`UNIT_FACTORS` more (a link in degrees beside a motor
+    in radians: ``i·pi/180``) is the units of one of the two, which the raw-or-output choice,
+    made on the travel, cannot read: a link in degrees beside a raw motor travels 1.41 times
+    for ``i = 81`` and was read as an output motor, every sample pair then a spike. Either
+    standard form within :data:`TRAVEL_TOLERANCE` is taken first, and a travel beyond
+    ``sqrt(i)``, which reads as a raw motor, is never taken for an output motor in other
+    units: a reducer of another ratio of the same frame (57 configured as 81) is likelier
+    than an output motor in degrees (57.3), and its ratio is said as such
+    (:meth:`TravelRatio.reason`).
+
+    Parameters
+    ----------
+    travel : float
+        The motor's travel over the link's (sums of absolute steps).
+    ratio : float
+        The configured reduction ratio ``i``.
+
+    Returns
+    -------
+    tuple or None
+        ``(factor, what, remedy, raw)``: the factor of :data:`UNIT_FACTORS`, what gives it,
+        the remedy, and whether the motor angles are raw (else divided by the ratio).
+
+    """
+    if not (math.isfinite(travel) and travel > 0.0):
+        return None
+    if any(abs(travel / form - 1.0) <= TRAVEL_TOLERANCE for form in (ratio, 1.0)):
+        return None
+    for value, what, remedy in UNIT_FACTORS:
+        for raw, form in ((True, ratio * value), (False, value)):
+            if value > 0.0 and abs(travel / form - 1.0) <= TRAVEL_TOLERANCE and \
+                    (raw or travel < math.sqrt(ratio)):
+                return value, what, remedy, raw
+    return None
 
 
 class TravelRatio:

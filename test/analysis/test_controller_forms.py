@@ -560,6 +560,38 @@ def test_link_and_motor_entries_swapped_are_said_to_be(original, tmp_path, capsy
     assert all('the two are swapped' in got['reason'] for got in out['joints'].values())
 
 
+@pytest.mark.parametrize('side, said', [
+    ('link', ('moves 1.41', 'times its link entry {j}, where a motor in radians moves 81 times '
+              'its link (raw angles) or once (divided by the ratio): 81 x 0.01745, which a '
+              'link angle in degrees beside a motor angle in radians gives')),
+    ('motor', ('moves 46', 'times its link entry {j}', '81 x 57.3, which a motor angle in '
+               'degrees beside a link angle in radians gives')),
+], ids=['link in degrees', 'motor in degrees'])
+def test_encoders_in_mixed_units_are_named_not_taken_for_spikes(
+        original, tmp_path, capsys, side, said):
+    # A link in degrees beside a raw motor in radians travels 1.41 times the link: it was
+    # read as an output motor, every pair a spike, and the reason listed "positions in
+    # degrees or counts, a wrong reduction ratio or motor_angles, link and motor entries
+    # swapped, or faulty encoders"; a motor in degrees was said so, and at 250 Hz also to
+    # be "stamped 35.9 ms apart".
+    js = original[0]
+    position, velocity = js.position.copy(), js.velocity.copy()
+    columns = _link_columns(js) if side == 'link' else _motor_columns(js)
+    position[:, columns] = np.degrees(position[:, columns])
+    velocity[:, columns] = np.degrees(velocity[:, columns])
+    code, out, err = _cli_json(_rewrite(js, tmp_path, side, position=position,
+                                        velocity=velocity), tmp_path, capsys)
+    assert code == 3
+    for joint, got in out['joints'].items():
+        assert got['observed'] is False and got['wear_um'] is None
+        assert got['reason'].startswith(f'its motor entry {joint}_motor moves ')
+        assert all(part.format(j=joint) in got['reason'] for part in said)
+        assert f'a {side} angle in degrees beside a ' in got['reason']
+        assert got['reason'].endswith('publish both angles in radians (REP 103)')
+        assert 'spikes' not in got['reason'] and 'stamped' not in got['reason']
+        assert any(x.startswith(f'WARNING: {joint}: not observed') for x in err.splitlines())
+
+
 def _link_columns(js):
     return [k for k, n in enumerate(js.names) if not n.endswith('_motor')]
 

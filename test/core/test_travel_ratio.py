@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 from reducer_twin.core.te_extraction import compute_te
-from reducer_twin.core.travel_ratio import RATIO_TOLERANCE, TravelRatio
+from reducer_twin.core.travel_ratio import mixed_units, RATIO_TOLERANCE, TravelRatio
 
 RATIO = 81.0
 T = np.arange(20_000) * 1e-3                              # 20 s at 1 kHz
@@ -114,3 +114,37 @@ def test_a_motor_whose_moves_fold_into_turns_is_not_given_a_ratio():
     for part in np.array_split(np.arange(T.size), 40):
         travel.observe(stream.t[part], stream.output_angle[part], stream.te[part])
     assert travel.measured is None and travel.reason() is None
+
+
+DEG = math.pi / 180.0
+
+
+@pytest.mark.parametrize('travel, said, raw', [
+    (RATIO * DEG, 'a link angle in degrees beside a motor angle in radians', True),
+    (RATIO / DEG, 'a motor angle in degrees beside a link angle in radians', True),
+    (RATIO * 2.0 * math.pi, 'a link angle in revolutions beside a motor angle in radians',
+     True),
+    (DEG, 'a link angle in degrees beside a motor angle in radians', False),
+    (1.0 / (2.0 * math.pi), 'a motor angle in revolutions beside a link angle in radians',
+     False),
+])
+def test_encoders_in_mixed_units_are_named_from_their_travel(travel, said, raw):
+    factor, what, remedy, got_raw = mixed_units(travel * 1.03, RATIO)   # 3 % off
+    assert what == said and got_raw is raw
+    assert remedy == 'publish both angles in radians (REP 103)'
+    assert travel / factor == pytest.approx(RATIO if raw else 1.0)
+
+
+@pytest.mark.parametrize('travel', [
+    RATIO, 0.97 * RATIO, 1.0, 1.04,     # raw or output angles in radians
+    101.0, 57.0,                        # another ratio of the frame: a ratio, said as one
+    1.0 / DEG,                          # 57.3: read as raw (a ratio-57 reducer is likelier)
+    1.0 / RATIO,                        # link and motor entries swapped
+    math.nan, 0.0,                      # nothing travelled
+])
+def test_travels_of_one_unit_are_not_taken_for_mixed_units(travel):
+    assert mixed_units(travel, RATIO) is None
+
+
+def test_a_reducer_of_ratio_57_reads_raw_not_as_a_motor_in_degrees():
+    assert mixed_units(57.0, 57.0) is None and mixed_units(57.0 / DEG, 57.0) is not None
