@@ -496,15 +496,14 @@ class StreamCleaner:
             self._ndim = 1 if one_d else 2
         vel = _optional(velocity, pos.shape, 'velocity')
         eff = _optional(effort, pos.shape, 'effort')
+        self._rows += n        # arrived (the rows of this batch count from ``base``)
         if n == 0:
             out = CleanStream(t, pos, vel, eff, np.zeros(0, np.int64))
             return _squeeze(out) if one_d else out
         if n <= FAST_ROWS and not undecided:
             out = self._fast(t, pos, vel, eff)
             if out is not None:
-                self._rows += n
                 return _squeeze(out) if one_d else out
-        self._rows += n
         if undecided and self.clock.active:
             # The deciding stamps scattered: their holes are those of the clock's line,
             # the later ones those of the re-timed stamps.
