@@ -6,7 +6,10 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
-PYTEST_ARGS ?=
+# The suite on every core (at most 4 test processes), a module's tests in one of them so that
+# its fixtures are built once; each process holds a ROS domain id of its own (test/conftest.py).
+# `make test PYTEST_ARGS=-n0` runs it in one process.
+PYTEST_ARGS ?= -n auto --maxprocesses 4 --dist loadfile
 
 # Keep DDS traffic on this machine (see ../shared/docs/ros2-notes.md). The tests'
 # conftest sets these too, with a ROS_DOMAIN_ID of its own per test process.

@@ -53,6 +53,8 @@ setup(
         'test': [
             'pytest',
             'pytest-timeout',
+            # The suite's modules spread over the cores (`make test`).
+            'pytest-xdist',
             'hypothesis',
             'mcap-ros2-support',
             # What ament_flake8's configuration expects (its package.xml exec_depends).
