@@ -215,6 +215,19 @@ class TravelRatio:
         self._wide.append(1.0 - d_te / d_link)
         self._wide_travel += float(np.abs(d_link).sum()) / k
 
+    def _angle_forms(self):
+        """
+        Factors that motor angles taken in the other form give, what, and the remedy.
+
+        Live, ``motor_angles`` is configured (offline it is found from the data): output
+        angles taken as raw turn once per link turn, raw angles taken as output the ratio
+        squared times; the ratio line then pointed at the reducer's geometry.
+        """
+        return ((1.0 / self.ratio, 'a motor angle already divided by the ratio but configured '
+                 'as raw', 'set motor_angles (twin.motor_angles in --config) to output'),
+                (self.ratio, 'a raw motor angle configured as divided by the ratio',
+                 'set motor_angles (twin.motor_angles in --config) to raw'))
+
     def reason(self):
         """Say when the motor turns another number of times than the ratio, else None."""
         if self.measured is None or abs(self.measured / self.ratio - 1.0) <= RATIO_TOLERANCE:
@@ -225,7 +238,7 @@ class TravelRatio:
                 f'configured reduction ratio is {self.ratio:g} ({off:+.2g} %): the '
                 'transmission error then grows with the angle by that share of it, which no '
                 "reducer's play or twist does")
-        for value, what, remedy in UNIT_FACTORS:
+        for value, what, remedy in (*self._angle_forms(), *UNIT_FACTORS):
             if abs(factor / value - 1.0) <= FACTOR_TOLERANCE:
                 return (f'{said}. That is {value:.4g} times the configured ratio, which '
                         f'{what} gives: {remedy}')

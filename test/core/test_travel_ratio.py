@@ -148,3 +148,21 @@ def test_travels_of_one_unit_are_not_taken_for_mixed_units(travel):
 
 def test_a_reducer_of_ratio_57_reads_raw_not_as_a_motor_in_degrees():
     assert mixed_units(57.0, 57.0) is None and mixed_units(57.0 / DEG, 57.0) is not None
+
+
+@pytest.mark.parametrize('ratio_true, said', [
+    (1.0, 'That is 0.01235 times the configured ratio, which a motor angle already divided '
+          'by the ratio but configured as raw gives: set motor_angles (twin.motor_angles in '
+          '--config) to output'),
+    (RATIO * RATIO, 'That is 81 times the configured ratio, which a raw motor angle configured '
+                    'as divided by the ratio gives: set motor_angles (twin.motor_angles in '
+                    '--config) to raw'),
+])
+def test_motor_angles_configured_in_the_other_form_are_named_with_the_setting(ratio_true, said):
+    # A live node is told the form (motor_angles); the other one was said as a ratio of
+    # another reducer: "give this reducer's geometry ... in its parameter file".
+    travel = TravelRatio(RATIO)
+    for part in np.array_split(np.arange(T.size), 40):
+        travel.observe(T[part], LINK[part], _te(ratio_true)[part])
+    assert travel.reason().endswith(said)
+    assert 'geometry' not in travel.reason()
