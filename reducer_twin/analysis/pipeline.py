@@ -71,7 +71,7 @@ from reducer_twin.core.joint_twin import TOPIC_NAMESPACE, TwinFront
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
-from reducer_twin.core.travel_ratio import mixed_units
+from reducer_twin.core.travel_ratio import motor_angle_form
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -450,20 +450,19 @@ class _Run:
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
                 warn(self.bag, f'the motor encoder of {joint} counts against '
                      'the link (a negative reduction): its angles are taken reversed')
-            units = mixed_units(r, ratio)
+            found, units = motor_angle_form(r, ratio)
             if units is not None:
                 # Neither raw nor output in one unit: the joint's reason, never read.
                 self.mixed[joint] = (r, units)
-                self._set_angles(joint, 'raw' if units[3] else 'output', sense)
+                self._set_angles(joint, found, sense)
                 continue
-            if r < 1.0 / math.sqrt(ratio):
+            if found == 'swapped':
                 # The link entry moves about the ratio times the motor's: a swap, said as
                 # the joint's reason (never read as encoders that jump, a ratio off, or
                 # motor angles other than configured).
                 self.swapped[joint] = 1.0 / r
                 self._set_angles(joint, 'raw', sense)
                 continue
-            found = 'raw' if r > math.sqrt(ratio) else 'output'
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
                                  f'{ratio:g} times, output angles about 1)')

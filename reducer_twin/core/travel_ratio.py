@@ -129,11 +129,45 @@ def mixed_units(travel, ratio):
     if any(abs(travel / form - 1.0) <= TRAVEL_TOLERANCE for form in (ratio, 1.0)):
         return None
     for value, what, remedy in UNIT_FACTORS:
+        if value <= 0.0:
+            continue        # the other sense: a travel does not show it
         for raw, form in ((True, ratio * value), (False, value)):
-            if value > 0.0 and abs(travel / form - 1.0) <= TRAVEL_TOLERANCE and \
+            if abs(travel / form - 1.0) <= TRAVEL_TOLERANCE and \
                     (raw or travel < math.sqrt(ratio)):
                 return value, what, remedy, raw
     return None
+
+
+def motor_angle_form(travel, ratio):
+    """
+    Read the form of a joint's motor angles from the motor's travel over the link's.
+
+    Raw angles (at the motor) travel about the ratio ``i`` times the link, output angles
+    (divided by it) about once; the two are told apart at ``sqrt(i)``. A travel below
+    ``1/sqrt(i)`` is a link entry that moves about ``i`` times its motor entry: the two
+    entries swapped. Encoders in mixed units (:func:`mixed_units`) are read in the form
+    their factor comes with.
+
+    Parameters
+    ----------
+    travel : float
+        The motor's travel over the link's (finite, > 0).
+    ratio : float
+        The configured reduction ratio ``i``.
+
+    Returns
+    -------
+    tuple
+        ``(form, units)``: ``'raw'``, ``'output'`` or ``'swapped'``, and
+        :func:`mixed_units` (None for encoders in one unit).
+
+    """
+    units = mixed_units(travel, ratio)
+    if units is not None:
+        return ('raw' if units[3] else 'output'), units
+    if travel < 1.0 / math.sqrt(ratio):
+        return 'swapped', None
+    return ('raw' if travel > math.sqrt(ratio) else 'output'), None
 
 
 class TravelRatio:

@@ -5,7 +5,8 @@ import math
 import numpy as np
 import pytest
 from reducer_twin.core.te_extraction import compute_te
-from reducer_twin.core.travel_ratio import mixed_units, RATIO_TOLERANCE, TravelRatio
+from reducer_twin.core.travel_ratio import mixed_units, motor_angle_form, RATIO_TOLERANCE
+from reducer_twin.core.travel_ratio import TravelRatio
 
 RATIO = 81.0
 T = np.arange(20_000) * 1e-3                              # 20 s at 1 kHz
@@ -166,3 +167,13 @@ def test_motor_angles_configured_in_the_other_form_are_named_with_the_setting(ra
         travel.observe(T[part], LINK[part], _te(ratio_true)[part])
     assert travel.reason().endswith(said)
     assert 'geometry' not in travel.reason()
+
+
+@pytest.mark.parametrize('travel, form, mixed', [
+    (0.97 * RATIO, 'raw', False), (101.0, 'raw', False), (1.04, 'output', False),
+    (1.0 / RATIO, 'swapped', False),                  # the link entry moves 81 times
+    (RATIO * DEG, 'raw', True), (DEG, 'output', True),    # a link in degrees
+])
+def test_the_motor_angles_form_is_read_from_the_travel(travel, form, mixed):
+    got, units = motor_angle_form(travel, RATIO)
+    assert got == form and (units is not None) is mixed
