@@ -83,6 +83,27 @@ def _catch_sigterm():
         signal.signal(signal.SIGTERM, _on_sigterm(os.getpid()))
 
 
+def _stopped(code, argv):
+    """
+    Return the exit code of a stopped command; run as the program, exit with it at once.
+
+    The stop may have come while the command's thread held a lock of a library's thread
+    or queue (a ``multiprocessing`` queue's, a thread pool's): the interpreter's exit
+    handlers, which join those threads and flush those queues, would then wait for it
+    for ever (an interrupted ``analyze`` was found asleep there). The command's outputs
+    were removed and its workers stopped on the way here; nothing is lost by skipping
+    the handlers. Called in-process (``argv`` given), the code is returned.
+    """
+    if argv is not None:
+        return code
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass    # a closed pipe: nothing more can be said
+    os._exit(code)
+
+
 def main(argv=None):
     """
     Run the ``reducer-twin`` command.
@@ -90,7 +111,8 @@ def main(argv=None):
     Parameters
     ----------
     argv : list of str, optional
-        Arguments (default: ``sys.argv[1:]``).
+        Arguments (default: ``sys.argv[1:]``, as the program: a stopped command then
+        exits at once, see :func:`_stopped`).
 
     Returns
     -------
@@ -110,10 +132,10 @@ def main(argv=None):
         return 1
     except Terminated:
         sys.stderr.write('ERROR: terminated (SIGTERM); nothing was left at the outputs\n')
-        return 143
+        return _stopped(143, argv)
     except KeyboardInterrupt:
         sys.stderr.write('ERROR: interrupted\n')
-        return 130
+        return _stopped(130, argv)
     except BrokenPipeError:
         return 0
     except OSError as err:   # a file the command did not expect to fail: still one line

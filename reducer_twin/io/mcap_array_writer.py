@@ -22,7 +22,6 @@ Speed comes from treating messages as arrays: ``write_batch`` and
 into reused buffers while earlier chunks compress on worker threads.
 """
 
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 import struct
@@ -33,6 +32,7 @@ from mcap.records import (
     SummaryOffset)
 import numpy as np
 from reducer_twin.core.errors import BagError, InvalidInput
+from reducer_twin.io.background import Background
 from reducer_twin.io.mcap_format import (
     _compress, _COMPRESSIONS, _lz4, _string, _zstd, DEFAULT_CHUNK_SIZE, LIBRARY, MAGIC,
     MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_CHUNK_INDEX, OP_MESSAGE, OP_MESSAGE_INDEX,
@@ -222,7 +222,7 @@ class McapBagWriter(TopicBook):
         self._index = {}  # channel id -> list of uint64 (k, 2) arrays (log time, offset)
         self._chunk_indexes = []
         self._metadata_indexes = []
-        self._pool = ThreadPoolExecutor(threads) if threads > 1 else None
+        self._pool = Background(threads, 'mcap-write') if threads > 1 else None
         self._pending = []
         self._write(MAGIC)
         self._write(record_bytes(Header(profile=PROFILE, library=LIBRARY)))
@@ -440,7 +440,7 @@ class McapBagWriter(TopicBook):
             self._closed = True
             self._file.close()
             if self._pool is not None:
-                self._pool.shutdown()
+                self._pool.close()
         return self.file_summary()
 
     def discard(self):
@@ -451,7 +451,7 @@ class McapBagWriter(TopicBook):
         except OSError:
             pass  # a full disk fails the flush again: the file is removed anyway
         if self._pool is not None:
-            self._pool.shutdown(cancel_futures=True)
+            self._pool.close()  # a chunk in flight is compressed for nobody, never awaited
 
     def __enter__(self):
         """Return the writer."""

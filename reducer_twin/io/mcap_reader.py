@@ -22,7 +22,6 @@ what is readable is returned and the reader's ``warnings`` say where reading sto
 """
 
 import collections
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 import itertools
 import mmap
@@ -39,6 +38,7 @@ from mcap.records import Channel, Chunk, Footer, Header, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, get_chunk_data_stream
 import numpy as np
 from reducer_twin.core.errors import BagError
+from reducer_twin.io.background import Background
 from reducer_twin.io.mcap_format import (
     MAGIC, MESSAGE_HEADER, OP_CHANNEL, OP_CHUNK, OP_DATA_END, OP_FOOTER, OP_HEADER, OP_MESSAGE,
     OP_MESSAGE_INDEX, OP_METADATA, OP_SCHEMA, RECORD_NAMES)
@@ -523,7 +523,7 @@ class McapBagReader:
         """Yield ``(chunk, batch of the wanted messages or None)`` for each chunk, in order."""
         # Decompression (and the CRC check) of the next chunks runs on a worker thread
         # while this one is handed out; zstd and zlib release the GIL.
-        with ThreadPoolExecutor(1) as pool:
+        with Background(1, 'mcap-read') as pool:
             queue = collections.deque()
             upcoming = iter(chunks)
             for chunk in itertools.islice(upcoming, 2):
