@@ -131,17 +131,21 @@ def main(argv=None):
         sys.stderr.write(f'ERROR: {err}\n')
         return 1
     except Terminated:
-        sys.stderr.write('ERROR: terminated (SIGTERM); nothing was left at the outputs\n')
-        return _stopped(143, argv)
+        sys.stderr.write('ERROR: terminated (SIGTERM); nothing incomplete was left at the '
+                         'outputs\n')
+        stopped = 143
     except KeyboardInterrupt:
         sys.stderr.write('ERROR: interrupted\n')
-        return _stopped(130, argv)
+        stopped = 130
     except BrokenPipeError:
         return 0
     except OSError as err:   # a file the command did not expect to fail: still one line
         where = f' ({err.filename})' if err.filename else ''
         sys.stderr.write(f'ERROR: {err.strerror or err}{where}\n')
         return 1
+    # Out of the handler: the stopped frames are gone, so the generators they held
+    # (a Ray engine's) have run their clean-up.
+    return _stopped(stopped, argv)
 
 
 if __name__ == '__main__':

@@ -11,6 +11,10 @@ when that thread ends), a thread of the worker looks at its parent twice a secon
 A worker holds no output of its own beyond what a killed run leaves anyway (a named
 temporary, which the next run removes); the lock of an output, inherited or taken, goes
 with it.
+
+The process pools of several bags (:func:`new_pool`) stop with the command: a stop
+interrupts the bag each worker analyses, which removes what it was writing, and no
+queued bag is started (:func:`stop_pool`).
 """
 
 import os
@@ -77,3 +81,92 @@ def _watch_parent(pid):
     while os.getppid() == pid:
         time.sleep(PARENT_CHECK_S)
     os._exit(1)
+
+
+# --------------------------------------------------------------------------- process pools
+
+_worker_state = 'idle'
+"""What this pool worker does: 'idle', 'task' or 'stopping' (see :func:`pool_worker`)."""
+
+STOP_WAIT_S = 30.0
+"""How long [s] a stopped pool's workers get to remove what they were writing."""
+
+
+def pool_worker(parent):
+    """
+    Initialise a worker of a process pool: it ends with its parent and stops cleanly.
+
+    A stop (SIGINT, SIGTERM) raises ``KeyboardInterrupt`` in the task it runs (see
+    :func:`run_task`), so that the bag it analyses removes what it was writing, as a
+    stopped command does; a further stop is ignored until that is done (Ctrl-C reaches
+    the worker, then the pool's own stop), and the tasks already queued for it are not
+    started. Between tasks it ends the worker at once, without a traceback.
+
+    Parameters
+    ----------
+    parent : tuple of (int, bool)
+        :func:`parent_of_fork` of the parent, taken before the fork.
+
+    """
+    end_with_parent(parent)
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, _stop_worker)
+
+
+def _stop_worker(signum, frame):
+    global _worker_state
+    if _worker_state == 'task':
+        _worker_state = 'stopping'
+        raise KeyboardInterrupt()
+    if _worker_state == 'idle':
+        os._exit(128 + signum)
+
+
+def run_task(fn, *args):
+    """Run ``fn(*args)`` as a pool worker's task (a stop then raises in it)."""
+    global _worker_state
+    if _worker_state == 'stopping':     # work queued before the stop: never started
+        raise KeyboardInterrupt()
+    _worker_state = 'task'
+    try:
+        return fn(*args)
+    finally:
+        if _worker_state == 'task':
+            _worker_state = 'idle'
+
+
+def new_pool(jobs):
+    """
+    Return a process pool of ``jobs`` forked workers (see :func:`pool_worker`).
+
+    Submit its work through :func:`run_task`; stop it with :func:`stop_pool`.
+    """
+    import concurrent.futures
+    import multiprocessing
+    return concurrent.futures.ProcessPoolExecutor(
+        jobs, mp_context=multiprocessing.get_context('fork'), initializer=pool_worker,
+        initargs=(parent_of_fork(),))
+
+
+def stop_pool(pool):
+    """
+    Stop a pool at once, after a stop or an error of this process.
+
+    Work not started is dropped; each worker gets SIGTERM, so that the task it runs
+    removes what it was writing, and is waited for (:data:`STOP_WAIT_S`, then killed).
+    Left alone, the pool ran every bag submitted to it before the stop took effect
+    (``analyze`` of many bags went on for as long after Ctrl-C, writing them all).
+    """
+    from multiprocessing.connection import wait
+    workers = list((pool._processes or {}).values())  # gone once shut down
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        worker.terminate()
+    # The pool's own thread reaps its workers too: their ends are watched, not waited for.
+    running = {worker.sentinel: worker for worker in workers}
+    deadline = time.monotonic() + STOP_WAIT_S
+    while running and time.monotonic() < deadline:
+        for ended in wait(list(running), max(0.0, deadline - time.monotonic())):
+            del running[ended]
+    for worker in running.values():
+        worker.kill()

@@ -43,7 +43,7 @@ from pathlib import Path
 import sys
 
 from reducer_twin.commands.common import print_json
-from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
+from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
 
 MAX_JOBS = 64
 
@@ -121,21 +121,32 @@ def _analyze_all(args, settings, outs, worker):
             except ReducerTwinError as err:
                 results[bag] = err
         return results
-    import concurrent.futures
-    import multiprocessing
-    from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
-    pool = concurrent.futures.ProcessPoolExecutor(
-        jobs, mp_context=multiprocessing.get_context('fork'), initializer=end_with_parent,
-        initargs=(parent_of_fork(),))
-    with pool:
-        futures = {bag: pool.submit(analyze_bag, bag, out, settings, args.overwrite, False)
+    from reducer_twin.analysis.forking import new_pool, run_task, stop_pool
+    pool = new_pool(jobs)
+    try:
+        futures = {bag: pool.submit(run_task, analyze_bag, bag, out, settings, args.overwrite,
+                                    False)
                    for bag, out in zip(args.bags, outs)}
         for bag, future in futures.items():
-            try:
-                results[bag] = future.result()
-            except ReducerTwinError as err:
-                results[bag] = err
+            results[bag] = _outcome(future, bag)
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
     return results
+
+
+def _outcome(future, bag):
+    """Return the pool's result for ``bag``, or the error that ended it (a worker killed too)."""
+    from concurrent.futures.process import BrokenProcessPool
+    try:
+        return future.result()
+    except ReducerTwinError as err:
+        return err
+    except BrokenProcessPool:
+        return BagError(f'{bag}: not analysed: a process of the pool ended while the bags '
+                        'were analysed (killed: out of memory?); run it again, with fewer '
+                        '--jobs if memory ran short')
 
 
 def _check_outputs(args, names):

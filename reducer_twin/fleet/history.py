@@ -19,6 +19,7 @@ alone, one transaction per bag; a chain stops at its first failed bag so that no
 reducer's history has a hole.
 """
 
+import contextlib
 from dataclasses import dataclass, field
 import hashlib
 import os
@@ -382,16 +383,18 @@ def run_local(chains, start, settings, overwrite, jobs, worker):
                 yield done
         return
     import concurrent.futures
-    import multiprocessing
-    from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
-    pool = concurrent.futures.ProcessPoolExecutor(
-        min(jobs, len(chains)), mp_context=multiprocessing.get_context('fork'),
-        initializer=end_with_parent, initargs=(parent_of_fork(),))
-    with pool:
-        futures = [pool.submit(_run_chain, items, start.get(robot, {}), settings, overwrite)
+    from reducer_twin.analysis.forking import new_pool, run_task, stop_pool
+    pool = new_pool(min(jobs, len(chains)))
+    try:
+        futures = [pool.submit(run_task, _run_chain, items, start.get(robot, {}), settings,
+                               overwrite)
                    for robot, items in chains.items()]
         for future in concurrent.futures.as_completed(futures):
             yield from future.result()
+    except BaseException:   # a stop, an error, or the loop left (GeneratorExit)
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def _run_chain(items, start, settings, overwrite):
@@ -514,20 +517,24 @@ def analyze_into_store(args, settings, names, outs, worker):
             results.update(outcomes)
             workers = {}
             broken = {}
-            for done in _engine(args, chains, start, settings, worker):
-                info = done.item.info
-                if info.robot in broken and not isinstance(done.result, Exception):
-                    outcome = BagRefused(f'{info.path}: not stored: {broken[info.robot]}')
-                else:
-                    outcome = store_done(store, done, settings, args.engine)
-                if isinstance(outcome, Exception) and info.robot not in broken:
-                    broken[info.robot] = f'the earlier bag {info.path} was not stored'
-                if info.name.startswith('stored_'):
-                    if isinstance(outcome, Exception):
-                        sys.stderr.write(f'ERROR: --rebuild: stored bag {outcome}\n')
-                    continue
-                results[info.path] = outcome
-                workers[info.path] = done.worker
+            # Closed here, also when stopped: the engine's workers (Ray's processes)
+            # end with the loop, not when the interpreter collects it.
+            with contextlib.closing(_engine(args, chains, start, settings,
+                                            worker)) as runs:
+                for done in runs:
+                    info = done.item.info
+                    if info.robot in broken and not isinstance(done.result, Exception):
+                        outcome = BagRefused(f'{info.path}: not stored: {broken[info.robot]}')
+                    else:
+                        outcome = store_done(store, done, settings, args.engine)
+                    if isinstance(outcome, Exception) and info.robot not in broken:
+                        broken[info.robot] = f'the earlier bag {info.path} was not stored'
+                    if info.name.startswith('stored_'):
+                        if isinstance(outcome, Exception):
+                            sys.stderr.write(f'ERROR: --rebuild: stored bag {outcome}\n')
+                        continue
+                    results[info.path] = outcome
+                    workers[info.path] = done.worker
     finally:
         store.close()
     return results, workers
@@ -547,7 +554,8 @@ def _without_store(args, settings, names, outs):
         info = BagInfo(str(bag), name, str(out), f'bag {k}', '', 0, ())
         chains[f'bag {k}'] = [ChainItem(info, {})]
     results, workers = {}, {}
-    for done in _engine(args, chains, {}, settings, None):
-        results[done.item.info.path] = done.result
-        workers[done.item.info.path] = done.worker
+    with contextlib.closing(_engine(args, chains, {}, settings, None)) as runs:
+        for done in runs:
+            results[done.item.info.path] = done.result
+            workers[done.item.info.path] = done.worker
     return results, workers

@@ -329,17 +329,18 @@ def test_analyze_killed_mid_write_leaves_a_named_temporary_the_next_run_removes(
     assert temporaries(tmp_path) == [], 'the stale temporary and the lock are gone'
 
 
-def _stopped_once(argv, sig, ready, what, env=None):
+def _stopped_once(argv, sig, ready, what, env=None, group=False):
     """
     Run the command as from a terminal, send ``sig`` once ``ready()``; return code, stderr.
 
     A test run started in the background (a shell's background job ignores SIGINT, and a
-    child inherits that) would otherwise start it deaf to Ctrl-C.
+    child inherits that) would otherwise start it deaf to Ctrl-C. With ``group``, the
+    signal goes to the command's process group, as a terminal's Ctrl-C does.
     """
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True)
+                                stderr=subprocess.PIPE, text=True, start_new_session=group)
     finally:
         signal.signal(signal.SIGINT, previous)
     try:
@@ -349,7 +350,10 @@ def _stopped_once(argv, sig, ready, what, env=None):
             seen = ready()
             time.sleep(0.001)
         assert seen, f'the run ended before {what} was seen'
-        proc.send_signal(sig)
+        if group:
+            os.killpg(proc.pid, sig)
+        else:
+            proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
@@ -375,6 +379,65 @@ def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
     assert returncode == code and said in err and 'Traceback' not in err, err
     assert not out.exists() and temporaries(tmp_path) == [], 'no bag, temporary or lock'
     assert snapshot(rec) == before
+
+
+@pytest.mark.parametrize('sig, code, group', [
+    (signal.SIGTERM, 143, False),
+    (signal.SIGINT, 130, True),
+], ids=['SIGTERM to the command (a service stopped)', 'SIGINT to its processes (Ctrl-C)'])
+def test_analyze_of_several_bags_stopped_stops_every_bag_and_starts_no_other(
+        tmp_path, sig, code, group):
+    # The bags' process pool ran every bag queued before the stop: four bags were all
+    # analysed and written after Ctrl-C or SIGTERM.
+    bags = []
+    for k in range(4):
+        bags.append(tmp_path / f'rec{k}')
+        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
+                                              seed=5))
+    out = tmp_path / 'd'
+    returncode, err = _stopped_once(
+        program('analyze', *bags, '--out', out, '--jobs', '2'), sig,
+        lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
+                                     for f in tmp.glob('*.mcap')),
+        'a partial derived bag', group=group)
+    assert returncode == code and 'Traceback' not in err, err
+    assert temporaries(out) == [], 'no partial bag or lock'
+    written = sorted(p.name for p in out.iterdir())
+    assert set(written) <= {'rec0', 'rec1'}, f'bags queued at the stop were analysed: {written}'
+    for name in written:
+        bag_is_consistent(out / name)
+
+
+def test_a_bag_process_killed_is_one_error_per_bag_not_a_traceback(tmp_path):
+    # A pool worker killed (the kernel's out-of-memory killer) broke the pool: the
+    # command ended in a BrokenProcessPool traceback.
+    bags = []
+    for k in range(3):
+        bags.append(tmp_path / f'rec{k}')
+        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
+                                              seed=5))
+    out = tmp_path / 'd'
+    proc = subprocess.Popen(program('analyze', *bags, '--out', out, '--jobs', '2'),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        workers = []
+        while not workers and proc.poll() is None and time.monotonic() < deadline:
+            if out.is_dir() and any(out.glob('.rec*')):
+                children = Path(f'/proc/{proc.pid}/task/{proc.pid}/children').read_text()
+                workers = [int(pid) for pid in children.split()]
+            time.sleep(0.001)
+        assert workers, 'the run ended before its bags were being written'
+        os.kill(workers[0], signal.SIGKILL)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+        proc.wait()
+    lines = err.splitlines()
+    assert proc.returncode == 1 and 'Traceback' not in err, err
+    assert len(lines) == 3 and all(line.startswith('ERROR: ') and 'not analysed' in line
+                                   and 'out of memory' in line for line in lines), err
+    assert sorted(line.split(':')[1].strip() for line in lines) == sorted(map(str, bags))
 
 
 @pytest.mark.parametrize('sig, code', [(signal.SIGTERM, 143), (signal.SIGINT, 130)],
