@@ -61,15 +61,21 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised where the command is, so that its outputs are cleaned up as at Ctrl-C."""
 
 
+_sigterm_seen = False
+"""Whether SIGTERM came (a library may turn :class:`Terminated` into KeyboardInterrupt)."""
+
+
 def _on_sigterm(pid):
     """Return a SIGTERM handler raising :class:`Terminated` in process ``pid`` only."""
     import signal
 
     def handler(signum, frame):
+        global _sigterm_seen
         if os.getpid() != pid:      # a forked worker dies as it would have
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
             os.kill(os.getpid(), signal.SIGTERM)
             return
+        _sigterm_seen = True
         raise Terminated()
     return handler
 
@@ -123,6 +129,8 @@ def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
     table_cache.install()   # the core's tables are kept on disk between runs
+    global _sigterm_seen
+    _sigterm_seen = False
     if args.command != 'demo':      # the demo's nodes stop on SIGTERM as ROS nodes do
         _catch_sigterm()
     try:
@@ -130,13 +138,14 @@ def main(argv=None):
     except ReducerTwinError as err:
         sys.stderr.write(f'ERROR: {err}\n')
         return 1
-    except Terminated:
-        sys.stderr.write('ERROR: terminated (SIGTERM); nothing incomplete was left at the '
-                         'outputs\n')
-        stopped = 143
-    except KeyboardInterrupt:
-        sys.stderr.write('ERROR: interrupted\n')
-        stopped = 130
+    except KeyboardInterrupt as err:    # Ray's waits raise it for a SIGTERM too
+        if isinstance(err, Terminated) or _sigterm_seen:
+            sys.stderr.write('ERROR: terminated (SIGTERM); nothing incomplete was left at '
+                             'the outputs\n')
+            stopped = 143
+        else:
+            sys.stderr.write('ERROR: interrupted\n')
+            stopped = 130
     except BrokenPipeError:
         return 0
     except OSError as err:   # a file the command did not expect to fail: still one line

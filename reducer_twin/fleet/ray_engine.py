@@ -24,6 +24,9 @@ import tempfile
 
 from reducer_twin.core.errors import BagError, InvalidParameter
 
+STOP_WAIT_S = 30.0
+"""How long [s] a stopped run waits for its cancelled tasks to clean up."""
+
 
 def _ray():
     os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
@@ -33,6 +36,26 @@ def _ray():
         raise InvalidParameter('--engine ray needs Ray, which is not installed: pip install '
                                "'reducer_twin[fleet]' (or pip install ray)") from None
     return ray
+
+
+class _KeepSigterm:
+    """
+    Keep this command's SIGTERM handler across ``ray.init``, which replaces it.
+
+    Ray's handler exited 1 without a word or a clean-up; the command's own stops the
+    run as Ctrl-C does (the bags' tasks cancelled, nothing incomplete left).
+    """
+
+    def __enter__(self):
+        import signal
+        self.handler = signal.getsignal(signal.SIGTERM)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+        import threading
+        if self.handler is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, self.handler)
 
 
 def start_local(jobs):
@@ -62,9 +85,10 @@ def start_local(jobs):
     services.resolve_ip_for_localhost = lambda host: host
     services.get_node_ip_address = lambda address=None: '127.0.0.1'
     try:
-        ray.init(address='local', num_cpus=int(jobs), include_dashboard=False,
-                 _node_ip_address='127.0.0.1', _temp_dir=temp_dir, log_to_driver=False,
-                 configure_logging=False)
+        with _KeepSigterm():
+            ray.init(address='local', num_cpus=int(jobs), include_dashboard=False,
+                     _node_ip_address='127.0.0.1', _temp_dir=temp_dir,
+                     log_to_driver=False, configure_logging=False)
     except BaseException:
         shutil.rmtree(temp_dir, ignore_errors=True)
         raise
@@ -77,7 +101,8 @@ def connect(address):
     """Join an existing Ray cluster at ``address``."""
     ray = _ray()
     try:
-        ray.init(address=address, log_to_driver=False, configure_logging=False)
+        with _KeepSigterm():
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
     except (ConnectionError, ValueError, RuntimeError) as err:
         raise InvalidParameter(f'--ray-address {address}: cannot join the Ray cluster: '
                                f'{err}') from None
@@ -130,10 +155,10 @@ def run_ray(chains, start, settings, overwrite, jobs, address=None):
         connect(address)
     else:
         temp_dir = start_local(jobs)
+    pending = {}
     try:
         task = ray.remote(num_cpus=1, num_returns=2, max_retries=0)(_task)
         settings_ref = ray.put(settings)
-        pending = {}
         for robot, items in chains.items():
             chain = {'ok': True, 'why': '', 'states': dict(start.get(robot, {}))}
             refs = []
@@ -142,8 +167,28 @@ def run_ray(chains, start, settings, overwrite, jobs, address=None):
                 refs.append((item, done_ref))
             pending[robot] = refs
         yield from _collect(ray, pending)
+    except BaseException:   # a stop, an error, or the loop left (GeneratorExit)
+        _cancel(ray, [ref for refs in pending.values() for _, ref in refs])
+        raise
     finally:
         stop(temp_dir)
+
+
+def _cancel(ray, refs):
+    """
+    Cancel the bags' tasks still queued or running, and wait for them to end.
+
+    A running task gets ``KeyboardInterrupt``, so that its bag removes what it was
+    writing, as a stopped command does; stopped at once with the cluster, tasks left
+    their partial derived bags and locks beside the outputs.
+    """
+    for ref in refs:
+        try:
+            ray.cancel(ref)
+        except Exception:  # noqa: B902 - a task already ended: nothing to cancel
+            pass
+    if refs:
+        ray.wait(refs, num_returns=len(refs), timeout=STOP_WAIT_S)
 
 
 def _collect(ray, pending):

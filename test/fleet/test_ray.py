@@ -3,10 +3,13 @@
 import json
 import os
 from pathlib import Path
+import signal
 
-from cli_runs import run_cli as _run
+from cli_runs import program, run_cli as _run, stopped_once
+import pytest
 import ray  # noqa: F401 - the 'fleet' extra the Makefile installs; missing Ray fails here
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+import yaml
 
 LIFE = {'hours': 1500.0, 'aging_factor': 360_000.0, 'joints': 2, 'rate_hz': 250.0}
 
@@ -85,3 +88,33 @@ def test_ray_analyses_two_robots_in_parallel_with_the_local_results(tmp_path, ca
         assert set(bag['worker']) == {'node', 'pid'} and bag['worker']['pid'] != os.getpid()
     assert len({b['worker']['pid'] for b in remote['bags'].values()}) >= 2
     assert ray_fleet == local_fleet and [r['bags'] for r in ray_fleet] == [2] * 4
+
+
+@pytest.mark.parametrize('sig, code, group', [
+    (signal.SIGTERM, 143, False),
+    (signal.SIGINT, 130, True),
+], ids=['SIGTERM to the command (a service stopped)', 'SIGINT to its processes (Ctrl-C)'])
+def test_a_stopped_ray_run_cancels_its_bags_and_leaves_nothing_incomplete(
+        tmp_path, sig, code, group):
+    # Ray replaced the command's SIGTERM handler (exit 1, a stack dump, no clean-up), and
+    # its tasks were killed with the cluster: partial derived bags and locks stayed.
+    bags = []
+    for k in range(4):
+        bags.append(tmp_path / f'rec{k}')
+        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
+                                              seed=5))
+    out = tmp_path / 'd'
+    returncode, err = stopped_once(
+        program('analyze', *bags, '--out', out, '--engine', 'ray', '--jobs', '2'), sig,
+        lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
+                                     for f in tmp.glob('*.mcap')),
+        'a partial derived bag', group=group)
+    said = 'ERROR: terminated (SIGTERM)' if sig == signal.SIGTERM else 'ERROR: interrupted'
+    assert returncode == code and said in err and 'Traceback' not in err, err
+    assert [p.name for p in out.iterdir() if p.name.startswith('.')] == [], \
+        'no partial bag or lock'
+    written = list(out.iterdir())
+    assert len(written) < 4, 'every bag was analysed after the stop'
+    for bag in written:
+        info = yaml.safe_load((bag / 'metadata.yaml').read_text())
+        assert info['rosbag2_bagfile_information']['message_count'] > 0

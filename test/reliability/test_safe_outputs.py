@@ -18,10 +18,9 @@ from pathlib import Path
 import shutil
 import signal
 import subprocess
-import sys
 import time
 
-from cli_runs import run_cli
+from cli_runs import program, run_cli, stopped_once
 from full_disk import fill, FillingFile, small_tmpfs
 from mcap.reader import make_reader
 import pytest
@@ -83,11 +82,6 @@ def one_error(err):
 def temporaries(directory):
     """Return the names of reducer-twin's temporaries and locks in ``directory``."""
     return sorted(p.name for p in Path(directory).iterdir() if TEMP_TAG in p.name)
-
-
-def program(*args):
-    """Return the installed ``reducer-twin`` program with ``args``, as strings."""
-    return [str(Path(sys.executable).parent / 'reducer-twin'), *map(str, args)]
 
 
 def bag_is_consistent(out):
@@ -329,38 +323,6 @@ def test_analyze_killed_mid_write_leaves_a_named_temporary_the_next_run_removes(
     assert temporaries(tmp_path) == [], 'the stale temporary and the lock are gone'
 
 
-def _stopped_once(argv, sig, ready, what, env=None, group=False):
-    """
-    Run the command as from a terminal, send ``sig`` once ``ready()``; return code, stderr.
-
-    A test run started in the background (a shell's background job ignores SIGINT, and a
-    child inherits that) would otherwise start it deaf to Ctrl-C. With ``group``, the
-    signal goes to the command's process group, as a terminal's Ctrl-C does.
-    """
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        proc = subprocess.Popen(argv, env=env, stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, start_new_session=group)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-    try:
-        deadline = time.monotonic() + 120
-        seen = False
-        while not seen and proc.poll() is None and time.monotonic() < deadline:
-            seen = ready()
-            time.sleep(0.001)
-        assert seen, f'the run ended before {what} was seen'
-        if group:
-            os.killpg(proc.pid, sig)
-        else:
-            proc.send_signal(sig)
-        _, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-        proc.wait()
-    return proc.returncode, err
-
-
 @pytest.mark.parametrize('sig, code, said', [
     (signal.SIGTERM, 143, 'ERROR: terminated (SIGTERM)'),
     (signal.SIGINT, 130, 'ERROR: interrupted'),
@@ -372,7 +334,7 @@ def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
     simulate_bag(rec, SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1, seed=5))
     before = snapshot(rec)
     out = tmp_path / 'd'
-    returncode, err = _stopped_once(
+    returncode, err = stopped_once(
         program('analyze', rec, '--out', out), sig,
         lambda: any(f.stat().st_size > 0 for tmp in tmp_path.glob(f'.d.{TEMP_TAG}-incomplete-*')
                     for f in tmp.glob('*.mcap')), 'a partial derived bag')
@@ -395,7 +357,7 @@ def test_analyze_of_several_bags_stopped_stops_every_bag_and_starts_no_other(
         simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
                                               seed=5))
     out = tmp_path / 'd'
-    returncode, err = _stopped_once(
+    returncode, err = stopped_once(
         program('analyze', *bags, '--out', out, '--jobs', '2'), sig,
         lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
                                      for f in tmp.glob('*.mcap')),
@@ -456,7 +418,7 @@ def test_analyze_stopped_while_decompressing_a_recording_leaves_no_copy_behind(
     before = snapshot(rec)
     scratch = tmp_path / 'scratch'
     scratch.mkdir()
-    returncode, err = _stopped_once(
+    returncode, err = stopped_once(
         program('analyze', rec, '--out', tmp_path / 'd'), sig,
         lambda: any(f.stat().st_size > 0 for f in scratch.glob('reducer-twin-bag-*/*')),
         'its copy', env={**os.environ, 'TMPDIR': str(scratch)})
