@@ -10,7 +10,7 @@ the bag go to its list (:func:`warn`).
 from dataclasses import replace
 
 import numpy as np
-from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
+from reducer_twin.analysis.forking import end_process, end_with_parent, parent_of_fork
 from reducer_twin.core.ingest import CLOCK_SCATTER
 from reducer_twin.core.ingest import retimed_message, step_scatter
 from reducer_twin.io.mcap_reader import ReadWarning
@@ -274,9 +274,7 @@ class ForkedBagChunks:
 
     def terminate(self):
         """Stop the reading process (after an error)."""
-        if self._proc.is_alive():
-            self._proc.terminate()
-            self._proc.join(timeout=5)
+        end_process(self._proc)
 
 
 def joint_columns(batch, names, fields=3):

@@ -16,7 +16,7 @@ samples and records in the same order.
 from typing import NamedTuple
 
 import numpy as np
-from reducer_twin.analysis.forking import end_with_parent, parent_of_fork
+from reducer_twin.analysis.forking import end_process, end_with_parent, parent_of_fork
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
@@ -646,6 +646,4 @@ class WorkerBacks:
         analysing process hung on a full disk with the worker gone).
         """
         self._inbox.cancel_join_thread()
-        if self._proc.is_alive():
-            self._proc.terminate()
-            self._proc.join(timeout=5)
+        end_process(self._proc)
