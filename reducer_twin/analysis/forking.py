@@ -23,6 +23,8 @@ import sys
 import threading
 import time
 
+from reducer_twin.core.errors import BagError
+
 PARENT_CHECK_S = 0.5
 """How often [s] a worker without ``PR_SET_PDEATHSIG`` looks whether its parent lives."""
 
@@ -163,6 +165,18 @@ def new_pool(jobs):
     return concurrent.futures.ProcessPoolExecutor(
         jobs, mp_context=multiprocessing.get_context('fork'), initializer=pool_worker,
         initargs=(parent_of_fork(),))
+
+
+def pool_broken(bag):
+    """
+    Return the error of a bag whose pool broke (a worker ended while the bags ran).
+
+    Python's pool then fails every bag not yet returned; the kernel's out-of-memory
+    killer is the usual cause.
+    """
+    return BagError(f'{bag}: not analysed: a process of the pool ended while the bags were '
+                    'analysed (killed: out of memory?); run it again, with fewer --jobs if '
+                    'memory ran short')
 
 
 def stop_pool(pool):

@@ -43,7 +43,7 @@ from pathlib import Path
 import sys
 
 from reducer_twin.commands.common import print_json
-from reducer_twin.core.errors import BagError, InvalidParameter, ReducerTwinError
+from reducer_twin.core.errors import InvalidParameter, ReducerTwinError
 
 MAX_JOBS = 64
 
@@ -139,14 +139,13 @@ def _analyze_all(args, settings, outs, worker):
 def _outcome(future, bag):
     """Return the pool's result for ``bag``, or the error that ended it (a worker killed too)."""
     from concurrent.futures.process import BrokenProcessPool
+    from reducer_twin.analysis.forking import pool_broken
     try:
         return future.result()
     except ReducerTwinError as err:
         return err
     except BrokenProcessPool:
-        return BagError(f'{bag}: not analysed: a process of the pool ended while the bags '
-                        'were analysed (killed: out of memory?); run it again, with fewer '
-                        '--jobs if memory ran short')
+        return pool_broken(bag)
 
 
 def _check_outputs(args, names):

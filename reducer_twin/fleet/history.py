@@ -383,14 +383,18 @@ def run_local(chains, start, settings, overwrite, jobs, worker):
                 yield done
         return
     import concurrent.futures
-    from reducer_twin.analysis.forking import new_pool, run_task, stop_pool
+    from concurrent.futures.process import BrokenProcessPool
+    from reducer_twin.analysis.forking import new_pool, pool_broken, run_task, stop_pool
     pool = new_pool(min(jobs, len(chains)))
     try:
-        futures = [pool.submit(run_task, _run_chain, items, start.get(robot, {}), settings,
-                               overwrite)
-                   for robot, items in chains.items()]
+        futures = {pool.submit(run_task, _run_chain, items, start.get(robot, {}), settings,
+                               overwrite): items
+                   for robot, items in chains.items()}
         for future in concurrent.futures.as_completed(futures):
-            yield from future.result()
+            try:
+                yield from future.result()
+            except BrokenProcessPool:
+                yield from (Done(item, pool_broken(item.info.path)) for item in futures[future])
     except BaseException:   # a stop, an error, or the loop left (GeneratorExit)
         stop_pool(pool)
         raise

@@ -370,16 +370,18 @@ def test_analyze_of_several_bags_stopped_stops_every_bag_and_starts_no_other(
         bag_is_consistent(out / name)
 
 
-def test_a_bag_process_killed_is_one_error_per_bag_not_a_traceback(tmp_path):
+@pytest.mark.parametrize('store', [False, True], ids=['bags', 'robots into a fleet store'])
+def test_a_bag_process_killed_is_one_error_per_bag_not_a_traceback(tmp_path, store):
     # A pool worker killed (the kernel's out-of-memory killer) broke the pool: the
     # command ended in a BrokenProcessPool traceback.
     bags = []
     for k in range(3):
         bags.append(tmp_path / f'rec{k}')
         simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
-                                              seed=5))
+                                              seed=5, robot=f'r{k}'))
     out = tmp_path / 'd'
-    proc = subprocess.Popen(program('analyze', *bags, '--out', out, '--jobs', '2'),
+    extra = ['--store', tmp_path / 'fleet.db'] if store else []
+    proc = subprocess.Popen(program('analyze', *bags, '--out', out, '--jobs', '2', *extra),
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
