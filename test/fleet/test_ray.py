@@ -5,7 +5,7 @@ import os
 from pathlib import Path
 import signal
 
-from cli_runs import program, run_cli as _run, stopped_once
+from cli_runs import run_cli as _run, several_bags_stopped, STOP_IDS, STOPS
 import pytest
 import ray  # noqa: F401 - the 'fleet' extra the Makefile installs; missing Ray fails here
 from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
@@ -90,25 +90,12 @@ def test_ray_analyses_two_robots_in_parallel_with_the_local_results(tmp_path, ca
     assert ray_fleet == local_fleet and [r['bags'] for r in ray_fleet] == [2] * 4
 
 
-@pytest.mark.parametrize('sig, code, group', [
-    (signal.SIGTERM, 143, False),
-    (signal.SIGINT, 130, True),
-], ids=['SIGTERM to the command (a service stopped)', 'SIGINT to its processes (Ctrl-C)'])
+@pytest.mark.parametrize('sig, code, group', STOPS, ids=STOP_IDS)
 def test_a_stopped_ray_run_cancels_its_bags_and_leaves_nothing_incomplete(
         tmp_path, sig, code, group):
     # Ray replaced the command's SIGTERM handler (exit 1, a stack dump, no clean-up), and
     # its tasks were killed with the cluster: partial derived bags and locks stayed.
-    bags = []
-    for k in range(4):
-        bags.append(tmp_path / f'rec{k}')
-        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
-                                              seed=5))
-    out = tmp_path / 'd'
-    returncode, err = stopped_once(
-        program('analyze', *bags, '--out', out, '--engine', 'ray', '--jobs', '2'), sig,
-        lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
-                                     for f in tmp.glob('*.mcap')),
-        'a partial derived bag', group=group)
+    out, returncode, err = several_bags_stopped(tmp_path, sig, group, '--engine', 'ray')
     said = 'ERROR: terminated (SIGTERM)' if sig == signal.SIGTERM else 'ERROR: interrupted'
     assert returncode == code and said in err and 'Traceback' not in err, err
     assert [p.name for p in out.iterdir() if p.name.startswith('.')] == [], \

@@ -20,7 +20,7 @@ import signal
 import subprocess
 import time
 
-from cli_runs import program, run_cli, stopped_once
+from cli_runs import program, run_cli, several_bags_stopped, STOP_IDS, stopped_once, STOPS
 from full_disk import fill, FillingFile, small_tmpfs
 from mcap.reader import make_reader
 import pytest
@@ -343,25 +343,12 @@ def test_analyze_stopped_by_a_signal_mid_write_leaves_nothing_at_or_beside_out(
     assert snapshot(rec) == before
 
 
-@pytest.mark.parametrize('sig, code, group', [
-    (signal.SIGTERM, 143, False),
-    (signal.SIGINT, 130, True),
-], ids=['SIGTERM to the command (a service stopped)', 'SIGINT to its processes (Ctrl-C)'])
+@pytest.mark.parametrize('sig, code, group', STOPS, ids=STOP_IDS)
 def test_analyze_of_several_bags_stopped_stops_every_bag_and_starts_no_other(
         tmp_path, sig, code, group):
     # The bags' process pool ran every bag queued before the stop: four bags were all
     # analysed and written after Ctrl-C or SIGTERM.
-    bags = []
-    for k in range(4):
-        bags.append(tmp_path / f'rec{k}')
-        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
-                                              seed=5))
-    out = tmp_path / 'd'
-    returncode, err = stopped_once(
-        program('analyze', *bags, '--out', out, '--jobs', '2'), sig,
-        lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
-                                     for f in tmp.glob('*.mcap')),
-        'a partial derived bag', group=group)
+    out, returncode, err = several_bags_stopped(tmp_path, sig, group)
     assert returncode == code and 'Traceback' not in err, err
     assert temporaries(out) == [], 'no partial bag or lock'
     written = sorted(p.name for p in out.iterdir())

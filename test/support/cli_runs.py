@@ -9,6 +9,11 @@ import time
 
 from reducer_twin.cli import main
 
+STOPS = [(signal.SIGTERM, 143, False), (signal.SIGINT, 130, True)]
+"""``(signal, exit code, to the process group)`` of the two ways a run is stopped."""
+STOP_IDS = ['SIGTERM to the command (a service stopped)', 'SIGINT to its processes (Ctrl-C)']
+"""Test ids of :data:`STOPS`."""
+
 
 def run_cli(argv, capsys):
     """
@@ -85,3 +90,29 @@ def stopped_once(argv, sig, ready, what, env=None, group=False):
         proc.kill()
         proc.wait()
     return proc.returncode, err
+
+
+def several_bags_stopped(tmp_path, sig, group, *extra):
+    """
+    Analyse four bags in two processes; stop with ``sig`` once a derived bag is written.
+
+    Returns
+    -------
+    tuple
+        ``(out, exit code, stderr)``: the directory of derived bags, as
+        :func:`stopped_once` returns the rest.
+
+    """
+    from reducer_twin.analysis.simulate import simulate_bag, SimulationSpec
+    bags = []
+    for k in range(4):
+        bags.append(tmp_path / f'rec{k}')
+        simulate_bag(bags[-1], SimulationSpec(hours=150.0, aging_factor=3600.0, joints=1,
+                                              seed=5))
+    out = tmp_path / 'd'
+    returncode, err = stopped_once(
+        program('analyze', *bags, '--out', out, '--jobs', '2', *extra), sig,
+        lambda: out.is_dir() and any(f.stat().st_size > 0 for tmp in out.glob('.rec*')
+                                     for f in tmp.glob('*.mcap')),
+        'a partial derived bag', group=group)
+    return out, returncode, err
