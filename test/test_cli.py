@@ -1,11 +1,13 @@
 """The reducer-twin command: JSON output, and errors that read ERROR: without a traceback."""
 
 import json
+import os
 from pathlib import Path
+import signal
 import subprocess
 import sys
 
-from cli_runs import run_cli as _run
+from cli_runs import run_cli as _run, STOP_IDS, stopped_once, STOPS
 import pytest
 
 T0 = 784.0   # rated torque [N*m], paper Table 3
@@ -176,6 +178,27 @@ def test_the_demo_piped_prints_its_final_table_once_within_80_columns(tmp_path):
     assert lines[-2].startswith('arcmin: TE p-p, LM (lost motion); um: wear; h: RUL; ')
     assert lines[-2].rstrip().endswith(' dropped')
     assert lines[-1] == f'wear history plot: {plot}'
+
+
+@pytest.mark.parametrize('sig, code, group', STOPS, ids=STOP_IDS)
+def test_the_demo_stopped_says_so_in_one_line_and_leaves_no_state_behind(
+        tmp_path, sig, code, group):
+    # rclpy's own handlers shut the context down under the running callbacks: SIGTERM
+    # ended in ExternalShutdownException tracebacks and exit 1, Ctrl-C printed the
+    # simulator timer's traceback; each run left its state directory in TMPDIR.
+    env = {**os.environ, 'TMPDIR': str(tmp_path)}
+    seen = []
+
+    def running():
+        seen[:] = list(tmp_path.glob('reducer-twin-demo-*/*'))
+        return bool(seen)   # the estimators have written their first states
+    returncode, err = stopped_once(
+        [str(_console_script()), 'demo', '--joints', '2', '--hours', '1000',
+         '--duration-s', '60', '--json'], sig, running, 'a state file', env=env, group=group)
+    said = 'ERROR: terminated (SIGTERM)' if sig == signal.SIGTERM else 'ERROR: interrupted'
+    lines = err.splitlines()
+    assert returncode == code and len(lines) == 1 and lines[0].startswith(said), err
+    assert list(tmp_path.iterdir()) == [], 'the state directory is removed'
 
 
 def test_the_demo_stops_its_simulator_at_the_hours_asked_and_reads_the_wear_of_those(tmp_path):

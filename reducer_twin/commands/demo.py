@@ -12,6 +12,8 @@ saves a plot of the wear estimate, its band and the truth.
 
 import math
 import os
+import shutil
+import signal
 import tempfile
 import time
 
@@ -81,7 +83,8 @@ def run(args):
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
     from rclpy.parameter import Parameter
-    from reducer_twin.nodes.runtime import make_executor, quiet_gc
+    from rclpy.signals import SignalHandlerOptions
+    from reducer_twin.nodes.runtime import make_executor, quiet_gc, STOP_SIGNALS, StopRequest
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     aging = args.hours * HOUR / args.duration_s
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -95,20 +98,40 @@ def run(args):
                         f'{DEMO_LOAD_NM / RATED_TORQUE_NM:.1f}x rated torque '
                         f'({DEMO_LOAD_NM:.0f} N*m), aging factor {aging:,.0f}: '
                         f'{args.hours:,g} h in {args.duration_s:g} s of stream', soft_wrap=True)
-    rclpy.init(args=['--ros-args', '--log-level', 'warn'])
+    # Ctrl-C and SIGTERM stop the loop, then the nodes close in order, as in every node's
+    # main(): rclpy's own handlers shut the context down under the running callbacks
+    # (tracebacks of the simulator's timer and the executor, exit 1 for SIGTERM).
+    stop = StopRequest()
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    rclpy.init(args=['--ros-args', '--log-level', 'warn'],
+               signal_handler_options=SignalHandlerOptions.NO)
     history = {j: [] for j in joints}
+    built = []
     try:
         nodes = build_nodes(config, sim_overrides=[
             Parameter('sim.seed', value=args.seed),
             Parameter('sim.load_torque_nm', value=DEMO_LOAD_NM)])
+        built = all_nodes(nodes)
         executor = make_executor()
-        for node in all_nodes(nodes):
+        for node in built:
             executor.add_node(node)
         quiet_gc()
-        rows = _spin(executor, nodes, joints, args, history)
-        summary = _summary(nodes, joints, rows)
+        rows = _spin(executor, nodes, joints, args, history, stop)
+        if stop.signum is None:
+            summary = _summary(nodes, joints, rows)
     finally:
+        for node in built:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
         rclpy.try_shutdown()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        shutil.rmtree(state_dir, ignore_errors=True)
+    if stop.signum is not None:
+        from reducer_twin.cli import Terminated
+        raise Terminated() if stop.signum == signal.SIGTERM else KeyboardInterrupt()
     plot = args.plot or (None if args.json else 'reducer-twin-demo.png')
     if plot:
         _plot(history, summary, plot, args)
@@ -123,8 +146,8 @@ def run(args):
     return 0
 
 
-def _spin(executor, nodes, joints, args, history):
-    """Spin until the simulator has streamed ``duration_s``; keep the history and the table."""
+def _spin(executor, nodes, joints, args, history, stop):
+    """Spin until the simulator has streamed ``duration_s`` (or a stop); keep the history."""
     from reducer_twin.nodes.runtime import WORKER
     sim = nodes['simulator']
     live = None
@@ -136,7 +159,7 @@ def _spin(executor, nodes, joints, args, history):
         live.start()
     last_view = last_hist = 0.0
     try:
-        while sim.sent < args.duration_s * sim.rate_hz:
+        while sim.sent < args.duration_s * sim.rate_hz and stop.signum is None:
             executor.spin_once(timeout_sec=0.02)
             now = time.monotonic()
             if now - last_hist >= 0.25:
@@ -145,6 +168,8 @@ def _spin(executor, nodes, joints, args, history):
             if live is not None and now - last_view >= 0.5:
                 last_view = now
                 live.update(_table(_summary(nodes, joints, None), _title(sim, args)))
+        if stop.signum is not None:
+            return None
         # The stream is complete: the simulator stops (left running, it went on through the
         # drain below, and the truth stood hundreds of hours past the estimate). The last
         # samples reach the TE monitors and are analysed; then the windows' estimates and
