@@ -12,11 +12,12 @@ A worker holds no output of its own beyond what a killed run leaves anyway (a na
 temporary, which the next run removes); the lock of an output, inherited or taken, goes
 with it.
 
-The process pools of several bags (:func:`new_pool`) stop with the command: a stop
+The process pools of several bags (:func:`stopping_pool`) stop with the command: a stop
 interrupts the bag each worker analyses, which removes what it was writing, and no
 queued bag is started (:func:`stop_pool`).
 """
 
+import contextlib
 import os
 import signal
 import sys
@@ -108,7 +109,7 @@ _worker_state = 'idle'
 """What this pool worker does: 'idle', 'task' or 'stopping' (see :func:`pool_worker`)."""
 
 STOP_WAIT_S = 30.0
-"""How long [s] a stopped pool's workers get to remove what they were writing."""
+"""How long [s] stopped workers (a pool's, Ray's tasks) get to remove what they were writing."""
 
 
 def pool_worker(parent):
@@ -154,17 +155,32 @@ def run_task(fn, *args):
             _worker_state = 'idle'
 
 
-def new_pool(jobs):
+@contextlib.contextmanager
+def stopping_pool(jobs):
     """
-    Return a process pool of ``jobs`` forked workers (see :func:`pool_worker`).
+    Run a process pool of ``jobs`` forked workers (see :func:`pool_worker`).
 
-    Submit its work through :func:`run_task`; stop it with :func:`stop_pool`.
+    Submit its work through :func:`run_task`. Left by an error, a stop or a generator
+    closed early, the pool is stopped at once (:func:`stop_pool`); left normally, it is
+    shut down once its work is done.
+
+    Yields
+    ------
+    concurrent.futures.ProcessPoolExecutor
+        The pool.
+
     """
     import concurrent.futures
     import multiprocessing
-    return concurrent.futures.ProcessPoolExecutor(
+    pool = concurrent.futures.ProcessPoolExecutor(
         jobs, mp_context=multiprocessing.get_context('fork'), initializer=pool_worker,
         initargs=(parent_of_fork(),))
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def pool_broken(bag):

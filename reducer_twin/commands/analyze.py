@@ -121,18 +121,13 @@ def _analyze_all(args, settings, outs, worker):
             except ReducerTwinError as err:
                 results[bag] = err
         return results
-    from reducer_twin.analysis.forking import new_pool, run_task, stop_pool
-    pool = new_pool(jobs)
-    try:
+    from reducer_twin.analysis.forking import run_task, stopping_pool
+    with stopping_pool(jobs) as pool:
         futures = {bag: pool.submit(run_task, analyze_bag, bag, out, settings, args.overwrite,
                                     False)
                    for bag, out in zip(args.bags, outs)}
         for bag, future in futures.items():
             results[bag] = _outcome(future, bag)
-    except BaseException:
-        stop_pool(pool)
-        raise
-    pool.shutdown()
     return results
 
 

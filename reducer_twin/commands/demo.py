@@ -84,7 +84,8 @@ def run(args):
     import rclpy
     from rclpy.parameter import Parameter
     from rclpy.signals import SignalHandlerOptions
-    from reducer_twin.nodes.runtime import make_executor, quiet_gc, STOP_SIGNALS, StopRequest
+    from reducer_twin.nodes.runtime import close_nodes, make_executor, quiet_gc
+    from reducer_twin.nodes.runtime import stop_on_signals
     from reducer_twin.nodes.twin_bringup import all_nodes, build_nodes, load_config
     aging = args.hours * HOUR / args.duration_s
     joints = [f'joint_{k + 1}' for k in range(args.joints)]
@@ -101,34 +102,27 @@ def run(args):
     # Ctrl-C and SIGTERM stop the loop, then the nodes close in order, as in every node's
     # main(): rclpy's own handlers shut the context down under the running callbacks
     # (tracebacks of the simulator's timer and the executor, exit 1 for SIGTERM).
-    stop = StopRequest()
-    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
-    rclpy.init(args=['--ros-args', '--log-level', 'warn'],
-               signal_handler_options=SignalHandlerOptions.NO)
     history = {j: [] for j in joints}
-    built = []
-    try:
-        nodes = build_nodes(config, sim_overrides=[
-            Parameter('sim.seed', value=args.seed),
-            Parameter('sim.load_torque_nm', value=DEMO_LOAD_NM)])
-        built = all_nodes(nodes)
-        executor = make_executor()
-        for node in built:
-            executor.add_node(node)
-        quiet_gc()
-        rows = _spin(executor, nodes, joints, args, history, stop)
-        if stop.signum is None:
-            summary = _summary(nodes, joints, rows)
-    finally:
-        for node in built:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        shutil.rmtree(state_dir, ignore_errors=True)
+    with stop_on_signals() as stop:
+        built = []
+        try:
+            rclpy.init(args=['--ros-args', '--log-level', 'warn'],
+                       signal_handler_options=SignalHandlerOptions.NO)
+            nodes = build_nodes(config, sim_overrides=[
+                Parameter('sim.seed', value=args.seed),
+                Parameter('sim.load_torque_nm', value=DEMO_LOAD_NM)])
+            built = all_nodes(nodes)
+            executor = make_executor()
+            for node in built:
+                executor.add_node(node)
+            quiet_gc()
+            rows = _spin(executor, nodes, joints, args, history, stop)
+            if stop.signum is None:
+                summary = _summary(nodes, joints, rows)
+        finally:
+            close_nodes(built)
+            rclpy.try_shutdown()
+            shutil.rmtree(state_dir, ignore_errors=True)
     if stop.signum is not None:
         from reducer_twin.cli import Terminated
         raise Terminated() if stop.signum == signal.SIGTERM else KeyboardInterrupt()

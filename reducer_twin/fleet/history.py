@@ -384,9 +384,8 @@ def run_local(chains, start, settings, overwrite, jobs, worker):
         return
     import concurrent.futures
     from concurrent.futures.process import BrokenProcessPool
-    from reducer_twin.analysis.forking import new_pool, pool_broken, run_task, stop_pool
-    pool = new_pool(min(jobs, len(chains)))
-    try:
+    from reducer_twin.analysis.forking import pool_broken, run_task, stopping_pool
+    with stopping_pool(min(jobs, len(chains))) as pool:
         futures = {pool.submit(run_task, _run_chain, items, start.get(robot, {}), settings,
                                overwrite): items
                    for robot, items in chains.items()}
@@ -395,10 +394,6 @@ def run_local(chains, start, settings, overwrite, jobs, worker):
                 yield from future.result()
             except BrokenProcessPool:
                 yield from (Done(item, pool_broken(item.info.path)) for item in futures[future])
-    except BaseException:   # a stop, an error, or the loop left (GeneratorExit)
-        stop_pool(pool)
-        raise
-    pool.shutdown()
 
 
 def _run_chain(items, start, settings, overwrite):

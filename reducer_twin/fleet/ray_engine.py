@@ -17,15 +17,16 @@ started on demand does not need, so that resolution is bypassed while it starts.
 reducer_twin installed and see the bags and the output directory at the same paths.
 """
 
+import contextlib
 import os
 from pathlib import Path
 import shutil
+import signal
 import tempfile
+import threading
 
+from reducer_twin.analysis.forking import STOP_WAIT_S
 from reducer_twin.core.errors import BagError, InvalidParameter
-
-STOP_WAIT_S = 30.0
-"""How long [s] a stopped run waits for its cancelled tasks to clean up."""
 
 
 def _ray():
@@ -38,24 +39,20 @@ def _ray():
     return ray
 
 
-class _KeepSigterm:
+@contextlib.contextmanager
+def _keeping_sigterm():
     """
     Keep this command's SIGTERM handler across ``ray.init``, which replaces it.
 
     Ray's handler exited 1 without a word or a clean-up; the command's own stops the
     run as Ctrl-C does (the bags' tasks cancelled, nothing incomplete left).
     """
-
-    def __enter__(self):
-        import signal
-        self.handler = signal.getsignal(signal.SIGTERM)
-        return self
-
-    def __exit__(self, *exc):
-        import signal
-        import threading
-        if self.handler is not None and threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, self.handler)
+    handler = signal.getsignal(signal.SIGTERM)
+    try:
+        yield
+    finally:
+        if handler is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, handler)
 
 
 def start_local(jobs):
@@ -85,7 +82,7 @@ def start_local(jobs):
     services.resolve_ip_for_localhost = lambda host: host
     services.get_node_ip_address = lambda address=None: '127.0.0.1'
     try:
-        with _KeepSigterm():
+        with _keeping_sigterm():
             ray.init(address='local', num_cpus=int(jobs), include_dashboard=False,
                      _node_ip_address='127.0.0.1', _temp_dir=temp_dir,
                      log_to_driver=False, configure_logging=False)
@@ -101,7 +98,7 @@ def connect(address):
     """Join an existing Ray cluster at ``address``."""
     ray = _ray()
     try:
-        with _KeepSigterm():
+        with _keeping_sigterm():
             ray.init(address=address, log_to_driver=False, configure_logging=False)
     except (ConnectionError, ValueError, RuntimeError) as err:
         raise InvalidParameter(f'--ray-address {address}: cannot join the Ray cluster: '

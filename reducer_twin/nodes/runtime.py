@@ -1,6 +1,7 @@
 """How a node program runs: the background worker, GC tuning, the executor, signals, main()."""
 
 from concurrent.futures import Future as TaskFuture
+import contextlib
 import os
 from pathlib import Path
 import queue
@@ -185,7 +186,8 @@ class StopRequest:
     """
     A signal handler that asks the spin loop to stop; a second signal kills at once.
 
-    Installed for SIGINT and SIGTERM by :func:`run_nodes` in place of rclpy's
+    Installed for SIGINT and SIGTERM (:func:`stop_on_signals`) by :func:`run_nodes`
+    and ``reducer-twin demo`` in place of rclpy's
     handlers, which shut the context down from another thread while a
     callback may be publishing (it then fails with "publisher's context is
     invalid"). Here the loop stops first, then the nodes are destroyed and
@@ -201,6 +203,38 @@ class StopRequest:
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
         self.signum = signum
+
+
+@contextlib.contextmanager
+def stop_on_signals():
+    """
+    Install a :class:`StopRequest` for SIGINT and SIGTERM; restore the handlers after.
+
+    Install it before ``rclpy.init(..., signal_handler_options=SignalHandlerOptions.NO)``
+    and let the loop watch its ``signum``.
+
+    Yields
+    ------
+    StopRequest
+        The handler, whose ``signum`` tells a stop.
+
+    """
+    stop = StopRequest()
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    try:
+        yield stop
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+
+
+def close_nodes(nodes):
+    """Close (finish the work of) and destroy the nodes, in order, before rclpy shuts down."""
+    for node in nodes:
+        close = getattr(node, 'close', None)
+        if close is not None:
+            close()
+        node.destroy_node()
 
 
 def spin_until_shutdown(executor, context=None, stop=None):
@@ -287,37 +321,28 @@ def run_nodes(factory, args=None):
     except ReducerTwinError as err:
         sys.stderr.write(f'ERROR: {err}\n')
         return 1
-    stop = StopRequest()
-    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
-    try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    except Exception as err:  # noqa: B902 - rcl refuses its arguments: one line, no traceback
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
-        sys.stderr.write(f'ERROR: cannot start: {str(err).splitlines()[0]}\n')
-        return 1
-    nodes = []
-    try:
-        made = factory()
-        nodes = made if isinstance(made, (list, tuple)) else [made]
-        executor = make_executor()
-        for node in nodes:
-            executor.add_node(node)
-        quiet_gc()
-        spin_until_shutdown(executor, stop=stop)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (ReducerTwinError, ParameterException) as err:
-        # ParameterException: rclpy refused a start value of a plain (non-spec) parameter.
-        sys.stderr.write(f'ERROR: {err}\n')
-        return 1
-    finally:
-        for node in nodes:
-            close = getattr(node, 'close', None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+    with stop_on_signals() as stop:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+        except Exception as err:  # noqa: B902 - rcl refuses its arguments: one line
+            sys.stderr.write(f'ERROR: cannot start: {str(err).splitlines()[0]}\n')
+            return 1
+        nodes = []
+        try:
+            made = factory()
+            nodes = made if isinstance(made, (list, tuple)) else [made]
+            executor = make_executor()
+            for node in nodes:
+                executor.add_node(node)
+            quiet_gc()
+            spin_until_shutdown(executor, stop=stop)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except (ReducerTwinError, ParameterException) as err:
+            # ParameterException: rclpy refused a start value of a plain (non-spec) parameter.
+            sys.stderr.write(f'ERROR: {err}\n')
+            return 1
+        finally:
+            close_nodes(nodes)
+            rclpy.try_shutdown()
     return 0

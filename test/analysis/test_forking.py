@@ -7,7 +7,7 @@ import signal
 import time
 
 import pytest
-from reducer_twin.analysis.forking import end_process, new_pool, run_task, stop_pool
+from reducer_twin.analysis.forking import end_process, run_task, stopping_pool
 
 
 def _deaf_to_sigterm(ready):
@@ -38,13 +38,13 @@ def _write_then_wait(marks, name):
 
 
 def test_a_stopped_pool_interrupts_its_tasks_and_starts_none_of_the_queued(tmp_path):
-    pool = new_pool(2)
-    futures = [pool.submit(run_task, _write_then_wait, str(tmp_path), f'bag{k}')
-               for k in range(5)]
-    deadline = time.monotonic() + 60
-    while len(list(tmp_path.glob('bag?'))) < 2 and time.monotonic() < deadline:
-        time.sleep(0.01)
-    stop_pool(pool)
+    with pytest.raises(KeyboardInterrupt), stopping_pool(2) as pool:
+        futures = [pool.submit(run_task, _write_then_wait, str(tmp_path), f'bag{k}')
+                   for k in range(5)]
+        deadline = time.monotonic() + 60
+        while len(list(tmp_path.glob('bag?'))) < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        raise KeyboardInterrupt()     # Ctrl-C in the command
     started = sorted(p.name for p in tmp_path.glob('bag?'))
     assert started == ['bag0', 'bag1']
     assert sorted(p.name for p in tmp_path.glob('*.cleaned')) == ['bag0.cleaned',
