@@ -228,55 +228,58 @@ def run(args):
     worker = WorkerBacks() if _use_stage_worker(args.stage_process, jobs) and \
         args.engine == 'local' else None
     workers = {}
+    from reducer_twin.io.outputs import no_empty_dirs_left
     try:
         settings = _settings(args)
         outs = [str(out) for out in outs]
-        if fleet:
-            from reducer_twin.fleet.history import analyze_into_store
-            results, workers = analyze_into_store(args, settings, names, outs, worker)
-        else:
-            results = _analyze_all(args, settings, outs, worker)
+        with no_empty_dirs_left(outs):
+            if fleet:
+                from reducer_twin.fleet.history import analyze_into_store
+                results, workers = analyze_into_store(args, settings, names, outs, worker)
+            else:
+                results = _analyze_all(args, settings, outs, worker)
     finally:
         if worker is not None:
             worker.close()
     code = 0
     blind = False
     summary, failed = {}, {}
-    for bag, name in zip(args.bags, names):
-        result = results[bag]
-        if fleet and _fleet_note(result, name, failed):
-            continue
-        if isinstance(result, Exception):
-            sys.stderr.write(f'ERROR: {result}\n')
-            failed[name] = str(result)
-            code = 1
-            continue
-        for warning in result.warnings:
-            sys.stderr.write(f'WARNING: {warning.path}: {warning.message}\n')
-        if result.damaged:
-            code = 1
-        for joint, res in result.joints.items():
-            if not res.observed:
-                sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
-                                 f'{res.reason or "no usable window"}\n')
-                blind = True
-            elif res.partial:
-                sys.stderr.write(f'WARNING: {joint}: observed in part of {name}: '
-                                 f'{res.partial}\n')
-        for joint, reason in result.plan.not_analysed().items():
-            sys.stderr.write(f'WARNING: {joint}: not observed in {name}: {reason}\n')
-            blind = True
-        if args.report:
-            from reducer_twin.analysis.report import write_report
-            try:
-                page = write_report(result, reports[names.index(name)], life=settings.life)
-            except ReducerTwinError as err:
-                sys.stderr.write(f'ERROR: {err}\n')
+    with no_empty_dirs_left(reports):   # a report parent made, but no report written
+        for bag, name in zip(args.bags, names):
+            result = results[bag]
+            if fleet and _fleet_note(result, name, failed):
+                continue
+            if isinstance(result, Exception):
+                sys.stderr.write(f'ERROR: {result}\n')
+                failed[name] = str(result)
                 code = 1
-            else:
-                if not args.json:
-                    print(f'report: {page}')
-        summary[name] = result
+                continue
+            for warning in result.warnings:
+                sys.stderr.write(f'WARNING: {warning.path}: {warning.message}\n')
+            if result.damaged:
+                code = 1
+            for joint, res in result.joints.items():
+                if not res.observed:
+                    sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
+                                     f'{res.reason or "no usable window"}\n')
+                    blind = True
+                elif res.partial:
+                    sys.stderr.write(f'WARNING: {joint}: observed in part of {name}: '
+                                     f'{res.partial}\n')
+            for joint, reason in result.plan.not_analysed().items():
+                sys.stderr.write(f'WARNING: {joint}: not observed in {name}: {reason}\n')
+                blind = True
+            if args.report:
+                from reducer_twin.analysis.report import write_report
+                try:
+                    page = write_report(result, reports[names.index(name)], life=settings.life)
+                except ReducerTwinError as err:
+                    sys.stderr.write(f'ERROR: {err}\n')
+                    code = 1
+                else:
+                    if not args.json:
+                        print(f'report: {page}')
+            summary[name] = result
     if args.json:
         if single:
             if summary:

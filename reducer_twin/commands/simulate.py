@@ -108,6 +108,7 @@ def run(args):
     """Validate the request, simulate, write the bag and print the summary."""
     from reducer_twin.io.bag_writer import foreign_bag_entries
     from reducer_twin.io.outputs import check_target, DiskFull, free_bytes, human_bytes
+    from reducer_twin.io.outputs import no_empty_dirs_left
     from reducer_twin.analysis.simulate import estimated_bytes, SimulationSpec, simulate_bag
     if args.seed < 0:
         raise InvalidParameter(f'--seed must be a whole number >= 0, got {args.seed}')
@@ -133,7 +134,8 @@ def run(args):
                        f'({needed:,} bytes), but only {human_bytes(free)} ({free:,} bytes) are '
                        'free on its device; nothing was written')
     start = time.perf_counter()
-    result = simulate_bag(args.out, spec, overwrite=args.overwrite)
+    with no_empty_dirs_left([args.out]):
+        result = simulate_bag(args.out, spec, overwrite=args.overwrite)
     seconds = time.perf_counter() - start
     if args.json:
         print_json(result.as_json())

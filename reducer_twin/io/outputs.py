@@ -16,9 +16,13 @@ Every directory the commands write (a derived or simulated bag, a report) goes t
   released by the kernel if the process dies) decides, and the loser stops at once with a
   message; the rename decides nothing by itself;
 * a full disk (``ENOSPC``, ``EDQUOT``) becomes one :class:`DiskFull` error naming the path,
-  the bytes needed and the bytes free.
+  the bytes needed and the bytes free;
+* directories made on the way to a target (``--out`` of several bags, a parent that did
+  not exist) do not outlive a run that wrote nothing into them
+  (:func:`no_empty_dirs_left`).
 """
 
+from contextlib import contextmanager
 import ctypes
 import errno
 import fcntl
@@ -269,6 +273,45 @@ def check_target(target, recognise, flag='--out', overwrite=False, replace_note=
                                f'entries); expected a new or empty directory, or --overwrite '
                                f'to replace {replace_note or "what reducer-twin wrote there"}')
     return True
+
+
+def _missing_parents(target):
+    """Return the directories above ``target`` that do not exist yet, deepest first."""
+    out = []
+    here = Path(os.path.abspath(target)).parent
+    while not here.exists() and here != here.parent:
+        out.append(here)
+        here = here.parent
+    return out
+
+
+@contextmanager
+def no_empty_dirs_left(targets):
+    """
+    Remove, on the way out, the directories a run made above its outputs and left empty.
+
+    A target's missing parents are created by :meth:`OutputDir.start`; when the run
+    writes nothing there (every bag failed, or a stop came first), they would stay
+    behind, empty. Each one still empty when the block ends, however it ends, is
+    removed (``rmdir``: a directory holding anything, an output of this run or of
+    another, stays).
+
+    Parameters
+    ----------
+    targets : iterable of str or os.PathLike
+        The output directories of the run.
+
+    """
+    made = sorted({d for t in targets for d in _missing_parents(t)},
+                  key=lambda d: len(d.parts), reverse=True)
+    try:
+        yield
+    finally:
+        for path in made:
+            try:
+                path.rmdir()
+            except OSError:
+                pass
 
 
 def _renameat2():

@@ -31,7 +31,7 @@ from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.io import mcap_array_writer, mcap_writer, outputs
 from reducer_twin.io.bag import open_bag
 from reducer_twin.io.bag_writer import foreign_bag_entries
-from reducer_twin.io.outputs import DiskFull, OutputDir, TEMP_TAG
+from reducer_twin.io.outputs import DiskFull, no_empty_dirs_left, OutputDir, TEMP_TAG
 from reducer_twin.io.rosbag2_compression import _zstd
 from small_bags import small_bag
 import yaml
@@ -348,10 +348,12 @@ def test_analyze_of_several_bags_stopped_stops_every_bag_and_starts_no_other(
         tmp_path, sig, code, group):
     # The bags' process pool ran every bag queued before the stop: four bags were all
     # analysed and written after Ctrl-C or SIGTERM.
+    # The --out it made stayed, empty, when no bag was finished before the stop.
     out, returncode, err = several_bags_stopped(tmp_path, sig, group)
     assert returncode == code and 'Traceback' not in err, err
-    assert temporaries(out) == [], 'no partial bag or lock'
-    written = sorted(p.name for p in out.iterdir())
+    written = sorted(p.name for p in out.iterdir()) if out.exists() else []
+    assert out.exists() == bool(written), 'the --out the run made stays only with a bag in it'
+    assert [name for name in written if TEMP_TAG in name] == [], 'no partial bag or lock'
     assert set(written) <= {'rec0', 'rec1'}, f'bags queued at the stop were analysed: {written}'
     for name in written:
         bag_is_consistent(out / name)
@@ -426,6 +428,38 @@ def test_a_full_disk_under_analyze_is_one_error_with_the_bytes_and_nothing_at_ou
         assert code == 1 and 'no space left' in line and 'bytes' in line, line
         assert str(disk / 'out') in line
         assert sorted(p.name for p in disk.iterdir()) == [], 'no bag, temporary or lock'
+
+
+def test_a_full_disk_under_analyze_of_several_bags_leaves_no_directory_the_run_made(
+        bag, tmp_path, capsys):
+    # Every bag failed, and the --out directory (and its parent) the run had made stayed,
+    # empty.
+    other = tmp_path / 'other'
+    shutil.copytree(bag, other)
+    with small_tmpfs(tmp_path / 'disk', 100_000) as disk:
+        code, _, err = run_cli(['analyze', bag, other, '--out', disk / 'new' / 'out'], capsys)
+        lines = [line for line in err.splitlines() if line.startswith('ERROR:')]
+        assert code == 1 and len(lines) == 2 and 'Traceback' not in err, err
+        assert all('no space left' in line for line in lines), err
+        assert list(disk.iterdir()) == [], 'no bag, temporary, lock or directory'
+
+
+def test_directories_made_above_outputs_go_when_left_empty_and_stay_with_anything_in_them(
+        tmp_path):
+    kept = tmp_path / 'kept'
+    kept.mkdir()
+    targets = [tmp_path / 'a' / 'b' / 'out', kept / 'c' / 'out', tmp_path / 'd' / 'out']
+    with pytest.raises(KeyboardInterrupt):
+        with no_empty_dirs_left(targets):
+            for target in targets:
+                target.parent.mkdir(parents=True)
+            (tmp_path / 'd' / 'note.txt').write_text('a file of somebody else')
+            raise KeyboardInterrupt
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['d', 'kept']
+    assert list(kept.iterdir()) == [] and (tmp_path / 'd' / 'note.txt').exists()
+    with no_empty_dirs_left(targets[:1]):
+        targets[0].mkdir(parents=True)
+    assert targets[0].is_dir(), 'a finished output and the directories above it stay'
 
 
 def test_a_full_disk_under_simulate_is_refused_first_or_reported_with_nothing_left(
