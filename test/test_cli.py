@@ -9,6 +9,7 @@ import sys
 
 from cli_runs import run_cli as _run, STOP_IDS, stopped_once, STOPS
 import pytest
+from reducer_twin.commands.demo import is_demo_plot
 
 T0 = 784.0   # rated torque [N*m], paper Table 3
 
@@ -178,6 +179,23 @@ def test_the_demo_piped_prints_its_final_table_once_within_80_columns(tmp_path):
     assert lines[-2].startswith('arcmin: TE p-p, LM (lost motion); um: wear; h: RUL; ')
     assert lines[-2].rstrip().endswith(' dropped')
     assert lines[-1] == f'wear history plot: {plot}'
+    assert is_demo_plot(plot), 'the plot says a demo wrote it (a later demo may replace it)'
+
+
+@pytest.mark.parametrize('where', ['own file', 'directory', 'missing directory'])
+def test_the_demo_refuses_a_plot_path_it_may_not_write_before_it_runs(
+        tmp_path, capsys, where):
+    # The plot was written at the end, over whatever file was there (a user's own
+    # image), and a path in a missing directory failed after the whole run.
+    own = tmp_path / 'photo.png'
+    own.write_bytes(b'\x89PNG\r\n\x1a\n a user image')
+    plot = {'own file': own, 'directory': tmp_path,
+            'missing directory': tmp_path / 'nowhere' / 'demo.png'}[where]
+    code, out, err = _run(['demo', '--plot', str(plot)], capsys)
+    lines = _error_lines(err)
+    assert code == 1 and len(lines) == 1 and '--plot' in lines[0], err
+    assert out == '' and own.read_bytes() == b'\x89PNG\r\n\x1a\n a user image'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['photo.png']
 
 
 @pytest.mark.parametrize('sig, code, group', STOPS, ids=STOP_IDS)
@@ -214,4 +232,4 @@ def test_the_demo_stops_its_simulator_at_the_hours_asked_and_reads_the_wear_of_t
     assert joint['exposure_h'] == pytest.approx(6000.0, rel=0.01)
     assert joint['dropped'] == 0 and joint['windows'] >= 8
     assert joint['wear_um'] == pytest.approx(joint['true_wear_um'], rel=0.2)
-    assert (tmp_path / 'demo.png').stat().st_size > 0
+    assert is_demo_plot(tmp_path / 'demo.png')

@@ -7,9 +7,12 @@ estimator, life publisher) in one process over real DDS, compressing
 simulator's aging factor), with a live table per joint: TE, lost motion,
 wear estimate against the simulator's hidden truth, remaining life
 P10/P50/P90 and the diagnostics level. At the end it prints a summary and
-saves a plot of the wear estimate, its band and the truth.
+saves a plot of the wear estimate, its band and the truth: written whole or not
+at all, and never over a file a demo did not write (checked before the demo
+starts).
 """
 
+import io
 import math
 import os
 import shutil
@@ -29,6 +32,17 @@ RATED_TORQUE_NM = 784.0
 DEMO_LOAD_NM = 1.2 * RATED_TORQUE_NM
 """Gravity-load amplitude of the demo joints: a heavily loaded axis that ages visibly."""
 
+PLOT_SOFTWARE = 'reducer-twin demo'
+"""The ``Software`` text of the demo's PNG: a plot that says it may be replaced."""
+
+DEFAULT_PLOT = 'reducer-twin-demo.png'
+
+
+def is_demo_plot(path):
+    """Tell whether the file at ``path`` is a plot a demo wrote (it may be replaced)."""
+    from reducer_twin.io.outputs import png_text
+    return png_text(path).get('Software') == PLOT_SOFTWARE
+
 
 def add_parser(sub):
     """Register the subcommand."""
@@ -46,8 +60,8 @@ def add_parser(sub):
                    help="joint motion: 'robot' cycle or the paper's constant 90 deg/s")
     p.add_argument('--seed', type=int, default=0, help='seed of the simulator noise')
     p.add_argument('--plot', default=None,
-                   help='PNG of the wear history (default reducer-twin-demo.png; with --json '
-                        'only when given)')
+                   help=f'PNG of the wear history (default {DEFAULT_PLOT}; with --json '
+                        'only when given); a file there is replaced only when a demo wrote it')
     p.add_argument('--json', action='store_true',
                    help='print the final per-joint summary as JSON, no live table')
     p.set_defaults(run=run)
@@ -73,12 +87,16 @@ def _validate(args):
     else:
         cycle = (1.0, 0.8, 1.25, 0.6, 1.5, 0.9)
         scales = [cycle[k % len(cycle)] for k in range(args.joints)]
-    return scales
+    plot = args.plot or (None if args.json else DEFAULT_PLOT)
+    if plot:   # before the run, not after it
+        from reducer_twin.io.outputs import check_file_target
+        check_file_target(plot, is_demo_plot, '--plot')
+    return scales, plot
 
 
 def run(args):
     """Run the demo and print the summary."""
-    scales = _validate(args)
+    scales, plot = _validate(args)
     # Keep the demo's DDS traffic on this machine unless the user chose otherwise.
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy
@@ -126,7 +144,6 @@ def run(args):
     if stop.signum is not None:
         from reducer_twin.cli import Terminated
         raise Terminated() if stop.signum == signal.SIGTERM else KeyboardInterrupt()
-    plot = args.plot or (None if args.json else 'reducer-twin-demo.png')
     if plot:
         _plot(history, summary, plot, args)
     if args.json:
@@ -308,5 +325,8 @@ def _plot(history, summary, path, args):
     ax_r.grid(alpha=0.3)
     fig.suptitle(f'reducer_twin demo: {args.hours:,.0f} h in {args.duration_s:.0f} s of stream')
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format='png', dpi=110, metadata={'Software': PLOT_SOFTWARE})
     plt.close(fig)
+    from reducer_twin.io.outputs import write_file
+    write_file(path, buffer.getvalue(), is_demo_plot, "the demo's plot", '--plot')

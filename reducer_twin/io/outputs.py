@@ -135,6 +135,150 @@ def disk_full_error(err, what, path, needed=None):
                     'some space or choose another place')
 
 
+# --------------------------------------------------------------------------- files
+
+
+def png_text(path):
+    """
+    Return the text chunks (``tEXt``) of a PNG file, ``{}`` for any other file.
+
+    Reads the chunks before the image data only (where writers put their text).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+
+    Returns
+    -------
+    dict
+        Keyword to text (Latin-1).
+
+    """
+    out = {}
+    try:
+        with open(path, 'rb') as handle:
+            if handle.read(8) != b'\x89PNG\r\n\x1a\n':
+                return out
+            while True:
+                head = handle.read(8)
+                if len(head) < 8:
+                    return out
+                size, kind = int.from_bytes(head[:4], 'big'), head[4:]
+                if kind in (b'IDAT', b'IEND') or size > 1 << 20:
+                    return out
+                data = handle.read(size)
+                handle.read(4)   # the chunk's CRC
+                if kind == b'tEXt' and b'\0' in data:
+                    key, _, text = data.partition(b'\0')
+                    out[key.decode('latin-1')] = text.decode('latin-1')
+    except OSError:
+        return out
+
+
+def _alive(pid):
+    """Tell whether a process ``pid`` exists."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def check_file_target(target, recognise, flag):
+    """
+    Refuse a file output that cannot be written, or whose path holds another's file.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The file to write (a link: the file it points to).
+    recognise : callable
+        ``recognise(path) -> bool``: the file there was written by reducer-twin (it may
+        be replaced).
+    flag : str
+        Option name, for messages.
+
+    Returns
+    -------
+    pathlib.Path
+        The file's real path.
+
+    Raises
+    ------
+    InvalidParameter
+        If the target is a directory, its directory does not exist, or a file there
+        was not written by reducer-twin.
+
+    """
+    path = _real(target)
+    if path.is_dir():
+        raise InvalidParameter(f'{flag} {target} is a directory; expected the path of a file')
+    if not path.parent.is_dir():
+        raise InvalidParameter(f'{flag} {target}: its directory {path.parent} does not exist; '
+                               'expected a file in an existing directory')
+    if path.exists() and not recognise(path):
+        raise InvalidParameter(f'{flag} {target} exists and was not written by reducer-twin; '
+                               f'it is never replaced: choose another {flag}, or move the '
+                               'file away')
+    return path
+
+
+def write_file(target, data, recognise, what, flag):
+    """
+    Write a file whole or not at all: a temporary beside it, renamed into place.
+
+    The target is checked again first (:func:`check_file_target`: another's file may have
+    appeared while the command ran).
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The file.
+    data : bytes
+        Its content.
+    recognise, flag
+        As :func:`check_file_target`.
+    what : str
+        What is written, for messages (``'the demo's plot'``).
+
+    Raises
+    ------
+    InvalidParameter
+        As :func:`check_file_target`.
+    BagError
+        If it cannot be written (:class:`DiskFull` when the device is full); nothing is
+        left at or beside the target.
+
+    """
+    path = check_file_target(target, recognise, flag)
+    stem = f'.{path.name}.{TEMP_TAG}-incomplete-'
+    for entry in _entries(path.parent):   # left by a run that was killed while writing
+        pid = entry[len(stem):]
+        if entry.startswith(stem) and pid.isdigit() and not _alive(int(pid)):
+            _remove(path.parent / entry)
+    tmp = path.with_name(f'{stem}{os.getpid()}')
+    try:
+        with open(tmp, 'wb') as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+        _fsync_dir(path.parent)
+    except OSError as err:
+        _remove(tmp)
+        if is_disk_full(err):
+            raise disk_full_error(err, f'{what} {flag} {target}', path.parent,
+                                  len(data)) from None
+        raise BagError(f'cannot write {what} {flag} {target}: {err.strerror or err}; nothing '
+                       'was left there') from None
+    except BaseException:
+        _remove(tmp)
+        raise
+
+
 # --------------------------------------------------------------------------- inputs
 
 

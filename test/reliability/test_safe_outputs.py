@@ -31,7 +31,8 @@ from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.io import mcap_array_writer, mcap_writer, outputs
 from reducer_twin.io.bag import open_bag
 from reducer_twin.io.bag_writer import foreign_bag_entries
-from reducer_twin.io.outputs import DiskFull, no_empty_dirs_left, OutputDir, TEMP_TAG
+from reducer_twin.io.outputs import DiskFull, no_empty_dirs_left, OutputDir, png_text
+from reducer_twin.io.outputs import TEMP_TAG, write_file
 from reducer_twin.io.rosbag2_compression import _zstd
 from small_bags import small_bag
 import yaml
@@ -460,6 +461,59 @@ def test_directories_made_above_outputs_go_when_left_empty_and_stay_with_anythin
     with no_empty_dirs_left(targets[:1]):
         targets[0].mkdir(parents=True)
     assert targets[0].is_dir(), 'a finished output and the directories above it stay'
+
+
+# --------------------------------------------------------------------------- single files
+
+
+def _png(software):
+    """Return a small PNG as matplotlib writes it, with ``Software`` set."""
+    import io
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig = plt.figure(figsize=(1, 1))
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format='png', metadata={'Software': software})
+    plt.close(fig)
+    return buffer.getvalue()
+
+
+def _ours(path):
+    return png_text(path).get('Software') == 'ours'
+
+
+def test_a_file_output_replaces_only_its_own_kind_and_leaves_no_temporary(tmp_path):
+    target = tmp_path / 'plot.png'
+    write_file(target, _png('ours'), _ours, 'the plot', '--plot')
+    write_file(target, _png('ours') + b'', _ours, 'the plot', '--plot')   # replaced
+    assert _ours(target) and [p.name for p in tmp_path.iterdir()] == ['plot.png']
+    theirs = tmp_path / 'theirs.png'
+    theirs.write_bytes(_png('Matplotlib version 3'))
+    before = theirs.read_bytes()
+    with pytest.raises(InvalidParameter, match='theirs.png exists and was not written by '
+                                               'reducer-twin; it is never replaced'):
+        write_file(theirs, _png('ours'), _ours, 'the plot', '--plot')
+    assert theirs.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['plot.png', 'theirs.png']
+
+
+def test_a_file_output_removes_what_a_killed_writer_left_and_nothing_of_a_live_one(tmp_path):
+    target = tmp_path / 'plot.png'
+    stale = tmp_path / f'.plot.png.{TEMP_TAG}-incomplete-999999999'   # beyond any pid
+    live = tmp_path / f'.plot.png.{TEMP_TAG}-incomplete-1'     # pid 1 is always there
+    stale.write_bytes(b'partial')
+    live.write_bytes(b'partial')
+    write_file(target, _png('ours'), _ours, 'the plot', '--plot')
+    assert sorted(p.name for p in tmp_path.iterdir()) == [live.name, 'plot.png']
+
+
+def test_a_full_disk_under_a_file_output_is_one_error_and_leaves_nothing(tmp_path):
+    with small_tmpfs(tmp_path / 'disk', 100_000) as disk:
+        with pytest.raises(DiskFull, match=r'no space left on device writing the plot --plot '
+                                           r'.*needs about'):
+            write_file(disk / 'plot.png', bytes(300_000), _ours, 'the plot', '--plot')
+        assert list(disk.iterdir()) == []
 
 
 def test_a_full_disk_under_simulate_is_refused_first_or_reported_with_nothing_left(
