@@ -13,6 +13,7 @@ import numpy as np
 from reducer_twin.analysis.forking import end_process, end_with_parent, parent_of_fork
 from reducer_twin.core.ingest import CLOCK_SCATTER
 from reducer_twin.core.ingest import retimed_message, step_scatter
+from reducer_twin.core.ingest import unstamped_message
 from reducer_twin.io.mcap_reader import ReadWarning
 from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, JointStateBatch
 
@@ -43,6 +44,7 @@ class BagChunks:
         self.step_scatter = {}      # topic -> [(period, scatter)] of each chunk [ns]
         self.zero_stamps = dict.fromkeys(self.topics, 0)
         self.merged_topics = set()  # topics of which some messages named only some joints
+        self.unstamped = {}         # topic -> whether its stamps are the log times (see _ready)
         self._last_stamp = {}
 
     def __iter__(self):
@@ -69,6 +71,7 @@ class BagChunks:
         if not parts:
             return None
         batch = concat_batches(parts)
+        batch = self._stamped(topic, batch)
         if self.prefix:
             batch = replace(batch, names=tuple(self.prefix + n for n in batch.names))
         absent = np.isnan(batch.position)
@@ -77,6 +80,28 @@ class BagChunks:
             self.merged_topics.add(topic)
         batch = merged
         self._note_stamps(topic, batch.stamps_ns, batch.position)
+        return batch
+
+    def _stamped(self, topic, batch):
+        """
+        Return a topic's batch with the recorder's receive times for stamps if it has none.
+
+        A publisher that never fills ``header.stamp`` (every stamp of the topic's first
+        chunk zero) leaves the log times, when the recorder received each message, as
+        the only clock: they are taken for the whole topic, and said. They carry the
+        delivery's delays, which the stamp clock re-times where they scatter about the
+        period (:class:`.ingest.StampClock`). A topic that has stamps keeps them: zero
+        stamps among them are a clock that stands, and said so.
+        """
+        if topic not in self.unstamped and len(batch):
+            logs = batch.log_time_ns
+            self.unstamped[topic] = bool(
+                logs is not None and not batch.stamps_ns.any() and (logs > 0).all())
+            if self.unstamped[topic]:
+                warn(self.bag, unstamped_message(
+                    topic, 'the recorder received them (log times)'))
+        if self.unstamped.get(topic) and batch.log_time_ns is not None:
+            batch = replace(batch, stamps_ns=batch.log_time_ns.copy())
         return batch
 
     def _note_stamps(self, topic, stamps, position):

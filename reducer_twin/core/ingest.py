@@ -390,6 +390,29 @@ class StampClock:
         return out
 
 
+def unstamped_message(topic, instead):
+    """
+    Say that a topic's publisher does not stamp its messages, and which times stand in.
+
+    Parameters
+    ----------
+    topic : str
+        The JointState topic.
+    instead : str
+        The times taken, e.g. ``'the recorder received them (log times)'``.
+
+    Returns
+    -------
+    str
+        The line (for a ``WARNING``, a node's log).
+
+    """
+    return (f'every header stamp on {topic} is zero (its publisher does not stamp its '
+            f'messages): the times {instead} are taken instead; they carry the '
+            "delivery's delays, and a link and a motor topic received apart read as "
+            'stamped apart')
+
+
 def retimed_message(topic, clock):
     """
     Say that the stamps of ``topic`` were re-timed on the clock they scatter about.

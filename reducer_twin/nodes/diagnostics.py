@@ -125,7 +125,7 @@ def estimator_status(stage, rejected, live=None):
     return level, message, values
 
 
-def ingest_statuses(counts, rejects, unheard=None):
+def ingest_statuses(counts, rejects, unheard=None, unstamped=()):
     """
     Return the ``encoder_ingest`` statuses, one per joint, from its rule counts.
 
@@ -138,6 +138,9 @@ def ingest_statuses(counts, rejects, unheard=None):
     unheard : UnheardPublishers, optional
         Publishers the subscriptions cannot hear, for their QoS or type
         (:class:`.qos.UnheardPublishers`).
+    unstamped : sequence of str
+        Topics whose publisher does not stamp its messages (their arrival times are
+        taken instead): WARN, and ``unstamped_topics`` names them.
 
     Returns
     -------
@@ -160,6 +163,10 @@ def ingest_statuses(counts, rejects, unheard=None):
         if rejects.total:
             said = f'{rejects.total} messages dropped, the latest: {rejects.last}'
             level, message = 'WARN', said if bad == 0 else f'{message}; {said}'
+        if unstamped:
+            said = f'header stamps zero on {", ".join(unstamped)}: arrival times taken'
+            level, message = 'WARN', said if level == 'OK' else f'{message}; {said}'
+            c['unstamped_topics'] = ', '.join(unstamped)
         if not_heard:
             level, message = 'ERROR', '; '.join([*not_heard, message])
             c['unheard_topics'] = ', '.join(unheard.topics)

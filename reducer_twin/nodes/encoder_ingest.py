@@ -22,7 +22,7 @@ communication does; the topic is then published only while something subscribes.
 from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_UNITS
-from reducer_twin.core.ingest import retimed_message
+from reducer_twin.core.ingest import retimed_message, unstamped_message
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
@@ -78,6 +78,7 @@ class EncoderIngest(Node):
         self._raw_since = None
         self._retimed_said = False
         self._link_topic, self._motor_topic = p['link_topic'], p['motor_topic']
+        self._arrival = {}    # side -> its topic's first message had no stamp: arrival times
         qos = encoder_qos(p['reliable'])
         self.unheard = UnheardPublishers(self, p['reliable'])
         # The controller streams are taken as their serialised bytes and read by a
@@ -125,12 +126,24 @@ class EncoderIngest(Node):
         except InvalidInput as err:
             self.rejects.reject('bad_joint_state', str(err))
             return
+        arrival = self._arrival.get(side)
+        if arrival is None:     # decided by the topic's first message
+            arrival = self._arrival[side] = t == 0
+            if arrival:
+                self._say_unstamped(side)
+        if arrival:
+            t = self.get_clock().now().nanoseconds
         self._raw[side].append((t, pos, vel, eff))
         if self._raw_since is None:
             self._raw_since = t
         # With batch_period_s 0 the message goes on at once, not with the next one.
         if t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
             self._process()
+
+    def _say_unstamped(self, side):
+        """Say that a topic's publisher does not stamp: its arrival times are taken."""
+        topic = self._motor_topic if side == 'motor' else self._link_topic
+        self.get_logger().warning(unstamped_message(topic, 'they arrived here (arrival times)'))
 
     def _process(self):
         """Clean the buffered rows of all joints at once, pair and publish per joint."""
@@ -186,7 +199,9 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        return ingest_statuses(self.counts(), self.rejects, self.unheard)
+        unstamped = [self._motor_topic if side == 'motor' else self._link_topic
+                     for side, arrival in self._arrival.items() if arrival]
+        return ingest_statuses(self.counts(), self.rejects, self.unheard, unstamped)
 
 
 def main(args=None):

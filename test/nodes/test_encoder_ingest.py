@@ -308,6 +308,29 @@ def test_stamps_taken_on_arrival_are_re_timed_counted_and_said(ros, capfd):
     assert 're-timed' in capfd.readouterr().err
 
 
+def test_a_controller_that_never_stamps_is_read_on_arrival_times_and_said(ros, capfd):
+    # Every header stamp zero (a driver that leaves header.stamp unset): every sample
+    # after the first was dropped as a stamp that does not advance.
+    robot = Robot(ros)
+    j1 = robot.joints[0]
+    messages = []
+    for k in range(300):
+        msg = robot.combined(k)
+        msg.header.stamp.sec = msg.header.stamp.nanosec = 0
+        messages.append((robot.link_pub, msg))
+    before = robot.node.get_clock().now().nanoseconds * 1e-9
+    robot.send(messages)
+    rows = robot.wait_rows(j1, 290)
+    after = robot.node.get_clock().now().nanoseconds * 1e-9
+    assert np.all((rows[:, 0] >= before) & (rows[:, 0] <= after)), 'stamped on arrival'
+    assert np.all(np.diff(rows[:, 0]) > 0)
+    status = robot.status(j1, lambda s: 'unstamped_topics' in robot.ros.key_values(s))
+    assert status.level == DiagnosticStatus.WARN and 'arrival times taken' in status.message
+    assert robot.ros.key_values(status)['unstamped_topics'] == robot.link_topic
+    err = capfd.readouterr().err
+    assert err.count(f'every header stamp on {robot.link_topic} is zero') == 1, err
+
+
 def test_non_finite_counts_belong_to_the_joint_that_had_them(ros):
     robot = Robot(ros)
     j1, j2 = robot.joints

@@ -3,9 +3,10 @@ Bad messages in a bag count, never abort: repeated names, stamps that stand, non
 
 A JointState that names a joint twice (a controller configuration error) has its later
 entries dropped and counted, and the joint is analysed as from a clean recording; header
-stamps that do not advance (all zero, a frozen clock) give a WARNING naming the topic and
-the count; a named pipe, a socket or a device given as a bag is refused at once instead of
-blocking the reader.
+stamps that do not advance (a frozen clock, or all zero with no log time either) give a
+WARNING naming the topic and the count, and a publisher that never stamps is read on the
+recorder's receive times, said; a named pipe, a socket or a device given as a bag is
+refused at once instead of blocking the reader.
 """
 
 import json
@@ -101,12 +102,36 @@ def write_runs(path, sources):
     return path
 
 
+def test_a_publisher_that_never_stamps_is_read_on_the_recorders_receive_times_and_said(
+        clean, tmp_path, capsys):
+    # Every header stamp zero (a driver that leaves header.stamp unset) made every joint
+    # "not observed: stamps do not advance", although the recorder's log times were there.
+    bag, batch = clean
+    n = len(batch)
+    code, expected, _ = analyze(bag, tmp_path / 'd', capsys)
+    # Received 0.2-0.6 ms after the encoders were read, in order.
+    delay = np.random.default_rng(4).uniform(2e5, 6e5, n).astype(np.int64)
+    zero = JointStateBatch(np.zeros(n, np.int64), batch.names, batch.position, batch.velocity,
+                           batch.effort, log_time_ns=batch.stamps_ns + delay)
+    code, got, err = analyze(rewrite(tmp_path / 'zero', zero), tmp_path / 'd0', capsys)
+    assert code == 0, err
+    (line,) = [w for w in warnings(err) if 'header stamp' in w]
+    assert 'every header stamp on /joint_states is zero' in line
+    assert 'the times the recorder received them (log times) are taken instead' in line
+    for joint, res in got['joints'].items():
+        want = expected['joints'][joint]
+        assert res['observed'] and res['windows'] >= want['windows'] - 1
+        assert res['wear_um'] == pytest.approx(want['wear_um'], rel=0.05)
+        assert res['lost_motion_arcmin'] == pytest.approx(want['lost_motion_arcmin'], rel=0.02)
+
+
 def test_stamps_that_never_advance_give_a_warning_naming_the_topic_and_the_count(
         clean, tmp_path, capsys):
     _, batch = clean
     n = len(batch)
+    # Zero stamps, and no log time to read instead (a bag whose log times are zero too).
     zero = JointStateBatch(np.zeros(n, np.int64), batch.names, batch.position, batch.velocity,
-                           batch.effort, log_time_ns=batch.stamps_ns)
+                           batch.effort, log_time_ns=np.zeros(n, np.int64))
     code, got, err = analyze(rewrite(tmp_path / 'zero', zero), tmp_path / 'd0', capsys)
     # Nothing can be observed with one stamp: the joints are declared, exit 3.
     assert code == 3 and got is not None
