@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 from reducer_twin.analysis.reading import warn
 from reducer_twin.core.errors import BagError
 from reducer_twin.io.bag import JOINT_STATE_TYPES
+from reducer_twin.io.rosbag1 import SERIALIZATION as ROS1
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 
 
@@ -111,6 +112,10 @@ def _first_names(bag, topic, malformed=None, every=False):
     return tuple(names)
 
 
+READABLE_ENCODINGS = ('cdr', ROS1)
+"""Message encodings of JointState topics the twin decodes."""
+
+
 def plan_joints(bag, settings):
     """
     Find the JointState topics and motor/link pairs by the ingestion node's rules.
@@ -160,11 +165,35 @@ def plan_joints(bag, settings):
         return _plan_joints(bag, settings, every=True)
 
 
+def _readable(bag, states):
+    """
+    Return the JointState topics in an encoding the twin reads (CDR, ROS 1), others said.
+
+    An MCAP written by another tool may carry JointState as JSON or Protobuf (a Foxglove
+    bridge's recording): read as CDR, every message was "malformed", which did not name
+    the cause. Topics in such an encoding are left out with a WARNING; when no topic
+    is left, the ERROR names the encodings.
+    """
+    details = getattr(bag, 'topic_details', {})
+    encoding = {t: details[t].serialization_format for t in states if t in details}
+    other = {t: e for t, e in encoding.items() if e and e not in READABLE_ENCODINGS}
+    said = '; '.join(f'{t} carries its messages encoded as {e!r}' for t, e in other.items())
+    readable = [t for t in states if t not in other]
+    if other and not readable:
+        raise BagError(f'{bag.path}: {said}; reducer-twin reads JointState as rosbag2 records '
+                       "it (CDR) or a ROS 1 bag: record the topics with 'ros2 bag record' "
+                       '(another tool, such as a Foxglove bridge, may write JSON)')
+    if other:
+        warn(bag, f'{said}: left out (reducer-twin reads CDR, as rosbag2 records it)')
+    return readable
+
+
 def _plan_joints(bag, settings, every):
     states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
     if not states:
         raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
                        f'(and no {JOINT_STATE_TYPES[1]})')
+    states = _readable(bag, states)
     names, malformed = {}, {}
 
     def names_of(topic):

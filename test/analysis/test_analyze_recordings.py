@@ -291,6 +291,61 @@ def test_a_ros1_bag_without_joint_states_is_refused_naming_its_topics(tmp_path):
         analyze_bag(path, tmp_path / 'out')
 
 
+def _json_mcap(path, messages, cdr_from=None):
+    """
+    Write JointState as a Foxglove bridge records it: JSON, in an MCAP of its own making.
+
+    ``cdr_from``: a bag whose CDR messages (and schemas) are copied in beside.
+    """
+    from mcap.reader import make_reader
+    from mcap.writer import Writer as McapWriter
+    with open(path, 'wb') as stream:
+        writer = McapWriter(stream)
+        writer.start(profile='', library='a bridge')
+        schema = writer.register_schema(name=JOINT_STATE, encoding='jsonschema', data=b'{}')
+        channel = writer.register_channel('/bridge/joint_states', 'json', schema)
+        for _, stamp, msg in messages:
+            body = {'header': {'stamp': {'sec': msg.header.stamp.sec,
+                                         'nanosec': msg.header.stamp.nanosec}},
+                    'name': list(msg.name), 'position': msg.position.tolist(),
+                    'velocity': msg.velocity.tolist(), 'effort': msg.effort.tolist()}
+            writer.add_message(channel, stamp, json.dumps(body).encode(), stamp)
+        if cdr_from is not None:
+            schemas, channels = {}, {}
+            with open(next(Path(cdr_from).glob('*.mcap')), 'rb') as source:
+                for sch, ch, m in make_reader(source).iter_messages():
+                    if sch.id not in schemas:
+                        schemas[sch.id] = writer.register_schema(sch.name, sch.encoding,
+                                                                 sch.data)
+                    if ch.id not in channels:
+                        channels[ch.id] = writer.register_channel(
+                            ch.topic, ch.message_encoding, schemas[sch.id], ch.metadata)
+                    writer.add_message(channels[ch.id], m.log_time, m.data, m.publish_time)
+        writer.finish()
+    return path
+
+
+def test_joint_states_in_json_are_refused_naming_the_encoding(combined, tmp_path):
+    # Read as CDR, every message was "malformed JointState CDR ... encapsulation header
+    # 7b 22 68 65 is not plain CDR": true, but it did not say the messages were JSON.
+    bag = _json_mcap(tmp_path / 'bridge.mcap', combined[1][:200])
+    with pytest.raises(BagError, match=r'/bridge/joint_states carries its messages encoded as '
+                                       r'.json.; reducer-twin reads JointState as rosbag2 '
+                                       r'records it \(CDR\)'):
+        analyze_bag(bag, tmp_path / 'out')
+    assert not (tmp_path / 'out').exists()
+
+
+def test_joint_states_in_json_beside_cdr_ones_are_left_out_and_said(combined, tmp_path):
+    bag = _json_mcap(tmp_path / 'both.mcap', combined[1][:200], cdr_from=combined[0])
+    result = analyze_bag(bag, tmp_path / 'out', SETTINGS)
+    said = [w.message for w in result.warnings if "encoded as 'json'" in w.message]
+    assert said == ["/bridge/joint_states carries its messages encoded as 'json': left out "
+                    '(reducer-twin reads CDR, as rosbag2 records it)']
+    for joint, res in combined[2].joints.items():
+        assert result.joints[joint].summary() == res.summary()
+
+
 # --------------------------------------------------------------------------- rosbag2 compression
 
 
