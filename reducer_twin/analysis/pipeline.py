@@ -62,7 +62,7 @@ from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, stamp_ns
 from reducer_twin.analysis.stages import te_values, WorkerBacks
 from reducer_twin.core.errors import InvalidInput, StateFileError
-from reducer_twin.core.ingest import motor_effort_scale
+from reducer_twin.core.ingest import motor_effort_scale, motor_torque_seen
 from reducer_twin.core.ingest import pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS
 from reducer_twin.core.ingest import stream_cleaners
@@ -72,6 +72,7 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.core.travel_ratio import motor_angle_form
+from reducer_twin.core.window_analysis import EFFORT_PLAUSIBLE_RATED
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -433,14 +434,17 @@ class _Run:
             if plan.motor_topic is None:
                 if link is None or not len(link):
                     continue
-                pos = joint_columns(link, link_names[2 * k:2 * k + 2], fields=1)[0]
+                pos, _, eff = joint_columns(link, link_names[2 * k:2 * k + 2])
                 x_link, x_motor, t_motor = pos[:, 0], pos[:, 1], link.stamps_ns
+                efforts = eff[:, 0], eff[:, 1]
             else:
                 if link is None or motor is None or not len(link) or not len(motor):
                     continue
-                x_link = joint_columns(link, [joint], fields=1)[0][:, 0]
-                x_motor = joint_columns(motor, [plan.motor_names[k]], fields=1)[0][:, 0]
+                x_link, _, e_link = (c[:, 0] for c in joint_columns(link, [joint]))
+                x_motor, _, e_motor = (c[:, 0] for c in joint_columns(
+                    motor, [plan.motor_names[k]]))
                 t_motor = motor.stamps_ns
+                efforts = e_link, e_motor
             r = motor_travel_ratio(x_link, x_motor)
             sense = motor_direction(link.stamps_ns, x_link, t_motor, x_motor)
             if not (math.isfinite(r) and math.isfinite(sense)):
@@ -466,7 +470,25 @@ class _Run:
             self._against_config('motor_angles', found, joint,
                                  f'move {r:.3g} times the link (raw angles move about '
                                  f'{ratio:g} times, output angles about 1)')
-            self._set_angles(joint, found, sense)
+            self._set_angles(joint, found, sense, efforts)
+
+    def _motor_torque(self, joint, front, efforts):
+        """``'motor'`` where the motor entry's effort beside output angles is a motor torque."""
+        link_effort, motor_effort = efforts
+        if self.settings.effort_source == 'motor':     # the motor entry's, whatever the link's
+            link_effort = np.full_like(link_effort, np.nan)
+        lowest = front.analyzer.edges[0]
+        peak = motor_torque_seen(link_effort, motor_effort, front.ratio, lowest,
+                                 EFFORT_PLAUSIBLE_RATED * front.analyzer.rated_torque)
+        if peak is None:
+            return 'auto'
+        where = self.plan.motor_topic or self.plan.link_topic
+        warn(self.bag, f'{joint}: the effort of its motor entry on {where} stays within '
+             f'+-{peak:.3g} N*m beside motor angles divided by the ratio, below the '
+             f'{lowest:.3g} N*m from which the lost motion is read: it is read as the '
+             f"motor's torque, times the ratio {front.ratio:g} (set twin.motor_effort_units "
+             'in --config to joint to read it as the output torque)')
+        return 'motor'
 
     def _against_config(self, key, found, joint, seen):
         """Refuse a ``twin.<key>`` of ``--config`` that the data of ``joint`` contradict."""
@@ -477,14 +499,17 @@ class _Run:
         raise InvalidInput(f'{self.bag.path}: twin.{key} is {configured!r} in --config, but '
                            f'the motor angles of {joint} on {where} {seen}: {key} {found!r}')
 
-    def _set_angles(self, joint, angles, direction=1.0):
+    def _set_angles(self, joint, angles, direction=1.0, efforts=None):
         front = self.fronts[joint]
         self.angles[joint] = angles
         front.motor_scale = _motor_scale(self.settings, joint, angles, direction)
         front.pairer.motor_scale = front.motor_scale
+        units = self.settings.motor_effort_units
+        if units == 'auto' and angles == 'output' and efforts is not None and \
+                self.settings.effort_source != 'link':
+            units = self._motor_torque(joint, front, efforts)
         # A motor that counts against the link reports its torque in its own sense too.
-        front.effort_scale = direction * motor_effort_scale(self.settings.motor_effort_units,
-                                                            angles, front.ratio)
+        front.effort_scale = direction * motor_effort_scale(units, angles, front.ratio)
         front.pairer.motor_effort_scale = front.effort_scale
 
     def run(self):

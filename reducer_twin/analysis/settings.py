@@ -49,7 +49,8 @@ class AnalysisSettings:
     motor_effort_units : str
         The motor entry's effort: ``'motor'`` (motor torque, times the ratio),
         ``'joint'`` (already output torque) or ``'auto'`` (motor torque when the
-        motor angles are raw).
+        motor angles are raw, or beside output angles when its size says so:
+        :func:`.ingest.motor_torque_seen`).
     effort_scale : float
         Output torque [N·m] per unit of the effort so read (-1: an effort of the other
         sign; a torque constant times the ratio for a motor current in A).

@@ -1459,6 +1459,48 @@ def motor_effort_scale(units, motor_angles, ratio):
     return ratio if units == 'motor' else 1.0
 
 
+def motor_torque_seen(link_effort, motor_effort, ratio, test_torque, largest_torque):
+    """
+    Tell from the data a motor torque on the motor entry beside motor angles in output form.
+
+    With ``motor_effort_units`` left to ``auto``, an effort on the motor entry beside
+    motor angles divided by the ratio is read in joint units. A drive that reports the
+    joint's angle but its motor's torque then gives efforts ``ratio`` times too small:
+    the lost motion, read from the lost-motion test torque on, is never reached, and the
+    joint is not observed. Such an effort is taken for a motor torque when the link
+    entry carries none (the motor entry's is the one read), the motor entry's stays
+    below the test torque (read as output torque, it gives no lost motion either way),
+    and ``ratio`` times it reaches the test torque without passing ``largest_torque``.
+
+    Parameters
+    ----------
+    link_effort, motor_effort : ndarray
+        The entries' efforts over the samples seen so far [as published] (NaN: none).
+    ratio : float
+        The reduction ratio.
+    test_torque : float
+        The lost-motion test torque [N*m].
+    largest_torque : float
+        The largest output torque a reducer takes [N*m].
+
+    Returns
+    -------
+    float or None
+        The motor entry's largest effort (its 99.9th percentile of ``|effort|``) when it
+        is a motor torque, else None (the configured rule stands).
+
+    """
+    if np.isfinite(link_effort).any():
+        return None
+    effort = np.abs(motor_effort[np.isfinite(motor_effort)])
+    if effort.size < 100:
+        return None
+    peak = float(np.percentile(effort, 99.9))
+    if peak < test_torque <= ratio * peak <= largest_torque:
+        return peak
+    return None
+
+
 def choose_effort(link_effort, motor_effort, source='link', motor_effort_scale=1.0,
                   effort_scale=1.0):
     """

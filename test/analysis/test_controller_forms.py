@@ -102,6 +102,37 @@ def test_motor_angles_divided_by_the_ratio_are_recognised_without_a_config(origi
     _assert_same_estimate(result, original)
 
 
+def test_a_motor_torque_beside_output_angles_is_read_as_one_and_said(
+        original, tmp_path, capsys):
+    # A drive that reports the joint's angle (divided by the ratio) and its motor's torque:
+    # the effort, read in joint units, never reached the bins the lost motion is read
+    # from, and every joint was not observed ("... set motor_effort_units to motor").
+    js = original[0]
+    effort = np.full_like(js.effort, np.nan)
+    for k in _motor_columns(js):
+        link = js.names.index(js.names[k][:-len('_motor')])
+        effort[:, k] = js.effort[:, link] / RATIO    # the motor's torque
+    bag = _rewrite(js, tmp_path, 'drive', position=_output_angles(js), effort=effort)
+    code, got, err = _cli_json(bag, tmp_path, capsys)
+    assert code == 0, err
+    for joint, res in original[1].joints.items():
+        (line,) = [x for x in err.splitlines() if f'{joint}: the effort of its motor entry' in x]
+        assert line.startswith('WARNING: ') and "read as the motor's torque, times the " \
+            'ratio 81' in line and 'twin.motor_effort_units' in line, line
+        assert got['joints'][joint]['wear_um'] == pytest.approx(res.summary()['wear_um'],
+                                                                rel=0.02)
+    config = tmp_path / 'twin.yaml'
+    config.write_text('twin:\n  motor_effort_units: motor\n')
+    code, told, err = _cli_json(bag, tmp_path, capsys, '--config', config, out='told')
+    assert code == 0 and 'the effort of its motor entry' not in err
+    got.pop('messages_per_s'), told.pop('messages_per_s')
+    assert got == told      # as if the configuration had said it
+    config.write_text('twin:\n  motor_effort_units: joint\n')
+    code, joint_units, err = _cli_json(bag, tmp_path, capsys, '--config', config, out='joint')
+    assert code == 3 and all('motor_effort_units' in res['reason']
+                             for res in joint_units['joints'].values())
+
+
 @pytest.mark.parametrize('divided', [False, True], ids=['raw', 'output'])
 def test_a_motor_encoder_that_counts_against_the_link_is_read_reversed_and_said(
         original, tmp_path, capsys, divided):

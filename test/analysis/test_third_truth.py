@@ -19,32 +19,40 @@ gen = load('third_generator')
 
 
 @pytest.mark.slow
-def test_a_motor_torque_taken_for_the_output_torque_is_named_and_the_setting_reads_it(
+def test_a_motor_torque_beside_output_angles_is_read_as_one_and_joint_units_are_named(
         tmp_path):
-    # With the motor angles divided by the ratio, 'auto' takes the motor entries' effort
+    # With the motor angles divided by the ratio, 'auto' took the motor entries' effort
     # for output torque; a motor torque is then 1/ratio of it and never reaches the
-    # lowest torque bin. Each joint is "not observed" (exit 3) with a reason naming the
-    # effort and the setting, not a joint that "did not reverse under load"; with
-    # motor_effort_units: motor the same bag is read.
+    # lowest torque bin: each joint was "not observed" (exit 3). Now its size says it is
+    # a motor torque, read as the setting motor_effort_units: motor reads it, and said;
+    # told joint units, the joints are not observed with a reason naming the setting.
     spec = gen.Spec(seed=5, kinds=('shoulder', 'forearm'), hours=60.0 / 3600.0,
                     rate_hz=250.0, start_fraction=0.5, layout='combined',
                     motor_angles='output', effort_on='motor')
     gen.generate_bag(spec, tmp_path / 'bag')
 
-    def analyze(out, *extra):
-        return analyze_process(tmp_path / 'bag', tmp_path / out, *extra)
+    def analyze(out, units=None):
+        extra = ()
+        if units is not None:
+            config = tmp_path / f'{units}.yaml'
+            config.write_text(f'twin:\n  motor_effort_units: {units}\n')
+            extra = ('--config', str(config))
+        done = analyze_process(tmp_path / 'bag', tmp_path / out, *extra)
+        return done, json.loads(done.stdout)
 
-    done = analyze('auto')
+    done, auto = analyze('auto')
+    assert done.returncode == 0, done.stderr[-500:]
+    assert done.stderr.count("it is read as the motor's torque, times the ratio 81") == 2
+    told, motor = analyze('motor', 'motor')
+    assert told.returncode == 0 and "the motor's torque" not in told.stderr
+    auto.pop('messages_per_s'), motor.pop('messages_per_s')
+    assert auto == motor and all(j['observed'] for j in auto['joints'].values())
+    done, joint_units = analyze('joint', 'joint')
     assert done.returncode == 3, done.stderr[-500:]
-    for name, joint in json.loads(done.stdout)['joints'].items():
+    for name, joint in joint_units['joints'].items():
         assert not joint['observed'], name
         assert 'stays within' in joint['reason'], joint['reason']
         assert 'motor_effort_units' in joint['reason']
-    config = tmp_path / 'twin.yaml'
-    config.write_text('twin:\n  motor_effort_units: motor\n')
-    done = analyze('motor', '--config', str(config))
-    assert done.returncode == 0, done.stderr[-500:]
-    assert all(j['observed'] for j in json.loads(done.stdout)['joints'].values())
 
 
 @pytest.mark.slow

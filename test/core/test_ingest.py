@@ -19,6 +19,7 @@ import pytest
 from reducer_twin.core import ingest
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import CleanStream, IngestConfig, pair_columns, pair_same_stamps
+from reducer_twin.core.ingest import motor_torque_seen
 from reducer_twin.core.ingest import Pairer, SpikeFilter, SpikeFilterBank, StreamCleaner
 
 MS = 1_000_000
@@ -921,3 +922,27 @@ def test_a_pairer_keeps_interpolating_true_stamps_and_pairs_the_same_samples():
     np.testing.assert_array_equal(t, t_old)
     np.testing.assert_array_equal(te, te_old)
     assert np.std(te - te_true[np.searchsorted(link.t_ns, t)]) < 0.5e-6
+
+
+@pytest.mark.parametrize('link, motor, seen', [
+    ('none', 'motor torque', True),
+    ('none', 'output torque', False),      # reaches the lowest bin: read as it is
+    ('none', 'idle', False),               # times the ratio still below: nothing to tell
+    ('none', 'beyond', False),             # times the ratio beyond what a reducer takes
+    ('output torque', 'motor torque', False),   # the link entry's effort is the one read
+    ('none', 'a few samples', False),
+])
+def test_a_motor_torque_is_told_by_its_size_only_where_output_torque_could_not_be_read(
+        link, motor, seen):
+    # A drive reporting its motor's torque (load / 81) beside output angles: read in joint
+    # units it never reaches the 15.7 N*m the lost motion is read from.
+    load = 400.0 * np.sin(np.linspace(0.0, 20.0, 2000))
+    efforts = {'none': np.full(2000, np.nan), 'output torque': load,
+               'motor torque': load / RATIO, 'idle': load / RATIO / 100.0,
+               'beyond': np.full(2000, 15.0), 'a few samples': np.r_[load[:50] / RATIO,
+                                                                     np.full(1950, np.nan)]}
+    largest = 1000.0 if motor == 'beyond' else 5.0 * 784.0    # 15 N*m x 81: 1215 N*m
+    peak = motor_torque_seen(efforts[link], efforts[motor], RATIO, 15.7, largest)
+    assert (peak is not None) == seen
+    if seen:
+        assert peak == pytest.approx(400.0 / RATIO, rel=0.01)
