@@ -242,45 +242,9 @@ def run(args):
     finally:
         if worker is not None:
             worker.close()
-    code = 0
-    blind = False
-    summary, failed = {}, {}
     with no_empty_dirs_left(reports):   # a report parent made, but no report written
-        for bag, name in zip(args.bags, names):
-            result = results[bag]
-            if fleet and _fleet_note(result, name, failed):
-                continue
-            if isinstance(result, Exception):
-                sys.stderr.write(f'ERROR: {result}\n')
-                failed[name] = str(result)
-                code = 1
-                continue
-            for warning in result.warnings:
-                sys.stderr.write(f'WARNING: {warning.path}: {warning.message}\n')
-            if result.damaged:
-                code = 1
-            for joint, res in result.joints.items():
-                if not res.observed:
-                    sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
-                                     f'{res.reason or "no usable window"}\n')
-                    blind = True
-                elif res.partial:
-                    sys.stderr.write(f'WARNING: {joint}: observed in part of {name}: '
-                                     f'{res.partial}\n')
-            for joint, reason in result.plan.not_analysed().items():
-                sys.stderr.write(f'WARNING: {joint}: not observed in {name}: {reason}\n')
-                blind = True
-            if args.report:
-                from reducer_twin.analysis.report import write_report
-                try:
-                    page = write_report(result, reports[names.index(name)], life=settings.life)
-                except ReducerTwinError as err:
-                    sys.stderr.write(f'ERROR: {err}\n')
-                    code = 1
-                else:
-                    if not args.json:
-                        print(f'report: {page}')
-            summary[name] = result
+        code, blind, summary, failed = _say_results(args, results, names, reports, settings,
+                                                    fleet)
     if args.json:
         if single:
             if summary:
@@ -307,6 +271,58 @@ def run(args):
             _print_summary(name, result)
     # 3: everything ran, but some reducer could not be observed (said on stderr and in JSON).
     return EXIT_NOT_OBSERVED if code == 0 and blind else code
+
+
+def _say_results(args, results, names, reports, settings, fleet):
+    """
+    Say each bag's outcome on stderr, write its report, and sum up.
+
+    Returns
+    -------
+    tuple
+        ``(exit code so far, whether a joint was not observed, {name: BagResult},
+        {name: error text or fleet note})``.
+
+    """
+    code = 0
+    blind = False
+    summary, failed = {}, {}
+    for bag, name in zip(args.bags, names):
+        result = results[bag]
+        if fleet and _fleet_note(result, name, failed):
+            continue
+        if isinstance(result, Exception):
+            sys.stderr.write(f'ERROR: {result}\n')
+            failed[name] = str(result)
+            code = 1
+            continue
+        for warning in result.warnings:
+            sys.stderr.write(f'WARNING: {warning.path}: {warning.message}\n')
+        if result.damaged:
+            code = 1
+        for joint, res in result.joints.items():
+            if not res.observed:
+                sys.stderr.write(f'WARNING: {joint}: not observed in {name}: '
+                                 f'{res.reason or "no usable window"}\n')
+                blind = True
+            elif res.partial:
+                sys.stderr.write(f'WARNING: {joint}: observed in part of {name}: '
+                                 f'{res.partial}\n')
+        for joint, reason in result.plan.not_analysed().items():
+            sys.stderr.write(f'WARNING: {joint}: not observed in {name}: {reason}\n')
+            blind = True
+        if args.report:
+            from reducer_twin.analysis.report import write_report
+            try:
+                page = write_report(result, reports[names.index(name)], life=settings.life)
+            except ReducerTwinError as err:
+                sys.stderr.write(f'ERROR: {err}\n')
+                code = 1
+            else:
+                if not args.json:
+                    print(f'report: {page}')
+        summary[name] = result
+    return code, blind, summary, failed
 
 
 def _fleet_note(result, name, failed):
