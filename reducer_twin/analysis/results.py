@@ -83,7 +83,8 @@ class JointResult:
         -------
         dict
             ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
-            ``lost_motion_arcmin`` (None when not observed), ``messages``, ``rejected``,
+            ``lost_motion_arcmin`` and ``lost_motion_std_arcmin`` (None when not
+            observed), ``messages``, ``rejected``,
             ``observed``, ``windows`` (windows with a lost motion), ``reason`` (why
             not observed, else None), ``partial`` (why an observed estimate stands as of
             a window well before the recording's end, else None), ``pairing`` (how

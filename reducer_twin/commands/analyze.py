@@ -359,7 +359,8 @@ def _print_summary(name, result):
             print(f'  {joint}: NOT OBSERVED: {s["reason"]}')
             continue
         print(f'  {joint}: wear {_fmt(s["wear_um"], ".3f")} +/- {_fmt(s["wear_std_um"], ".3f")} '
-              f'um, lost motion {_fmt(s["lost_motion_arcmin"], ".3f")} arcmin, remaining life '
+              f'um, lost motion {_fmt(s["lost_motion_arcmin"], ".3f")} +/- '
+              f'{_fmt(s["lost_motion_std_arcmin"], ".3f")} arcmin, remaining life '
               f'P10/P50/P90 {_fmt(s["rul_p10_h"], ",.0f")} / {_fmt(s["rul_p50_h"], ",.0f")} / '
               f'{_fmt(s["rul_p90_h"], ",.0f")} h, {s["rejected"]} samples rejected')
     for joint, reason in result.plan.not_analysed().items():

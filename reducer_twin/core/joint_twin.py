@@ -372,7 +372,9 @@ def estimate_numbers(wear, life, observed):
     -------
     dict
         ``wear_um``, ``wear_std_um``, ``rul_p10_h``, ``rul_p50_h``, ``rul_p90_h``,
-        ``lost_motion_arcmin``; None where not observed or not finite.
+        ``lost_motion_arcmin``, ``lost_motion_std_arcmin`` (the lost motion's standard
+        deviation, the window fit's bias allowed for); None where not observed or not
+        finite.
 
     """
     nan = float('nan')
@@ -381,7 +383,8 @@ def estimate_numbers(wear, life, observed):
            'rul_p10_h': life.get('p10_s', nan) / HOUR,
            'rul_p50_h': life.get('p50_s', nan) / HOUR,
            'rul_p90_h': life.get('p90_s', nan) / HOUR,
-           'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan))}
+           'lost_motion_arcmin': rad_to_arcmin(wear.get('lost_motion_rad', nan)),
+           'lost_motion_std_arcmin': rad_to_arcmin(wear.get('lost_motion_std_rad', nan))}
     return {k: (float(v) if observed and math.isfinite(v) else None) for k, v in out.items()}
 
 

@@ -19,6 +19,8 @@ from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
 from reducer_twin.core.te_extraction import TEExtractor
+from reducer_twin.core.transmission_error import lost_motion
+from reducer_twin.core.units import ARCMIN
 from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.io.bag import open_bag, write_bag_dir
 from reducer_twin.io.mcap_array_writer import McapBagWriter
@@ -41,9 +43,10 @@ AGING = 180_000.0
 SPEC = SimulationSpec(hours=3000.0, aging_factor=AGING, joints=2, rate_hz=250.0, seed=3,
                       wear_rate_scales=(1.0, 2.0), load_torque_nm=1.2 * 784.0)
 JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
-             'lost_motion_arcmin', 'messages', 'rejected', 'observed', 'windows', 'reason',
-             'partial', 'pairing', 'velocity', 'rate_resolved', 'faster_than_wear',
-             'growth_law', 'curve_extrapolation', 'service', 'inputs', 'soft_zone'}
+             'lost_motion_arcmin', 'lost_motion_std_arcmin', 'messages', 'rejected',
+             'observed', 'windows', 'reason', 'partial', 'pairing', 'velocity',
+             'rate_resolved', 'faster_than_wear', 'growth_law', 'curve_extrapolation',
+             'service', 'inputs', 'soft_zone'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
              'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',
@@ -99,6 +102,10 @@ def test_the_json_has_the_issue_shape_and_the_estimate_approaches_the_truth(
         # Wear within 10 % of the truth after 3000 h (the README's accuracy floor).
         assert got['wear_um'] == pytest.approx(truth[name]['true_wear_um'], rel=0.10)
         assert 0.0 < got['wear_std_um'] < 0.1 * got['wear_um']
+        # The lost motion with its standard deviation, which holds the truth.
+        true_lm = lost_motion(truth[name]['true_wear_um'] * 1e-6, ReducerParams()) / ARCMIN
+        assert 0.0 < got['lost_motion_std_arcmin'] < 0.2 * got['lost_motion_arcmin']
+        assert abs(got['lost_motion_arcmin'] - true_lm) < 3.0 * got['lost_motion_std_arcmin']
         assert got['rul_p10_h'] <= got['rul_p50_h'] <= got['rul_p90_h']
         assert got['rul_p50_h'] == pytest.approx(truth[name]['true_rul_h'], rel=0.3)
         # A few dozen windows of a third of a life: the wear model's curve carries the

@@ -44,7 +44,7 @@ T0_NS = 1_700_000_000_000_000_000
 
 TOPICS = {'link': '/joint_states', 'motor': '/motor_states'}
 JSON_FIELDS = ('wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
-               'lost_motion_arcmin')
+               'lost_motion_arcmin', 'lost_motion_std_arcmin')
 REJECTING = ('non_finite', 'duplicate', 'out_of_order')
 """Stream rules whose samples the JSON's ``rejected`` counts (with unpaired and spike)."""
 

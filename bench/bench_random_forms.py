@@ -1,0 +1,141 @@
+#!/usr/bin/env python3
+"""
+Recordings of random form and truth from the two outside generators, through ``analyze``.
+
+Each run draws, from its seed, a generator (``bench/independent_generator.py`` or
+``bench/third_generator.py``), one to three joint kinds, a controller rate (100-2000 Hz),
+the layout (one topic, or link and motor topics), the motor angles' form (raw or divided
+by the ratio), the entry that carries the effort (link or motor), sometimes no velocity
+field and a drawn stamp jitter, and a recording of 20-300 h at aging factor 3600 starting
+at 5-80 % of each unit's life. Nothing is configured: ``reducer-twin analyze BAG --out
+OUT --json`` is run as a user would run it on a recording it has never seen.
+
+Printed per generator: runs whose command failed (an exit status other than 0 or 3, a
+traceback, no JSON), joints observed and not observed (with their reasons' counts), and
+for the observed ones the lost motion's error against the generator's truth at the
+recording's end (median, p90 and max of the absolute relative error; the share within
+10 %); with ``--verbose`` a line per run.
+
+Usage::
+
+    .venv/bin/python bench/bench_random_forms.py [--runs 40] [--seed0 5000] [--verbose]
+"""
+
+import argparse
+from collections import Counter
+import json
+from pathlib import Path
+import random
+import shutil
+import subprocess
+import sys
+import tempfile
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+KINDS = ('base', 'shoulder', 'forearm', 'wrist')
+
+
+def draw(seed):
+    """Return ``(generator, its arguments)`` of run ``seed``."""
+    r = random.Random(seed)
+    gen = r.choice(['independent', 'third'])
+    kinds = ','.join(r.sample(KINDS, r.randint(1, 3)))
+    args = ['--seed', str(seed), '--kinds', kinds,
+            '--hours', str(r.choice([20, 60, 150, 300])), '--aging-factor', '3600',
+            '--start-fraction', str(round(r.uniform(0.05, 0.8), 2)),
+            '--rate-hz', str(r.choice([100, 200, 250, 500, 1000, 2000])),
+            '--layout', r.choice(['split', 'combined']),
+            '--motor-angles', r.choice(['raw', 'output']),
+            '--effort-on', r.choice(['link', 'motor'])]
+    if r.random() < 0.2:
+        args.append('--no-velocity')
+    if r.random() < 0.3:
+        args += ['--stamp-jitter-us', str(r.choice([0, 50, 300]))]
+    return gen, args
+
+
+def run_one(seed, work):
+    """Write run ``seed``'s recording, analyse it; return its outcome."""
+    gen, args = draw(seed)
+    bag, out = work / f'bag{seed}', work / f'out{seed}'
+    made = subprocess.run([sys.executable, str(HERE / f'{gen}_generator.py'), '--out', str(bag),
+                           '--json', *args], capture_output=True, text=True)
+    if made.returncode:
+        raise RuntimeError(f'{gen} generator failed on seed {seed}: {made.stderr[-500:]}')
+    truth = json.loads(made.stdout)['joints']
+    done = subprocess.run([sys.executable, '-m', 'reducer_twin.cli', 'analyze', str(bag),
+                           '--out', str(out), '--json'], capture_output=True, text=True)
+    shutil.rmtree(bag, ignore_errors=True)
+    shutil.rmtree(out, ignore_errors=True)
+    outcome = {'gen': gen, 'args': ' '.join(args), 'exit': done.returncode, 'joints': {}}
+    try:
+        joints = json.loads(done.stdout)['joints']
+    except (ValueError, KeyError):
+        joints = None
+    outcome['failed'] = (done.returncode not in (0, 3) or 'Traceback' in done.stderr
+                         or joints is None)
+    if outcome['failed']:
+        outcome['stderr'] = done.stderr[-800:]
+        return outcome
+    for name, got in joints.items():
+        true = truth[name]['lost_motion_end_arcmin']
+        read = got.get('lost_motion_arcmin')
+        outcome['joints'][name] = {
+            'kind': truth[name]['kind'], 'observed': got['observed'],
+            'error': None if read is None else read / true - 1.0,
+            'reason': got.get('reason')}
+    return outcome
+
+
+def summary(outcomes, gen):
+    """Print one generator's figures."""
+    runs = [o for o in outcomes if o['gen'] == gen]
+    failed = [o for o in runs if o['failed']]
+    joints = [j for o in runs if not o['failed'] for j in o['joints'].values()]
+    seen = [j for j in joints if j['observed'] and j['error'] is not None]
+    reasons = Counter(' '.join((j['reason'] or 'no lost motion').split()[:6])
+                      for j in joints if j not in seen)
+    print(f'{gen} generator: {len(runs)} runs, {len(failed)} failed (exit other than 0/3, '
+          f'a traceback or no JSON); {len(joints)} joints, {len(seen)} observed')
+    if seen:
+        err = np.abs([j['error'] for j in seen])
+        print(f'  lost motion vs truth: median |rel| {100 * np.median(err):.1f} %, p90 '
+              f'{100 * np.percentile(err, 90):.1f} %, max {100 * err.max():.0f} %; within '
+              f'10 % {100 * np.mean(err <= 0.1):.0f} %')
+        for kind in KINDS:
+            k = np.abs([j['error'] for j in seen if j['kind'] == kind])
+            if k.size:
+                print(f'    {kind}: {k.size} joints, median |rel| {100 * np.median(k):.1f} %, '
+                      f'max {100 * k.max():.0f} %')
+    for reason, count in reasons.most_common():
+        print(f'  not observed ({count}): {reason} ...')
+    for o in failed:
+        print(f'  FAILED: {o["args"]} (exit {o["exit"]}): {o["stderr"]}')
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0].strip())
+    p.add_argument('--runs', type=int, default=40)
+    p.add_argument('--seed0', type=int, default=5000)
+    p.add_argument('--verbose', action='store_true', help='a line per run')
+    args = p.parse_args()
+    outcomes = []
+    with tempfile.TemporaryDirectory(prefix='bench-forms-') as tmp:
+        for seed in range(args.seed0, args.seed0 + args.runs):
+            outcome = run_one(seed, Path(tmp))
+            outcomes.append(outcome)
+            if args.verbose:
+                joints = ', '.join(
+                    f'{j["kind"]} ' + (f'{100 * j["error"]:+.1f} %' if j['observed'] and
+                                       j['error'] is not None else 'not observed')
+                    for j in outcome['joints'].values())
+                print(f'{seed} {outcome["gen"]} {outcome["args"]}: exit {outcome["exit"]}; '
+                      f'{joints}', flush=True)
+    for gen in ('independent', 'third'):
+        summary(outcomes, gen)
+
+
+if __name__ == '__main__':
+    main()
