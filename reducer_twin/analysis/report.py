@@ -240,7 +240,9 @@ def _table(result):
             else None
         rul = ' / '.join(_fmt(s[k], ',.0f') for k in ('rul_p10_h', 'rul_p50_h', 'rul_p90_h'))
         cells = (joint, f'{_fmt(s["wear_um"], ".3f")} ± {_fmt(s["wear_std_um"], ".3f")}',
-                 _fmt(true_wear, '.3f'), _fmt(s['lost_motion_arcmin'], '.3f'), rul,
+                 _fmt(true_wear, '.3f'),
+                 f'{_fmt(s["lost_motion_arcmin"], ".3f")} ± '
+                 f'{_fmt(s["lost_motion_std_arcmin"], ".3f")}', rul,
                  _fmt(true_rul, ',.0f'), res.levels[-1] if res.levels else 'STALE',
                  str(len(res.features)), f'{s["messages"]:,}', str(s['rejected']))
         rows.append('<tr>' + ''.join(f'<td>{html.escape(c)}</td>' for c in cells) + '</tr>')

@@ -40,6 +40,9 @@ def test_the_report_has_every_plot_as_png_and_an_html_page_embedding_them(result
     assert not re.search(r'src="(?!data:)', text)
     for joint in ('joint_1', 'joint_2'):
         assert f'<td>{joint}</td>' in text
+        s = result.joints[joint].summary()    # the lost motion with its sd, as the wear
+        assert f'<td>{s["lost_motion_arcmin"]:.3f} ± {s["lost_motion_std_arcmin"]:.3f}</td>' \
+            in text
     assert 'true wear' in text and 'aging factor 120000' in text
 
 
