@@ -199,8 +199,8 @@ class HealthSummary:
         Combined wear and its standard deviation [µm].
     rate_scale : float
         Estimated wear-rate multiplier.
-    lost_motion_arcmin, lost_motion_obs_arcmin : float
-        Estimated and last observed lost motion [arcmin].
+    lost_motion_arcmin, lost_motion_std_arcmin, lost_motion_obs_arcmin : float
+        Estimated lost motion, its standard deviation and the last observed one [arcmin].
     rul_p10_h, rul_p50_h, rul_p90_h : float
         Remaining operating life percentiles [h].
     rul_p90_censored : bool
@@ -228,6 +228,7 @@ class HealthSummary:
     wear_std_um: float
     rate_scale: float
     lost_motion_arcmin: float
+    lost_motion_std_arcmin: float
     lost_motion_obs_arcmin: float
     rul_p10_h: float
     rul_p50_h: float
@@ -268,6 +269,7 @@ class HealthSummary:
             wear_um=m_to_um(wear['wear_m']), wear_std_um=m_to_um(wear['wear_std_m']),
             rate_scale=wear['rate_scale'],
             lost_motion_arcmin=rad_to_arcmin(wear['lost_motion_rad']),
+            lost_motion_std_arcmin=rad_to_arcmin(wear.get('lost_motion_std_rad', math.nan)),
             lost_motion_obs_arcmin=rad_to_arcmin(wear['lost_motion_obs_rad']),
             rul_p10_h=rec['p10_s'] / HOUR, rul_p50_h=rec['p50_s'] / HOUR,
             rul_p90_h=rec['p90_s'] / HOUR, rul_p90_censored=bool(rec['p90_censored']),
@@ -287,6 +289,7 @@ class HealthSummary:
         """
         out = {'wear_um': self.wear_um, 'wear_std_um': self.wear_std_um,
                'rate_scale': self.rate_scale, 'lost_motion_arcmin': self.lost_motion_arcmin,
+               'lost_motion_std_arcmin': self.lost_motion_std_arcmin,
                'lost_motion_obs_arcmin': self.lost_motion_obs_arcmin,
                'rul_p10_h': self.rul_p10_h, 'rul_p50_h': self.rul_p50_h,
                'rul_p90_h': self.rul_p90_h, 'rul_p90_censored': self.rul_p90_censored,

@@ -49,9 +49,10 @@ JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
              'service', 'inputs', 'soft_zone'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
-             'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h', 'rul_p90_censored',
-             'catalogue_life_h', 'exposure_h', 'updates', 'rejected_updates', 'te_pp_arcmin',
-             'rejected_messages', 'lost_motion_limit_arcmin']
+             'lost_motion_std_arcmin', 'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h',
+             'rul_p90_h', 'rul_p90_censored', 'catalogue_life_h', 'exposure_h', 'updates',
+             'rejected_updates', 'te_pp_arcmin', 'rejected_messages',
+             'lost_motion_limit_arcmin']
 
 
 @pytest.fixture(scope='module')

@@ -32,10 +32,10 @@ AGING = 180_000.0
 """Seconds of wear exposure per stream second (50 h of wear per second)."""
 
 DIAGNOSTIC_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
-                   'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
-                   'rul_p90_censored', 'catalogue_life_h', 'exposure_h', 'updates',
-                   'rejected_updates', 'te_pp_arcmin', 'rejected_messages',
-                   'lost_motion_limit_arcmin']
+                   'lost_motion_std_arcmin', 'lost_motion_obs_arcmin', 'rul_p10_h',
+                   'rul_p50_h', 'rul_p90_h', 'rul_p90_censored', 'catalogue_life_h',
+                   'exposure_h', 'updates', 'rejected_updates', 'te_pp_arcmin',
+                   'rejected_messages', 'lost_motion_limit_arcmin']
 """The key/values of a reducer's ``/diagnostics`` status, in order (README, nodes)."""
 
 

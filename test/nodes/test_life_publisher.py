@@ -150,9 +150,9 @@ def test_the_diagnostics_level_follows_the_thresholds(ros, estimate, warn_h, err
     assert status.message.startswith('remaining life P10')
     values = ros.key_values(status)
     for key in ('wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
-                'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
-                'catalogue_life_h', 'exposure_h', 'te_pp_arcmin', 'updates',
-                'rejected_messages', 'lost_motion_limit_arcmin'):
+                'lost_motion_std_arcmin', 'lost_motion_obs_arcmin', 'rul_p10_h',
+                'rul_p50_h', 'rul_p90_h', 'catalogue_life_h', 'exposure_h', 'te_pp_arcmin',
+                'updates', 'rejected_messages', 'lost_motion_limit_arcmin'):
         assert key in values, key
     assert float(values['rul_p10_h']) == pytest.approx(rec['p10_s'] / HOUR, rel=1e-5)
     assert float(values['wear_um']) == pytest.approx(wear_record['wear_m'] * 1e6, rel=1e-5)
