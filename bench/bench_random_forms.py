@@ -14,7 +14,8 @@ Printed per generator: runs whose command failed (an exit status other than 0 or
 traceback, no JSON), joints observed and not observed (with their reasons' counts), and
 for the observed ones the lost motion's error against the generator's truth at the
 recording's end (median, p90 and max of the absolute relative error; the share within
-10 %); with ``--verbose`` a line per run.
+10 %) and where the true remaining life lies against the P10-P90 given (within, below,
+above); with ``--verbose`` a line per run.
 
 Usage::
 
@@ -82,10 +83,15 @@ def run_one(seed, work):
     for name, got in joints.items():
         true = truth[name]['lost_motion_end_arcmin']
         read = got.get('lost_motion_arcmin')
+        life = truth[name]['remaining_life_end_h']
+        p10, p90 = got.get('rul_p10_h'), got.get('rul_p90_h')
         outcome['joints'][name] = {
             'kind': truth[name]['kind'], 'observed': got['observed'],
             'error': None if read is None else read / true - 1.0,
-            'reason': got.get('reason')}
+            'reason': got.get('reason'),
+            # Where the true remaining life lies against P10-P90: -1 below, 0 in, +1 above.
+            'life': None if p10 is None or p90 is None else
+            (-1 if life < p10 else 1 if life > p90 else 0)}
     return outcome
 
 
@@ -104,6 +110,11 @@ def summary(outcomes, gen):
         print(f'  lost motion vs truth: median |rel| {100 * np.median(err):.1f} %, p90 '
               f'{100 * np.percentile(err, 90):.1f} %, max {100 * err.max():.0f} %; within '
               f'10 % {100 * np.mean(err <= 0.1):.0f} %')
+        side = np.array([j['life'] for j in seen if j['life'] is not None])
+        if side.size:
+            print(f'  true remaining life within P10-P90: {100 * np.mean(side == 0):.0f} % '
+                  f'(below P10 {100 * np.mean(side < 0):.0f} %, above P90 '
+                  f'{100 * np.mean(side > 0):.0f} %; a recording of 20-300 h, no history)')
         for kind in KINDS:
             k = np.abs([j['error'] for j in seen if j['kind'] == kind])
             if k.size:
