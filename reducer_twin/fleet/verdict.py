@@ -127,6 +127,8 @@ def fleet_row(reducer, params):
         ``analyze --json`` gives it; None otherwise or unknown), ``curve_extrapolation``
         (how far the wear model's curve carries the remaining life beyond the span its
         shape was compared over, as ``analyze --json`` gives it; None otherwise) and
+        ``lost_motion_std_arcmin`` (the lost motion's standard deviation, as ``analyze
+        --json`` gives it; None where unknown, a store written before it was kept),
         ``service_hours`` (the operating time it had before the twin first saw it, where
         the configuration gave one and it was taken; else None) and ``inputs`` (how the
         latest analysis read its inputs otherwise than published, as ``analyze --json``
@@ -151,6 +153,7 @@ def fleet_row(reducer, params):
     row['growth_law'] = summary.get('growth_law')
     row['curve_extrapolation'] = summary.get('curve_extrapolation')
     row['inputs'] = list(summary.get('inputs') or [])
+    row['lost_motion_std_arcmin'] = None
     row['soft_zone'] = summary.get('soft_zone')
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \
@@ -159,6 +162,7 @@ def fleet_row(reducer, params):
         row['wear_um'] = float(state['x'][0]) / UM
         row['wear_std_um'] = math.sqrt(max(float(state['P'][0][0]), 0.0)) / UM
         row['lost_motion_arcmin'] = summary.get('lost_motion_arcmin')
+        row['lost_motion_std_arcmin'] = summary.get('lost_motion_std_arcmin')
         for key in ('rul_p10_h', 'rul_p50_h', 'rul_p90_h'):
             row[key] = summary.get(key)
         row['rul_censored'] = bool(summary.get('rul_censored', False))

@@ -52,6 +52,15 @@ def test_each_verdict_follows_its_rule_and_says_why(reducer, verdict, words):
         assert row['wear_um'] is None and row['rul_p10_h'] is None
 
 
+def test_the_row_gives_the_lost_motion_with_its_standard_deviation_where_the_store_has_it():
+    reducer = _reducer(5000.0)
+    assert fleet_row(reducer, PARAMS)['lost_motion_std_arcmin'] is None   # an older store
+    reducer.summary['lost_motion_std_arcmin'] = 0.04
+    row = fleet_row(reducer, PARAMS)
+    assert (row['lost_motion_arcmin'], row['lost_motion_std_arcmin']) == (1.0, 0.04)
+    assert fleet_row(_reducer(None, bags=0), PARAMS)['lost_motion_std_arcmin'] is None
+
+
 def test_past_the_limit_the_remaining_life_is_negative_hours_past_it():
     w_lim = limit_wear(PARAMS, LIMIT)
     reducer = _reducer(0.0, lm=3.4, wear_m=w_lim * 1.1)
