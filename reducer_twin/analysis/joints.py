@@ -157,12 +157,17 @@ def plan_joints(bag, settings):
     again from the names of all its messages before it is refused.
 
     """
+    states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
+    if not states:
+        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
+                       f'(and no {JOINT_STATE_TYPES[1]})')
+    states = _readable(bag, states)     # said once, whichever plan stands
     try:
-        return _plan_joints(bag, settings, every=False)
+        return _plan_joints(bag, settings, states, every=False)
     except BagError:
         # A joint may first appear later in the recording (a second broadcaster that
         # starts late): the whole topics are read before the bag is refused.
-        return _plan_joints(bag, settings, every=True)
+        return _plan_joints(bag, settings, states, every=True)
 
 
 def _readable(bag, states):
@@ -174,8 +179,7 @@ def _readable(bag, states):
     the cause. Topics in such an encoding are left out with a WARNING; when no topic
     is left, the ERROR names the encodings.
     """
-    details = getattr(bag, 'topic_details', {})
-    encoding = {t: details[t].serialization_format for t in states if t in details}
+    encoding = {t: bag.topic_details[t].serialization_format for t in states}
     other = {t: e for t, e in encoding.items() if e and e not in READABLE_ENCODINGS}
     said = '; '.join(f'{t} carries its messages encoded as {e!r}' for t, e in other.items())
     readable = [t for t in states if t not in other]
@@ -188,12 +192,7 @@ def _readable(bag, states):
     return readable
 
 
-def _plan_joints(bag, settings, every):
-    states = [n for n, t in bag.topics.items() if t.msgtype in JOINT_STATE_TYPES]
-    if not states:
-        raise BagError(f'{bag.path}: no {JOINT_STATE} topic; found: {_topic_list(bag)} '
-                       f'(and no {JOINT_STATE_TYPES[1]})')
-    states = _readable(bag, states)
+def _plan_joints(bag, settings, states, every):
     names, malformed = {}, {}
 
     def names_of(topic):

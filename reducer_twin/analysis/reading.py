@@ -44,7 +44,7 @@ class BagChunks:
         self.step_scatter = {}      # topic -> [(period, scatter)] of each chunk [ns]
         self.zero_stamps = dict.fromkeys(self.topics, 0)
         self.merged_topics = set()  # topics of which some messages named only some joints
-        self.unstamped = {}         # topic -> whether its stamps are the log times (see _ready)
+        self.unstamped = {}         # topic -> its stamps are the log times (see _stamped)
         self._last_stamp = {}
 
     def __iter__(self):

@@ -1459,18 +1459,18 @@ def motor_effort_scale(units, motor_angles, ratio):
     return ratio if units == 'motor' else 1.0
 
 
-def motor_torque_seen(link_effort, motor_effort, ratio, test_torque, largest_torque):
+def motor_torque_seen(link_effort, motor_effort, ratio, lowest_bin, largest_torque):
     """
     Tell from the data a motor torque on the motor entry beside motor angles in output form.
 
     With ``motor_effort_units`` left to ``auto``, an effort on the motor entry beside
     motor angles divided by the ratio is read in joint units. A drive that reports the
     joint's angle but its motor's torque then gives efforts ``ratio`` times too small:
-    the lost motion, read from the lost-motion test torque on, is never reached, and the
-    joint is not observed. Such an effort is taken for a motor torque when the link
-    entry carries none (the motor entry's is the one read), the motor entry's stays
-    below the test torque (read as output torque, it gives no lost motion either way),
-    and ``ratio`` times it reaches the test torque without passing ``largest_torque``.
+    the lowest torque bin the lost motion is read from is never reached, and the joint
+    is not observed. Such an effort is taken for a motor torque when the link entry
+    carries none (the motor entry's is the one read), the motor entry's stays below
+    ``lowest_bin`` (read as output torque, it gives no lost motion either way), and
+    ``ratio`` times it reaches ``lowest_bin`` without passing ``largest_torque``.
 
     Parameters
     ----------
@@ -1478,8 +1478,8 @@ def motor_torque_seen(link_effort, motor_effort, ratio, test_torque, largest_tor
         The entries' efforts over the samples seen so far [as published] (NaN: none).
     ratio : float
         The reduction ratio.
-    test_torque : float
-        The lost-motion test torque [N*m].
+    lowest_bin : float
+        The lower edge of the lowest torque bin the lost motion is read from [N*m].
     largest_torque : float
         The largest output torque a reducer takes [N*m].
 
@@ -1496,7 +1496,7 @@ def motor_torque_seen(link_effort, motor_effort, ratio, test_torque, largest_tor
     if effort.size < 100:
         return None
     peak = float(np.percentile(effort, 99.9))
-    if peak < test_torque <= ratio * peak <= largest_torque:
+    if peak < lowest_bin <= ratio * peak <= largest_torque:
         return peak
     return None
 

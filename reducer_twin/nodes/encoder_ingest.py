@@ -140,10 +140,14 @@ class EncoderIngest(Node):
         if t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
             self._process()
 
+    def _topic(self, side):
+        """Return the topic of ``side`` ('link' or 'motor')."""
+        return self._motor_topic if side == 'motor' else self._link_topic
+
     def _say_unstamped(self, side):
         """Say that a topic's publisher does not stamp: its arrival times are taken."""
-        topic = self._motor_topic if side == 'motor' else self._link_topic
-        self.get_logger().warning(unstamped_message(topic, 'they arrived here (arrival times)'))
+        self.get_logger().warning(unstamped_message(self._topic(side),
+                                                    'they arrived here (arrival times)'))
 
     def _process(self):
         """Clean the buffered rows of all joints at once, pair and publish per joint."""
@@ -199,8 +203,7 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        unstamped = [self._motor_topic if side == 'motor' else self._link_topic
-                     for side, arrival in self._arrival.items() if arrival]
+        unstamped = [self._topic(side) for side, arrival in self._arrival.items() if arrival]
         return ingest_statuses(self.counts(), self.rejects, self.unheard, unstamped)
 
 
