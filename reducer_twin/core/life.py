@@ -72,11 +72,14 @@ class LifePrediction:
     fraction_censored : float
         Share of samples that do not reach the limit within the horizon.
     limit_reached : bool
-        The estimated wear is already at or past the limit (all times 0).
+        The estimated wear is already at or past the limit, and so is the observed
+        growth law where it has a weight (all times 0).
     event_state : float
-        1 for a new reducer, 0 at the limit (progpy ``event_state``).
+        1 for a new reducer, 0 at the limit (progpy ``event_state``), of the lost motion
+        ``threshold_met`` compares.
     threshold_met : bool
-        The estimated lost motion is at or above the limit.
+        The estimated lost motion (the wear model's mixed with the growth law's by its
+        weight, as the estimator gives it) is at or above the limit.
     horizon_s : float
         Horizon used [s].
     wear_limit : float
@@ -521,12 +524,13 @@ def remaining_lives(queries, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_
     means = np.array([x for x, _ in checked])
     wear_means, baselines = np.maximum(means[:, 0], 0.0), means[:, 2]
     w_lims = wear_at_lost_motion(limit, baselines, curve).tolist()
-    lms = unit_lost_motion(wear_means, baselines, curve)
+    lms, past = _standing(queries, p_trends, unit_lost_motion(wear_means, baselines, curve),
+                          wear_means >= np.array(w_lims), limit)
     states = _event_state(curve, lms, limit, baselines).tolist()
-    standing = zip(wear_means.tolist(), w_lims, lms.tolist(), states)
-    for i, (wear_mean, w_lim, lm, es) in enumerate(standing):
+    standing = zip(w_lims, lms.tolist(), states, past.tolist())
+    for i, (w_lim, lm, es, both_past) in enumerate(standing):
         met = bool(lm >= limit)
-        if wear_mean >= w_lim or met:
+        if both_past:
             zeros = np.zeros(n_samples) if keep_samples else None
             out[i] = LifePrediction(0.0, 0.0, 0.0, False, False, False, 0.0, 0.0, True, es, met,
                                     float(horizon_s), w_lim, n_samples, zeros)
@@ -555,6 +559,35 @@ def remaining_lives(queries, params, limit=LOST_MOTION_LIMIT, horizon_s=DEFAULT_
             horizon_s=float(horizon_s), wear_limit=w_lim, n_samples=n_samples,
             samples=capped[k] if keep_samples else None)
     return out
+
+
+def _standing(queries, p_trends, lms, wear_past, limit):
+    """
+    Return each estimate's lost motion now and whether it is past the limit by all it follows.
+
+    The wear model's ``h(w + b)`` at the mean, mixed with the growth law's ``β + k`` by
+    the law's probability, as the estimator gives the lost motion
+    (:meth:`.estimator.WearEstimator.lost_motion`); an estimate is past the limit when the
+    wear model's mean wear is, and the law (where it has a weight) stands there too. A
+    wear model past the limit beside a law that is not gives the law's share of samples
+    their own times: "worn out" beside a lost motion given below the limit (a base whose
+    first windows read its play at 3.0 arcmin, the law of its later ones 2.3) told a user
+    two things at once.
+
+    Returns
+    -------
+    tuple of ndarray
+        The lost motion [rad] and the flags, one each per query.
+
+    """
+    lms = np.array(lms, dtype=float)
+    past = np.array(wear_past, dtype=bool) | (lms >= limit)
+    for i, (query, p) in enumerate(zip(queries, p_trends)):
+        if p > 0.0:
+            law = float(query.trend.mean[0] + query.trend.mean[1])
+            lms[i] = p * law + (1.0 - p) * lms[i]
+            past[i] &= law >= limit
+    return lms, past
 
 
 def _check_query(query):

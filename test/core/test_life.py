@@ -102,6 +102,32 @@ def test_a_reducer_past_the_limit_has_zero_life_and_meets_the_threshold(params, 
     assert life.event_state == 0.0
 
 
+def test_a_wear_model_past_the_limit_beside_a_law_below_it_is_not_worn_out(params, rated_rate):
+    # The lost motion is given as the two models mixed (2.3 arcmin by the law, 3.08 by the
+    # wear model's 22 um, past the limit): the law's share of samples keeps its own times.
+    below = trend_state(0.5, 1.0, growth_arcmin=1.8, new_arcmin=0.5)
+    life = remaining_life(state(22e-6), rated_rate, params, trend=below, keep_samples=True)
+    assert not life.limit_reached and not life.threshold_met
+    assert life.p10 == 0.0 and life.p90 > 0.0
+    assert np.mean(life.samples == 0.0) == pytest.approx(0.5, abs=0.05)
+    assert 0.0 < life.event_state < 1.0
+
+
+def test_a_wear_model_and_a_law_both_past_the_limit_are_worn_out(params, rated_rate):
+    past = trend_state(0.5, 1.0, growth_arcmin=3.0, new_arcmin=0.5)
+    life = remaining_life(state(22e-6), rated_rate, params, trend=past)
+    assert life.limit_reached and life.threshold_met
+    assert life.p10 == life.p50 == life.p90 == 0.0
+
+
+def test_a_law_past_the_limit_meets_the_threshold_by_its_weight(params, rated_rate):
+    # 3.5 arcmin by the law, 1.40 by the wear model at 5 um: mixed 2.45, or 3.29.
+    past = trend_state(0.5, 1.0, growth_arcmin=3.0, new_arcmin=0.5)
+    assert not remaining_life(state(5e-6), rated_rate, params, trend=past).threshold_met
+    heavy = trend_state(0.9, 1.0, growth_arcmin=3.0, new_arcmin=0.5)
+    assert remaining_life(state(5e-6), rated_rate, params, trend=heavy).threshold_met
+
+
 def test_one_thousand_samples_are_drawn_and_kept_when_asked(params, rated_rate):
     # How long it takes is measured by bench/bench_life.py, never asserted here.
     x, P = state(5e-6, wear_sd=1e-6, log_scale_sd=0.3)

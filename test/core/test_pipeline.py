@@ -217,7 +217,8 @@ def test_without_a_lost_motion_the_level_is_stale_whatever_the_duty_alone_predic
 
 
 def test_a_reducer_beyond_the_limit_is_an_error_with_no_life_left(worn_record):
-    worn_out = {**worn_record, 'wear_m': 200e-6}
+    # Worn out by both models: the wear model's wear and the observed law's lost motion.
+    worn_out = {**worn_record, 'wear_m': 200e-6, 'trend_growth_rad': 4.0 * ARCMIN}
     record, level, message = LifeStage(PARAMS).process(worn_out)
     assert level == 'ERROR'
     assert record['p10_s'] == record['p50_s'] == record['p90_s'] == 0.0

@@ -179,7 +179,8 @@ def test_the_diagnostics_say_when_the_life_spans_rates_not_the_units_own(
 def test_a_worn_out_reducer_is_an_error_with_no_life_left(ros, estimate):
     wear_record, _ = estimate
     life = Life(ros)
-    rec = life.send({**wear_record, 'wear_m': 150e-6})
+    # Worn out by both models: the wear model's wear and the observed law's lost motion.
+    rec = life.send({**wear_record, 'wear_m': 150e-6, 'trend_growth_rad': 4.0 * ARCMIN})
     assert rec['p10_s'] == rec['p50_s'] == rec['p90_s'] == 0.0
     status = life.status(lambda s: s.level != DiagnosticStatus.STALE)
     assert status.level == DiagnosticStatus.ERROR
