@@ -10,7 +10,9 @@ Motor angles are raw or already divided by the ratio (``motor_angles``), counted
 link or against it (``motor_direction`` 1 or -1, a negative reduction); the torque
 comes from the link or the motor entry (``effort_source``, ``motor_effort_units``).
 Messages are taken as serialised bytes and read by
-:class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateReader`; the core's
+:class:`~reducer_twin.msg_adapters.jointstate_cdr.JointStateReader` (no JointState object
+is built per message); a publisher that does not stamp is read on arrival times
+(:class:`~reducer_twin.nodes.arrival.ArrivalStamps`); the core's
 :class:`~reducer_twin.core.robot_ingest.RobotIngest` cleans, pairs and despikes them,
 and each joint's clean samples are published on ``/reducer_twin/<joint>/encoder_pairs``
 (layout ``encoder_pairs``) in small batches (``batch_period_s``), with counts on
@@ -22,17 +24,17 @@ communication does; the topic is then published only while something subscribes.
 from rclpy.node import Node
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_UNITS
-from reducer_twin.core.ingest import retimed_message, unstamped_message
+from reducer_twin.core.ingest import retimed_message
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
-from reducer_twin.core.robot_ingest import check_effort_scale, check_motor_direction
 from reducer_twin.core.robot_ingest import check_streams, RobotIngest
 from reducer_twin.core.robot_ingest import STREAMS
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES
 from reducer_twin.msg_adapters.ros import JointStatePicker
+from reducer_twin.nodes.arrival import ArrivalStamps
 from reducer_twin.nodes.diagnostics import ingest_statuses, publish_diagnostics
 from reducer_twin.nodes.intra_process import SharedOutput
 from reducer_twin.nodes.parameters import check_choice, declare_plain, SpecParameters
@@ -77,18 +79,15 @@ class EncoderIngest(Node):
         self._raw = {'link': [], 'motor': []}
         self._raw_since = None
         self._retimed_said = False
-        self._link_topic, self._motor_topic = p['link_topic'], p['motor_topic']
-        self._arrival = {}    # side -> its topic's first message had no stamp: arrival times
+        self._topics = {'link': p['link_topic'], 'motor': p['motor_topic']}
+        self._stamps = ArrivalStamps(self, self._topics)
         qos = encoder_qos(p['reliable'])
         self.unheard = UnheardPublishers(self, p['reliable'])
-        # The controller streams are taken as their serialised bytes and read by a
-        # JointStateReader: no JointState object (names, arrays) is built per message.
         if self.split:
             self._link_pick = JointStatePicker(self.joints)
             self._motor_pick = JointStatePicker(self.joints)
             self._motor_reader = JointStateReader()
-            self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos,
-                                     raw=True,
+            self.create_subscription(JointState, p['motor_topic'], self._on_motor, qos, raw=True,
                                      event_callbacks=self.unheard.callbacks(p['motor_topic']))
         else:
             self._link_pick = JointStatePicker(
@@ -106,8 +105,6 @@ class EncoderIngest(Node):
             **STREAMS,
             'reliable': (True, 'RELIABLE (true) or BEST_EFFORT subscription')})
         check_choice('motor_angles', out['motor_angles'], ('raw', 'output'))
-        check_motor_direction(out['motor_direction'])
-        check_effort_scale(out['effort_scale'])
         check_choice('effort_source', out['effort_source'], EFFORT_SOURCES)
         check_choice('motor_effort_units', out['motor_effort_units'], MOTOR_EFFORT_UNITS)
         check_streams(out['joints'], out['link_topic'], out['motor_topic'], out['motor_suffix'])
@@ -126,28 +123,13 @@ class EncoderIngest(Node):
         except InvalidInput as err:
             self.rejects.reject('bad_joint_state', str(err))
             return
-        arrival = self._arrival.get(side)
-        if arrival is None:     # decided by the topic's first message
-            arrival = self._arrival[side] = t == 0
-            if arrival:
-                self._say_unstamped(side)
-        if arrival:
-            t = self.get_clock().now().nanoseconds
+        t = self._stamps.stamp(side, t)
         self._raw[side].append((t, pos, vel, eff))
         if self._raw_since is None:
             self._raw_since = t
         # With batch_period_s 0 the message goes on at once, not with the next one.
         if t - self._raw_since >= self.batch_ns - 1 or t < self._raw_since:
             self._process()
-
-    def _topic(self, side):
-        """Return the topic of ``side`` ('link' or 'motor')."""
-        return self._motor_topic if side == 'motor' else self._link_topic
-
-    def _say_unstamped(self, side):
-        """Say that a topic's publisher does not stamp: its arrival times are taken."""
-        self.get_logger().warning(unstamped_message(self._topic(side),
-                                                    'they arrived here (arrival times)'))
 
     def _process(self):
         """Clean the buffered rows of all joints at once, pair and publish per joint."""
@@ -158,7 +140,8 @@ class EncoderIngest(Node):
             self.outputs[self.joints[k]].emit(rows)
         if self.ingest.link.clock.active and not self._retimed_said:
             self._retimed_said = True
-            self.get_logger().warning(retimed_message(self._link_topic, self.ingest.link.clock))
+            self.get_logger().warning(retimed_message(self._topics['link'],
+                                                      self.ingest.link.clock))
 
     def attach(self, joint, sink):
         """
@@ -188,7 +171,7 @@ class EncoderIngest(Node):
     def _check_listeners(self):
         for out in self.outputs.values():
             out.check_listeners()
-        self.unheard.check_types({self._link_topic, self._motor_topic} - {''}, JOINT_STATE)
+        self.unheard.check_types(set(self._topics.values()) - {''}, JOINT_STATE)
 
     def _flush_stale(self):
         if self._raw_since is None:
@@ -203,8 +186,8 @@ class EncoderIngest(Node):
                 for k, (joint, out) in enumerate(self.outputs.items())}
 
     def _statuses(self):
-        unstamped = [self._topic(side) for side, arrival in self._arrival.items() if arrival]
-        return ingest_statuses(self.counts(), self.rejects, self.unheard, unstamped)
+        return ingest_statuses(self.counts(), self.rejects, self.unheard,
+                               self._stamps.unstamped_topics())
 
 
 def main(args=None):

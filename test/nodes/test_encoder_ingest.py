@@ -217,6 +217,18 @@ def test_an_unknown_effort_source_stops_the_node_naming_the_allowed_values(ros):
             Parameter('effort_source', value='elbow')])
 
 
+@pytest.mark.parametrize('name, value, reason', [
+    ('motor_direction', 2, r'motor_direction must be 1 \(the motor encoder counts with the '
+                           r'link\) or -1 \(against it\), got 2'),
+    ('effort_scale', 0.0, 'effort_scale must be a number of magnitude 1e-6 to'),
+])
+def test_a_bad_motor_direction_or_effort_scale_stops_the_node_naming_it(ros, name, value,
+                                                                         reason):
+    with pytest.raises(InvalidParameter, match=reason):
+        EncoderIngest('bad_stream', context=ros.context,
+                      parameter_overrides=[Parameter(name, value=value)])
+
+
 @pytest.mark.parametrize('motor_angles, motor_direction', [
     ('raw', 1), ('output', 1), ('raw', -1)], ids=['raw', 'output', 'raw, counting against'])
 def test_combined_joint_states_become_aligned_encoder_pairs(ros, motor_angles, motor_direction):
