@@ -222,8 +222,8 @@ def test_an_unknown_effort_source_stops_the_node_naming_the_allowed_values(ros):
                            r'link\) or -1 \(against it\), got 2'),
     ('effort_scale', 0.0, 'effort_scale must be a number of magnitude 1e-6 to'),
 ])
-def test_a_bad_motor_direction_or_effort_scale_stops_the_node_naming_it(ros, name, value,
-                                                                         reason):
+def test_a_bad_motor_direction_or_effort_scale_stops_the_node_naming_it(
+        ros, name, value, reason):
     with pytest.raises(InvalidParameter, match=reason):
         EncoderIngest('bad_stream', context=ros.context,
                       parameter_overrides=[Parameter(name, value=value)])
