@@ -78,8 +78,10 @@ class LifePrediction:
         1 for a new reducer, 0 at the limit (progpy ``event_state``), of the lost motion
         ``threshold_met`` compares.
     threshold_met : bool
-        The estimated lost motion (the wear model's mixed with the growth law's by its
-        weight, as the estimator gives it) is at or above the limit.
+        The estimated lost motion is at or above the limit: the wear model's at the mean
+        mixed with the growth law's by the law's weight in the remaining life (the
+        estimator's lost motion mixes them by the law's probability, which the weight
+        moves towards its prior where the law is extrapolated beyond its scored span).
     horizon_s : float
         Horizon used [s].
     wear_limit : float
