@@ -11,7 +11,9 @@ at 5-80 % of each unit's life. Nothing is configured: ``reducer-twin analyze BAG
 OUT --json`` is run as a user would run it on a recording it has never seen.
 
 Printed per generator: runs whose command failed (an exit status other than 0 or 3, a
-traceback, no JSON), joints observed and not observed (with their reasons' counts), and
+traceback, no JSON), joints observed and not observed (with their reasons' counts),
+answers that contradict themselves (:func:`contradictions`: e.g. no life left beside a
+lost motion clearly below the limit), and
 for the observed ones the lost motion's error against the generator's truth at the
 recording's end (median, p90 and max of the absolute relative error; the share within
 10 %) and where the true remaining life lies against the P10-P90 given (within, below,
@@ -91,8 +93,38 @@ def run_one(seed, work):
             'reason': got.get('reason'),
             # Where the true remaining life lies against P10-P90: -1 below, 0 in, +1 above.
             'life': None if p10 is None or p90 is None else
-            (-1 if life < p10 else 1 if life > p90 else 0)}
+            (-1 if life < p10 else 1 if life > p90 else 0),
+            'contradictions': contradictions(got, limit=LIMIT_ARCMIN)}
     return outcome
+
+
+LIMIT_ARCMIN = 3.0
+"""The twin's default lost-motion limit [arcmin] (``life.lost_motion_limit``)."""
+
+
+def contradictions(got, limit):
+    """
+    Return what one joint's ``--json`` answer says against itself (empty: nothing).
+
+    An observed joint without a lost motion or its standard deviation, a joint not
+    observed without a reason, percentiles out of order, no life left at all (P90 0) beside
+    a lost motion clearly below the limit, or life left (P10 above 0) beside one at or
+    past it. Judged on the answer alone, not on the truth.
+    """
+    keys = ('lost_motion_arcmin', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h')
+    lm, p10, p50, p90 = (got.get(k) for k in keys)
+    said = []
+    if got.get('observed') and (lm is None or not got.get('lost_motion_std_arcmin')):
+        said.append('observed without a lost motion and its sd')
+    if not got.get('observed') and not got.get('reason'):
+        said.append('not observed without a reason')
+    if None not in (p10, p50, p90) and not p10 <= p50 <= p90:
+        said.append(f'percentiles out of order ({p10:.0f} / {p50:.0f} / {p90:.0f} h)')
+    if lm is not None and p90 is not None and lm < 0.9 * limit and p90 == 0.0:
+        said.append(f'no life left at a lost motion of {lm:.2f} arcmin')
+    if lm is not None and p10 is not None and lm >= limit and p10 > 0.0:
+        said.append(f'P10 {p10:.0f} h at a lost motion of {lm:.2f} arcmin, past the limit')
+    return said
 
 
 def summary(outcomes, gen):
@@ -122,6 +154,11 @@ def summary(outcomes, gen):
                       f'max {100 * k.max():.0f} %')
     for reason, count in reasons.most_common():
         print(f'  not observed ({count}): {reason} ...')
+    odd = [(o['args'].split()[1], name, said) for o in runs if not o['failed']
+           for name, j in o['joints'].items() for said in j['contradictions']]
+    print(f'  answers that contradict themselves: {len(odd)}')
+    for seed, name, said in odd:
+        print(f'    seed {seed} {name}: {said}')
     for o in failed:
         print(f'  FAILED: {o["args"]} (exit {o["exit"]}): {o["stderr"]}')
 
