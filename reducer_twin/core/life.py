@@ -568,9 +568,11 @@ def _standing(queries, p_trends, lms, wear_past, limit):
     Return each estimate's lost motion now and whether it is past the limit by all it follows.
 
     The wear model's ``h(w + b)`` at the mean, mixed with the growth law's ``β + k`` by
-    the law's probability, as the estimator gives the lost motion
-    (:meth:`.estimator.WearEstimator.lost_motion`); an estimate is past the limit when the
-    wear model's mean wear is, and the law (where it has a weight) stands there too. A
+    the law's weight in the remaining life (``p_trends``; the estimator's lost motion,
+    :meth:`.estimator.WearEstimator.lost_motion`, mixes them by its probability); an
+    estimate is past the limit when the wear model's mean wear is (``wear_past``; its
+    ``h(w + b)`` is then at the limit too), and the law (where it has a weight) stands
+    there too. A
     wear model past the limit beside a law that is not gives the law's share of samples
     their own times: "worn out" beside a lost motion given below the limit (a base whose
     first windows read its play at 3.0 arcmin, the law of its later ones 2.3) told a user
@@ -583,7 +585,7 @@ def _standing(queries, p_trends, lms, wear_past, limit):
 
     """
     lms = np.array(lms, dtype=float)
-    past = np.array(wear_past, dtype=bool) | (lms >= limit)
+    past = np.array(wear_past, dtype=bool)
     for i, (query, p) in enumerate(zip(queries, p_trends)):
         if p > 0.0:
             law = float(query.trend.mean[0] + query.trend.mean[1])
