@@ -85,7 +85,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import independent_generator as indep  # noqa: E402
 import numpy as np  # noqa: E402
-from reducer_twin.core.estimator import EstimatorConfig, lost_motion_curve  # noqa: E402
+from reducer_twin.core.estimator import EstimatorConfig  # noqa: E402
 from reducer_twin.core.joint_twin import TwinConfig, TwinFront  # noqa: E402
 from reducer_twin.core.life import remaining_life  # noqa: E402
 from reducer_twin.core.metrics import alpha_lambda  # noqa: E402
@@ -93,6 +93,7 @@ from reducer_twin.core.params import ReducerParams  # noqa: E402
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record  # noqa: E402
 from reducer_twin.core.pipeline import LifeStage, state_from_record  # noqa: E402
 from reducer_twin.core.simulator import JointSimulator, SimConfig  # noqa: E402
+from reducer_twin.core.state_space import lost_motion_curve  # noqa: E402
 from reducer_twin.core.transmission_error import model_tables  # noqa: E402
 from reducer_twin.core.units import ARCMIN, HOUR, UM  # noqa: E402
 from reducer_twin.msg_adapters.layouts import TE_FEATURES  # noqa: E402

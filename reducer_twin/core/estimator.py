@@ -69,29 +69,8 @@ more often on real data) a poor fit. Such a window is counted as censored and
 not used; a tight unit is learnt once its lost motion has grown past the
 bound.
 
-Why a Gaussian sum: the rate is known from the physics within a factor of a
-few at best, and a reducer can wear 10 000 times faster than the model says
-(lubrication lost, contamination, or simply a time-compressed recording read
-as real time). One unscented filter cannot move ``θ`` that far (its sigma
-points through ``exp(θ)`` blow the wear up), so the prior on ``θ`` is a
-sum of Gaussian components (Alspach & Sorenson 1972), 0.5 apart over
-``ln s0 - 6 .. ln s0 + 14`` with sd 0.3 each and weights from the prior
-``N(ln s0, σ_θ²)`` (default sd 2: the Janakiraman coefficient moves 1 % for a
-0.14 % change of the pressure-viscosity coefficient, physics notes section
-2). Each component is an unscented filter on the full state (Julier &
-Uhlmann 1997; scaled points of Wan & van der Merwe 2000,
-``α = 1, β = 2, κ = 0``: all mean weights positive, points at ±2σ, the
-weights of :func:`~.sigma_points.merwe_weights`, filterpy's numbers) whose weight follows its
-predictive likelihood. Components whose weight falls below ``exp(-23)`` of
-the best are dropped and components whose means come within a third of a
-standard deviation are merged (moment matching), so a few filters run once
-the rate is known. The numerics of the sum (points, moments, the update,
-pruning and merging) are :mod:`.gaussian_sum`'s.
-The estimate is the moment-matched mixture.
-
-A wide prior (a reducer of unknown history) makes the first update strongly
-nonlinear: the update is iterated by posterior linearisation
-(García-Fernández et al. 2015) while the prior sd of ``w + b`` exceeds 1 µm.
+The state is a Gaussian sum of unscented filters (:mod:`.wear_mixture`: why a
+sum, its prior over ``θ``, pruning and merging, the iterated first update).
 
 Persistent disagreement is never gated out (:mod:`.recovery`): a drift
 within the gate releases the rate, a jump or outliers in a row spread the
@@ -137,7 +116,7 @@ motion (:meth:`WearEstimator.lost_motion`); the wear is the wear model's.
 
 Only the curvature of ``h`` over the wear the windows span tells ``c`` from
 ``b``: for a window across which the lost motion grows by less than
-:data:`BIAS_SEPARATION` of its sd, ``c`` is a consider state (Schmidt 1966:
+:data:`.wear_mixture.BIAS_SEPARATION` of its sd, ``c`` is a consider state (Schmidt 1966:
 its mean and variance stay, its covariances are updated), so a long
 recording at one wear cannot walk the pair along their ridge.
 
@@ -157,7 +136,6 @@ simulator's rate is constant): coverage 87-89 %.
 """
 
 from dataclasses import dataclass, replace
-from functools import lru_cache
 import hashlib
 import json
 import math
@@ -166,16 +144,14 @@ import numpy as np
 
 from .duty_rate import DUTY_BATCH_WINDOWS, DutyRate
 from .errors import InvalidInput
-from .gaussian_sum import logsumexp as _logsumexp
-from .gaussian_sum import mixture_moments, tidy, UnscentedTransform
 from .noise_scale import NoiseScale
 from .params import _Validated, spec
-from .recovery import Disagreement, release_rate, respread
-from .service_time import implied_rate_scale, SERVICE_RATE_LIMIT, service_update
-from .transmission_error import model_tables
+from .recovery import Disagreement
+from .service_time import implied_rate_scale, SERVICE_RATE_LIMIT
+from .state_space import run_in_free_wear
 from .trend_score import TrendScore
 from .units import ARCMIN, HOUR, UM
-from .wear import _run_in_map, run_in_factor
+from .wear_mixture import WearMixture
 
 STATE_KIND = 'reducer_twin.wear_estimator'
 """Value of ``kind`` in a state dict."""
@@ -185,31 +161,6 @@ STATE_VERSION = 2
 
 N_STATE = 3
 """Dimension of the reducer's state ``[w, ln s, b]``."""
-
-N_FILTER = 4
-"""Dimension of the filter's state: the reducer's and the window fit's bias ``c``."""
-
-SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA = 1.0, 2.0, 0.0
-"""Scaled sigma-point parameters (Wan & van der Merwe 2000) for ``n = 4``."""
-
-RATE_GRID = (-6.0, 14.0, 0.5, 0.3)
-"""Components of the prior on ``θ``: from, to (relative to ln s0), spacing and sd."""
-
-
-PRIOR_REACH = 4.0
-"""Sds of their priors beyond which the as-built offset and the fit's bias are not taken."""
-
-BIAS_SEPARATION = 0.01
-"""Lost-motion growth across a window, in the window's sd, below which ``c`` is not updated."""
-
-INTERP_SEARCH_BELOW = 1000
-"""
-Values below which the run-in map is read by np.interp's binary search, not by division.
-
-The division takes a few more passes over the values and wins only where the 15 steps
-of a search over the map's 20 001 points cost more than those (measured: 150 values
-6.6 against 8.6 µs, 2000 values 28 against 17 µs).
-"""
 
 
 @dataclass(frozen=True)
@@ -317,215 +268,6 @@ class UpdateResult:
     nis: float = math.nan
 
 
-# --------------------------------------------------------------------------- model
-
-
-def run_in_free_wear(wear, wear_params):
-    """
-    Map wear to run-in-free wear, ``S(w) = ∫0^w dw'/g(w')`` [m].
-
-    ``g = (Rrms(w)/Rrms0)^1.589`` (:mod:`.wear`, eq 7); tabulated by
-    :func:`.wear._run_in_map`, extended with slope 1 below zero and with the
-    last slope beyond the table.
-
-    Parameters
-    ----------
-    wear : array_like
-        Combined wear w [m].
-    wear_params : Wear
-        Wear parameters.
-
-    Returns
-    -------
-    ndarray
-        S(w) [m], strictly increasing.
-
-    """
-    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
-    w = np.asarray(wear, dtype=float)
-    if w.size < INTERP_SEARCH_BELOW:
-        s = np.interp(w, grid_w, grid_s)
-    else:
-        # np.interp on the table's uniform grid, the interval found by division instead of
-        # a binary search over its 20 001 points (NaN stays NaN).
-        intervals = grid_w.size - 1
-        u = w * (intervals / grid_w[-1])
-        i = np.fmin(np.fmax(u, 0.0), float(intervals - 1)).astype(np.intp)
-        s = grid_s[i] + (u - i) * _run_in_free_steps(wear_params)[i]
-    s = np.where(w < 0.0, w, s)
-    return np.where(w > grid_w[-1], grid_s[-1] + (w - grid_w[-1]) / g_end, s)
-
-
-def wear_from_run_in_free(free_wear, wear_params):
-    """
-    Invert :func:`run_in_free_wear`: ``W(S) = w`` [m].
-
-    Parameters
-    ----------
-    free_wear : array_like
-        Run-in-free wear S [m].
-    wear_params : Wear
-        Wear parameters.
-
-    Returns
-    -------
-    ndarray
-        Combined wear w [m].
-
-    """
-    grid_w, grid_s, g_end = _run_in_free_map(wear_params)
-    s = np.asarray(free_wear, dtype=float)
-    w = np.interp(s, grid_s, grid_w)
-    w = np.where(s < 0.0, s, w)
-    return np.where(s > grid_s[-1], grid_w[-1] + (s - grid_s[-1]) * g_end, w)
-
-
-@lru_cache(maxsize=16)
-def _run_in_free_steps(wear_params):
-    """Return the run-in-free wear's step per interval of the map's uniform wear grid [m]."""
-    return np.diff(_run_in_free_map(wear_params)[1])
-
-
-@lru_cache(maxsize=16)
-def _run_in_free_map(wear_params):
-    """
-    Return the run-in map's grids ``(w, S)`` [m] and the settled rate factor beyond them.
-
-    ``g_end = g(w_max)``, the rate factor where the table ends (the slope of ``W(S)``
-    beyond it), with the grids of :func:`.wear._run_in_map`.
-    """
-    grid_w, grid_s = _run_in_map(wear_params)
-    g_end = float(run_in_factor(grid_w[-1], wear_params)) ** wear_params.roughness_exponent
-    return grid_w, grid_s, g_end
-
-
-class LostMotionCurve:
-    """
-    Lost motion at the catalogue test torque as a function of wear, ``h(w)``.
-
-    The nodes of ``model_tables(params)`` (bilinear in the table, hence
-    piecewise linear in ``w`` at fixed torque), evaluated with ``np.interp``
-    and extended linearly beyond both ends so that sigma points outside the
-    table still see a monotone model.
-
-    Parameters
-    ----------
-    params : ReducerParams
-        Reducer parameters.
-
-    """
-
-    def __init__(self, params):
-        tables = model_tables(params)
-        self.wear = np.array(tables.wear, dtype=float)
-        self.lost_motion = np.asarray(tables.lost_motion(self.wear), dtype=float)
-        dw_new = self.wear[1] - self.wear[0]
-        dw_end = self.wear[-1] - self.wear[-2]
-        self.slope_new = (self.lost_motion[1] - self.lost_motion[0]) / dw_new
-        self.slope_end = (self.lost_motion[-1] - self.lost_motion[-2]) / dw_end
-
-    def __call__(self, wear):
-        """
-        Evaluate the lost motion [rad].
-
-        Parameters
-        ----------
-        wear : array_like
-            Combined wear [m].
-
-        Returns
-        -------
-        ndarray
-            Lost motion [rad].
-
-        """
-        w = np.asarray(wear, dtype=float)
-        lm = np.interp(w, self.wear, self.lost_motion)
-        return (lm + self.slope_new * np.minimum(w - self.wear[0], 0.0)
-                + self.slope_end * np.maximum(w - self.wear[-1], 0.0))
-
-    def inverse(self, lost_motion):
-        """
-        Return the wear whose lost motion is given, ``h⁻¹`` [m] (extended like ``h``).
-
-        Parameters
-        ----------
-        lost_motion : array_like
-            Lost motion [rad].
-
-        Returns
-        -------
-        ndarray
-            Wear [m].
-
-        """
-        lm = np.asarray(lost_motion, dtype=float)
-        w = np.interp(lm, self.lost_motion, self.wear)
-        w = w + np.minimum(lm - self.lost_motion[0], 0.0) / self.slope_new
-        return w + np.maximum(lm - self.lost_motion[-1], 0.0) / self.slope_end
-
-
-@lru_cache(maxsize=16)
-def lost_motion_curve(params):
-    """
-    Return the cached :class:`LostMotionCurve` of a parameter set.
-
-    Parameters
-    ----------
-    params : ReducerParams
-        Reducer parameters.
-
-    Returns
-    -------
-    LostMotionCurve
-        Observation model ``h(w)``.
-
-    """
-    return LostMotionCurve(params)
-
-
-def unit_lost_motion(wear, baseline, curve):
-    """
-    Lost motion of a unit at wear ``w`` [rad]: ``h(w + b)``.
-
-    Parameters
-    ----------
-    wear, baseline : array_like
-        ``w`` [m] and the as-built offset ``b`` [m] (broadcast together).
-    curve : LostMotionCurve
-        ``h``.
-
-    Returns
-    -------
-    ndarray
-        Lost motion [rad].
-
-    """
-    return curve(np.asarray(wear) + baseline)
-
-
-def wear_at_lost_motion(lost_motion, baseline, curve):
-    """
-    Wear at which a unit's lost motion reaches ``lost_motion`` [m]: ``h⁻¹(z) - b``.
-
-    Parameters
-    ----------
-    lost_motion : array_like
-        Lost motion [rad].
-    baseline : array_like
-        The as-built offset ``b`` [m].
-    curve : LostMotionCurve
-        ``h``.
-
-    Returns
-    -------
-    ndarray
-        Wear ``w`` [m].
-
-    """
-    return curve.inverse(lost_motion) - baseline
-
-
 def params_fingerprint(params):
     """
     Hash the reducer parameters so a state file of another reducer is detected.
@@ -543,46 +285,6 @@ def params_fingerprint(params):
     """
     text = json.dumps(params.to_dict(), sort_keys=True, separators=(',', ':'))
     return hashlib.sha256(text.encode('utf-8')).hexdigest()
-
-
-def prior_components(config, new_unit_probability=None):
-    """
-    Return the Gaussian-sum prior: log weights, means and covariances.
-
-    Parameters
-    ----------
-    config : EstimatorConfig
-        Estimator tuning.
-    new_unit_probability : float, optional
-        Overrides ``config.new_unit_probability`` (1 after a reducer is replaced).
-
-    Returns
-    -------
-    tuple of ndarray
-        ``(log_weights (C,), means (C, 4), covariances (C, 4, 4))`` over
-        ``[w, ln s, b, c]``, weights normalised.
-
-    """
-    p_new = config.new_unit_probability if new_unit_probability is None else new_unit_probability
-    lo, hi, step, sd = RATE_GRID
-    theta0, sd0 = math.log(config.initial_rate_scale), config.initial_log_rate_scale_std
-    if sd0 <= sd:
-        thetas, comp_sd = np.array([theta0]), sd0
-    else:
-        thetas, comp_sd = theta0 + np.arange(lo, hi + 0.5 * step, step), sd
-    log_prior = -0.5 * ((thetas - theta0) / sd0) ** 2
-    hypotheses = [(p, w, s) for p, w, s in (
-        (p_new, config.initial_wear, config.initial_wear_std),
-        (1.0 - p_new, config.used_wear, config.used_wear_std)) if p > 0.0]
-    lw, means, covs = [], [], []
-    for p, wear, wear_sd in hypotheses:
-        for theta, lp in zip(thetas, log_prior):
-            lw.append(math.log(p) + lp)
-            means.append([wear, theta, 0.0, 0.0])
-            covs.append(np.diag([wear_sd ** 2, comp_sd ** 2, config.as_built_std ** 2,
-                                 config.fit_bias_std ** 2]))
-    lw = np.array(lw)
-    return lw - _logsumexp(lw), np.array(means), np.array(covs)
 
 
 def lognormal_sd(mu, var):
@@ -619,7 +321,12 @@ def _finite(value):
 
 class WearEstimator:
     """
-    Gaussian sum of unscented filters on ``x = [w, ln s, b, ln κ]`` (see the module).
+    The wear estimator: a :class:`.wear_mixture.WearMixture` and what judges its windows.
+
+    The mixture (a Gaussian sum of unscented filters on ``x = [w, ln s, b, c]``) is
+    predicted over each window's duty and corrected by its lost motion; around it, the
+    noise scale, the growth law and its score, the tests of disagreement, the service
+    time, the counters and the maintenance events (see the module).
 
     Parameters
     ----------
@@ -633,14 +340,11 @@ class WearEstimator:
     def __init__(self, params, config=None):
         self.params = params
         self.config = config or EstimatorConfig()
-        self._h = lost_motion_curve(params)
-        # The scaled sigma points (filterpy's MerweScaledSigmaPoints' weights, same numbers).
-        self._ut = UnscentedTransform(N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA)
         # A reducer with a known service time is used (however little): its wear is
         # told by its service time and rate once the duty is known (:meth:`_serviced`).
         serviced = self.config.service_time_s > 0.0
         p_new = 0.0 if serviced else self.config.new_unit_probability
-        self._lw, self._m, self._P = prior_components(self.config, p_new)
+        self._mix = WearMixture(params, self.config, p_new)
         self._scoring = TrendScore(p_new)
         self._service_pending = serviced
         self._service_verdict = None
@@ -657,21 +361,6 @@ class WearEstimator:
         self._counters = {'predictions': 0, 'updates': 0, 'rejected': 0, 'skipped': 0,
                           'censored': 0, 'recoveries': 0, 'consecutive_rejected': 0}
         self._events = []
-        self._refresh()
-
-    # model functions -------------------------------------------------------------------
-
-    def _fx(self, X, increment):
-        """Propagate sigma points: ``w' = W(S(w) + e^θ·Δa)``, the rest unchanged."""
-        wp = self.params.wear
-        out = X.copy()
-        free = run_in_free_wear(X[..., 0], wp) + np.exp(X[..., 1]) * increment
-        out[..., 0] = wear_from_run_in_free(free, wp)
-        return out
-
-    def _hx(self, X):
-        """Observe sigma points: the unit's lost motion plus the window fit's bias."""
-        return unit_lost_motion(X[..., 0], X[..., 2], self._h) + X[..., 3]
 
     # filter steps ----------------------------------------------------------------------
 
@@ -697,7 +386,7 @@ class WearEstimator:
         """
         exposure = self._duty_value(duty, 'exposure_s', 's')
         increment = self._duty_value(duty, 'archard_increment', 'm')
-        self._predict(exposure * fraction, increment * fraction)
+        self._mix.predict(exposure * fraction, increment * fraction)
         self._count_duty(exposure, increment)
 
     def _count_duty(self, exposure, increment):
@@ -707,18 +396,6 @@ class WearEstimator:
         self._archard += increment
         self._scoring.law.advance(self._archard)
         self._duty.add(exposure, increment)
-
-    def _predict(self, exposure, increment):
-        if exposure == 0.0 and increment == 0.0:
-            return
-        X = self._fx(self._ut.points(self._m, self._P), increment)
-        m, P = self._ut.moments(X)
-        c = self.config
-        P[:, 0, 0] += c.wear_noise_density * exposure
-        P[:, 1, 1] += c.log_rate_scale_noise_density * exposure
-        self._m, self._P = m, 0.5 * (P + np.swapaxes(P, 1, 2))
-        self._project()
-        self._refresh()
 
     @staticmethod
     def _duty_value(duty, name, unit):
@@ -812,80 +489,24 @@ class WearEstimator:
         self._service_verdict = (taken, implied)
         if not taken:
             return
-        sd = math.hypot(c.service_rate_log_std, self._duty.rel_std)
-        self._lw, self._m, self._P = service_update(
-            self._ut, self._lw, self._m, self._P, lambda w: run_in_free_wear(w, wp), past,
-            total, sd)
-        self._project()
-        self._tidy()
+        self._mix.serviced(past, total, math.hypot(c.service_rate_log_std, self._duty.rel_std))
+        self._mix.tidy()
         # The growth law counts from new too (its exponent prior the physics', as for a
         # unit the twin saw new), and both models are compared again from here on.
         self._scoring = TrendScore(1.0, origin=past)
         self._scoring.law.advance(self._archard)
         self._scoring.restart()
 
-    def _smear(self):
-        """
-        Variance each component's wear growth within the window adds to its lost motion [rad²].
-
-        A window's fit mixes samples from the start to the end of its exposure:
-        with the lost motion growing by ``ΔLM`` over the window (the component's
-        rate and slope times the window's Archard increment), the spread of a
-        uniform growth, ``ΔLM²/12``. Negligible for a real-time window, a large
-        share of the noise for a time-compressed one.
-        """
-        increment = self._window_increment
-        if not increment:
-            return np.zeros(self._lw.size)
-        m = self._m
-        step = 0.05 * UM
-        u = m[:, 0] + m[:, 2]
-        slope = (self._h(u + step) - self._h(u - step)) / (2 * step)
-        wp = self.params.wear
-        g = run_in_factor(np.maximum(m[:, 0], 0.0), wp) ** wp.roughness_exponent
-        growth = slope * g * np.exp(m[:, 1]) * increment
-        return growth * growth / 12.0
-
     def _update(self, z, sigma2):
         c = self.config
         nu = c.robust_dof
-        smear = self._smear()
         rho, known = self._noise.fit()
-        R = rho * sigma2 + smear
-        m0, P0 = self._m, self._P
-        X = self._ut.points(m0, P0)
-        zc, szz, cxz = self._ut.observed(self._hx(X), X - self._ut.mean(X)[:, None, :])
-        S = szz + R
-        d2 = (z - zc) ** 2 / S
-        w = np.exp(self._lw - self._lw.max())
-        w /= w.sum()
-        z_mix = float(w @ zc)
-        v_mix = float(w @ (szz + smear + (zc - z_mix) ** 2))
+        told = self._mix.update(z, rho, sigma2, self._window_increment)
+        y, v_mix, nis, spread = told.y, told.variance, told.nis, told.spread
         R = rho * sigma2
-        y = z - z_mix
-        nis = y * y / (v_mix + R)
-        loglik = -0.5 * np.log(S) - 0.5 * (nu + 1.0) * np.log1p(d2 / nu)
-        R_eff = (R + smear) * np.maximum(1.0, (nu + d2) / (nu + 1.0))
-        # A window across which the lost motion does not grow adds nothing that tells the
-        # fit's bias from the as-built offset: the bias is a consider state for it (Schmidt
-        # 1966: its mean and variance stay, its covariances are updated). ``c`` and ``b``
-        # are seen only as h(w + b) + c; the unscented update, whose slope changes as ``b``
-        # moves, lent the pair a spurious separate identity, and a long recording at one
-        # wear walked them along their ridge (measured: ``c`` from 0 to 4 prior sd and the
-        # lost motion 30 % low under steady windows).
-        consider = 12.0 * smear < (BIAS_SEPARATION ** 2) * sigma2
         # The growth law sees the window as the wear model does: its noise, the Student-t
         # weight and the lost motion's growth within the window (the components' smear).
-        spread = float(w @ smear)
         self._score_trend(z, R + spread, R * max(1.0, (nu + nis) / (nu + 1.0)) + spread, rho)
-        # A component whose w + b spans over 1 µm (where h bends across it) is relinearised
-        # about its posterior.
-        wide = (P0[:, 0, 0] + P0[:, 2, 2] + 2.0 * P0[:, 0, 2]) > UM ** 2
-        self._m, self._P = self._ut.posterior(m0, P0, z, R_eff, zc, szz, cxz, self._hx, wide,
-                                              (consider, 3))
-        self._lw = self._lw + loglik
-        self._lw -= _logsumexp(self._lw)
-        self._project()
         self._noise.add(y, v_mix, sigma2)
         self._counters['updates'] += 1
         # The tests of disagreement take the innovation as the normal score it has while
@@ -900,11 +521,11 @@ class WearEstimator:
         action = self._disagreement.judge(e, outlier, self._counters['consecutive_rejected'],
                                           c.max_consecutive_rejections)
         if action == 'release':
-            release_rate(self._P)
+            self._mix.release_rate()
             self._recovered()
         elif action == 'respread':
             self._respread(y, v_mix + R)
-        self._tidy()
+        self._mix.tidy()
         if action is not None:
             return UpdateResult('recovered', y, nis)
         return UpdateResult('rejected' if outlier else 'accepted', y, nis)
@@ -931,7 +552,7 @@ class WearEstimator:
         components by the time windows are scored; one Gaussian keeps the state
         small); :meth:`.trend_score.TrendScore.after_window` adds where the growth law is.
         """
-        x, P = self._estimate()
+        x, P = self._mix.estimate()
         return {'archard': self._archard, 'exposure_s': self._exposure_s,
                 'lw': np.zeros(1), 'm': x[None, :].copy(), 'P': P[None, :, :].copy()}
 
@@ -948,17 +569,10 @@ class WearEstimator:
             The mean [rad] and the variance without the window's noise [rad²].
 
         """
-        c = self.config
         at = self._archard if self._observed_at is None else self._observed_at
         now = self._exposure_s if self._observed_exposure is None else self._observed_exposure
-        X = self._fx(self._ut.points(snap['m'], snap['P']), at - snap['archard'])
-        m, P = self._ut.moments(X)
-        elapsed = now - snap['exposure_s']
-        P[:, 0, 0] += c.wear_noise_density * elapsed
-        P[:, 1, 1] += c.log_rate_scale_noise_density * elapsed
-        P = 0.5 * (P + np.swapaxes(P, 1, 2))
-        zc, szz = self._ut.observed(self._hx(self._ut.points(m, P)))
-        return float(zc[0]), float(szz[0])
+        return self._mix.predictive(snap['m'][0], snap['P'][0], at - snap['archard'],
+                                    now - snap['exposure_s'])
 
     def _respread(self, y, s_mix):
         """
@@ -974,15 +588,7 @@ class WearEstimator:
         # 12-31 um on a unit at 0.5 after a respread on two noisy windows: the growth law
         # won the score by 13 nats on them, and the remaining life came out 40 % short).
         self._scoring.restart()
-        m, P = mixture_moments(self._lw, self._m, self._P)
-        lo, hi, step, sd = RATE_GRID
-        theta0 = math.log(self.config.initial_rate_scale)
-        thetas = theta0 + np.arange(lo, hi + 0.5 * step, step)
-        step_w = 0.05 * UM
-        slope = abs(float(self._h(m[0] + m[2] + step_w) - self._h(m[0] + m[2] - step_w))) / (
-            2 * step_w)
-        self._lw, self._m, self._P = respread(
-            m, P, thetas, sd, max(y * y - s_mix, 0.0) / max(slope, 1e-6) ** 2)
+        self._mix.respread(y, s_mix)
         self._recovered()
 
     def _recovered(self):
@@ -991,45 +597,13 @@ class WearEstimator:
         self._counters['recoveries'] += 1
         self._counters['consecutive_rejected'] = 0
 
-    def _project(self):
-        """
-        Project each component's mean onto the physical ranges (Simon & Chia 2002).
-
-        ``w >= 0``; the as-built offset ``b`` and the fit's bias ``c`` within
-        :data:`PRIOR_REACH` of their priors' sd. Without the bounds a
-        component of the new-unit hypothesis could explain a worn unit by an
-        as-built offset of 11 µm and a bias of 0.27 arcmin (11 and 5 sd): its
-        Student-t weights keep it alive, and the mixture swung to it.
-        """
-        c = self.config
-        np.maximum(self._m[:, 0], 0.0, out=self._m[:, 0])
-        reach_b = PRIOR_REACH * c.as_built_std
-        reach_c = PRIOR_REACH * c.fit_bias_std
-        np.clip(self._m[:, 2], -reach_b, reach_b, out=self._m[:, 2])
-        np.clip(self._m[:, 3], -reach_c, reach_c, out=self._m[:, 3])
-
-    def _tidy(self):
-        """Drop negligible components, merge converged ones (:func:`.gaussian_sum.tidy`)."""
-        self._lw, self._m, self._P = tidy(self._lw, self._m, self._P, order_by=1)
-        self._refresh()
-
-    def _refresh(self):
-        """Mark the moment-matched estimate (the read-only views) stale after a change."""
-        self._mixture = None
-
     @property
     def _x(self):
-        return self._estimate()[0]
+        return self._mix.estimate()[0]
 
     @property
     def _Px(self):
-        return self._estimate()[1]
-
-    def _estimate(self):
-        """Return the moment-matched ``(x, P)``, computed when first read after a change."""
-        if self._mixture is None:
-            self._mixture = mixture_moments(self._lw, self._m, self._P)
-        return self._mixture
+        return self._mix.estimate()[1]
 
     def step(self, features):
         """
@@ -1052,10 +626,10 @@ class WearEstimator:
         increment = self._duty_value(duty, 'archard_increment', 'm')
         if not _finite(getattr(features, 'lost_motion', math.nan)):
             # Nothing to apply at the middle (no reversal in the window): one step.
-            self._predict(exposure, increment)
+            self._mix.predict(exposure, increment)
             result = self.update(features)
         else:
-            self._predict(0.5 * exposure, 0.5 * increment)
+            self._mix.predict(0.5 * exposure, 0.5 * increment)
             self._observed_at = self._archard + 0.5 * increment
             self._observed_exposure = self._exposure_s + 0.5 * exposure
             self._window_increment = increment
@@ -1064,7 +638,7 @@ class WearEstimator:
             finally:
                 self._observed_at = self._observed_exposure = None
                 self._window_increment = 0.0
-            self._predict(0.5 * exposure, 0.5 * increment)
+            self._mix.predict(0.5 * exposure, 0.5 * increment)
         self._count_duty(exposure, increment)
         self._scoring.after_window(_finite(getattr(features, 'lost_motion', math.nan)),
                                    self._snapshot)
@@ -1092,7 +666,7 @@ class WearEstimator:
         """
         if not isinstance(reason, str) or not reason.strip():
             raise InvalidInput(f'reset reason must be a non-empty string, got {reason!r}')
-        self._lw, self._m, self._P = prior_components(self.config, new_unit_probability=1.0)
+        self._mix = WearMixture(self.params, self.config, 1.0)
         self._scoring = TrendScore(1.0)
         self._service_pending = False
         self._service_verdict = None
@@ -1102,7 +676,6 @@ class WearEstimator:
         self._exposure_since_reset_s = 0.0
         self._counters['consecutive_rejected'] = 0
         self._events.append({'exposure_s': self._exposure_s, 'reason': reason})
-        self._refresh()
 
     # read-only views ------------------------------------------------------------------
 
@@ -1172,7 +745,7 @@ class WearEstimator:
     @property
     def components(self):
         """Return the number of Gaussian components now."""
-        return int(self._lw.size)
+        return self._mix.size
 
     @property
     def wear(self):
@@ -1202,7 +775,7 @@ class WearEstimator:
     @property
     def lost_motion_new(self):
         """Estimated lost motion of this unit when new, ``h(b)`` [rad]."""
-        return float(self._h(self._x[2]))
+        return float(self._mix.h(self._x[2]))
 
     def lost_motion(self, trend=None):
         """
@@ -1223,13 +796,7 @@ class WearEstimator:
             Mean and standard deviation.
 
         """
-        X = self._ut.points(self._m, self._P)
-        true = unit_lost_motion(X[..., 0], X[..., 2], self._h)
-        zc, szz = self._ut.observed(true)
-        w = np.exp(self._lw - self._lw.max())
-        w /= w.sum()
-        mean = float(w @ zc)
-        var = max(float(w @ (szz + (zc - mean) ** 2)), 0.0)
+        mean, var = self._mix.lost_motion()
         p = self.trend_probability
         if p > 0.0:
             m, cov = self.growth_trend()[1:3] if trend is None else trend[1:3]

@@ -16,12 +16,12 @@ import numpy as np
 
 from .errors import StateFileError
 from .estimator import (
-    EstimatorConfig, N_FILTER, params_fingerprint, STATE_KIND,
-    STATE_VERSION, WearEstimator)
+    EstimatorConfig, params_fingerprint, STATE_KIND, STATE_VERSION, WearEstimator)
 from .growth import GrowthTrend, window_terms
 from .noise_scale import NoiseScale
 from .recovery import Disagreement
 from .trend_score import SCORE_AFTER, SCORE_LAG
+from .wear_mixture import N_FILTER
 
 
 def _components_state(lw, m, P):
@@ -80,7 +80,7 @@ def estimator_state(est):
         'config': asdict(est.config),
         'x': [float(v) for v in est.x],
         'P': [[float(v) for v in row] for row in est.P],
-        'components': _components_state(est._lw, est._m, est._P),
+        'components': _components_state(est._mix.lw, est._mix.m, est._mix.P),
         'noise': est._noise.state(),
         'growth': est._scoring.law.state(),
         'lagged': [_snapshot_state(snap) for snap in est._scoring.lagged],
@@ -203,7 +203,7 @@ def restore_estimator(params, d, config=None):
         t_end = None if d['t_end'] is None else float(d['t_end'])
     except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
         raise StateFileError(f'state is malformed: {type(err).__name__}: {err}') from err
-    est._lw, est._m, est._P = lw, m, P
+    est._mix.assign(lw, m, P)
     scoring = est._scoring
     scoring.law, est._archard = growth, archard
     scoring.lagged, scoring.recent = lagged, recent
@@ -222,7 +222,6 @@ def restore_estimator(params, d, config=None):
     est._t_end = t_end
     est._counters = counters
     est._events = events
-    est._refresh()
     return est
 
 

@@ -42,9 +42,10 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import InvalidInput, InvalidParameter, out_of_range
-from .estimator import lost_motion_curve, N_STATE, run_in_free_wear, unit_lost_motion
-from .estimator import wear_at_lost_motion
+from .estimator import N_STATE
 from .growth import EXPONENTS
+from .state_space import lost_motion_curve, run_in_free_wear, unit_lost_motion
+from .state_space import wear_at_lost_motion
 from .transmission_error import model_tables
 from .units import ARCMIN, HOUR
 

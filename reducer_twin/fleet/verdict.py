@@ -80,7 +80,7 @@ def overdue_life(state, params, limit_rad, n_samples=2000):
         P10, P50, P90 [s]; NaN when the duty rate is unknown (no operation yet).
 
     """
-    from reducer_twin.core.estimator import run_in_free_wear
+    from reducer_twin.core.state_space import run_in_free_wear
     from reducer_twin.core.life import limit_wear
     # The marginal of (w, ln s): the state may carry more (the unit's as-built offset).
     x = np.asarray(state['x'], dtype=float)[:2]

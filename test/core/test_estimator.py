@@ -19,12 +19,11 @@ import numpy as np
 import pytest
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.estimator import (
-    EstimatorConfig, lost_motion_curve, run_in_free_wear,
-    wear_from_run_in_free, WearEstimator)
+from reducer_twin.core.estimator import EstimatorConfig, WearEstimator
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeStage
 from reducer_twin.core.service_time import service_note
+from reducer_twin.core.state_space import wear_from_run_in_free
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.trend_score import SCORE_LAG
 from reducer_twin.core.units import ARCMIN, HOUR, UM
@@ -80,32 +79,6 @@ def test_prediction_alone_follows_integrate_wear_when_the_prior_is_sharp(params)
     np.testing.assert_allclose(est.wear, truth[-1], rtol=1e-6)
     assert est.exposure_s == pytest.approx(400 * WINDOW, rel=1e-12)
     assert est.archard_exposure == pytest.approx(increment.sum(), rel=1e-12)
-
-
-def test_run_in_maps_are_inverse_and_extend_with_slope_one_below_zero(params):
-    w = np.array([-2e-6, 0.0, 1e-6, 20e-6, 400e-6, 1e-3])
-    free = run_in_free_wear(w, params.wear)
-    np.testing.assert_allclose(wear_from_run_in_free(free, params.wear), w, rtol=1e-12, atol=1e-18)
-    assert free[0] == -2e-6
-    assert np.all(np.diff(free) > 0.0)
-
-
-def test_run_in_free_wear_interpolates_its_table_linearly_as_np_interp_does(params):
-    # The table's wear grid is uniform (wear._run_in_map): the interval is found by division.
-    grid_w, grid_s = wear._run_in_map(params.wear)
-    rng = np.random.default_rng(4)
-    w = np.concatenate([rng.uniform(0.0, grid_w[-1], 5000), grid_w[::997], grid_w[-1:]])
-    for few_or_many in (w[:50], w):
-        np.testing.assert_allclose(run_in_free_wear(few_or_many, params.wear),
-                                   np.interp(few_or_many, grid_w, grid_s), rtol=1e-12, atol=1e-22)
-    assert np.isnan(run_in_free_wear(np.nan, params.wear))
-    assert np.isnan(run_in_free_wear(np.full(5000, np.nan), params.wear)).all()
-
-
-def test_the_lost_motion_curve_and_its_inverse_agree_beyond_both_ends_of_the_table(params):
-    curve = lost_motion_curve(params)
-    w = np.array([-3e-6, 0.0, 0.35e-6, 5e-6, 100e-6, 200e-6])
-    np.testing.assert_allclose(curve.inverse(curve(w)), w, rtol=1e-9, atol=1e-15)
 
 
 def test_duty_rate_is_the_archard_rate_of_a_steady_duty(params):
@@ -581,9 +554,10 @@ def test_the_two_models_are_scored_on_what_they_predicted_score_lag_windows_befo
     last = features[-1]
     then.predict(last.duty, fraction=0.5)
     R = est.noise_scale * max(last.lost_motion_std, est.config.min_lost_motion_std) ** 2
-    X = then._ut.points(then._m, then._P)
-    zc, szz = then._ut.observed(then._hx(X))
-    w = np.exp(then._lw - then._lw.max())
+    mix = then._mix
+    X = mix.ut.points(mix.m, mix.P)
+    zc, szz = mix.ut.observed(mix.hx(X))
+    w = np.exp(mix.lw - mix.lw.max())
     w /= w.sum()
     m_model = w @ zc
     v_model = w @ (szz + zc ** 2) - m_model ** 2 + R

@@ -9,13 +9,14 @@ import pytest
 
 from reducer_twin.core import wear
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.estimator import EstimatorConfig, run_in_free_wear, WearEstimator
+from reducer_twin.core.estimator import EstimatorConfig, WearEstimator
 from reducer_twin.core.life import (catalogue_life, event_state, GrowthTrendState, LifeDraws,
                                     LifeQuery, limit_wear, LOST_MOTION_LIMIT, remaining_life,
                                     remaining_lives, threshold_met)
 from reducer_twin.core.metrics import (alpha_lambda, cumulative_relative_accuracy,
                                        interval_coverage, prognostic_horizon, relative_accuracy)
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.core.state_space import run_in_free_wear
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from wear_windows import WINDOW, window_duty, WindowFeatures

@@ -9,8 +9,8 @@ costs half a second of scipy imports); they must be the very numbers filterpy's
 from filterpy.kalman import MerweScaledSigmaPoints
 import numpy as np
 import pytest
-from reducer_twin.core.estimator import N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA
 from reducer_twin.core.sigma_points import merwe_weights
+from reducer_twin.core.wear_mixture import N_FILTER, SIGMA_ALPHA, SIGMA_BETA, SIGMA_KAPPA
 
 
 @pytest.mark.parametrize('n, alpha, beta, kappa', [

@@ -83,7 +83,7 @@ def test_past_the_limit_with_a_soft_zone_the_limit_was_crossed_by_the_play_later
 
 
 def test_the_overdue_life_is_the_closed_form_at_a_certain_state():
-    from reducer_twin.core.estimator import run_in_free_wear
+    from reducer_twin.core.state_space import run_in_free_wear
     w_lim = limit_wear(PARAMS, LIMIT)
     state = _state(w_lim * 1.2, var=0.0)['estimator']
     state['P'] = [[0.0, 0.0], [0.0, 0.0]]
