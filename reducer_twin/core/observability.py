@@ -1,21 +1,44 @@
 """
-Why a joint's window analysis gives no lost motion, or stopped giving one: one line each.
+What a joint's window analysis says in words: why it gives no lost motion, and its warnings.
 
 Never silent: a joint the twin cannot observe is said to be so with the reason a
 maintenance engineer can act on (no effort, an effort in other units, encoders that do
 not measure the same motion, too low a rate, no torque reversal...), everywhere the
-answer appears (``analyze --json`` and its warnings, the nodes' ``/diagnostics``).
-These read a :class:`.window_analysis.WindowAnalyzer`'s counts; its
-``not_observed_reason`` and ``stale_reason`` are these.
+answer appears (``analyze --json`` and its warnings, the nodes' ``/diagnostics``); so is
+an observed joint whose lost motion stopped, and what the analysis found in a stream it
+still reads (an effort held between slower updates, an effort's noise correlated over
+samples, a step of the TE's constant). One line each. These read a
+:class:`.window_analysis.WindowAnalyzer`'s counts; its ``not_observed_reason``,
+``stale_reason``, ``effort_held``, ``effort_correlated`` and ``te_stepped`` are these.
 """
 
 import math
 
+import numpy as np
+
 from .effort_check import PLAUSIBLE_LOST_MOTION_RAD
 from .kinematics import total_ratio
-from .units import ARCMIN, ARCSEC
-from .window_analysis import EFFORT_PLAUSIBLE_RATED, LOW_RATE_HZ
+from .units import ARCMIN, ARCSEC, rad_to_arcmin
 from .window_fit import PLAUSIBLE_TE_SPAN_RAD
+
+EFFORT_PLAUSIBLE_RATED = 5.0
+"""
+Largest effort, in rated torques, a joint's reducer is taken to carry.
+
+An RV reducer's momentary maximum torque is about 5 times its rated torque (RV-80E:
+3920 N·m against 784); an effort beyond it explains a joint without lost motion as an
+effort in other units.
+"""
+
+LOW_RATE_HZ = 200.0
+"""
+Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly.
+"""
+
+SINCE = ('seen', 'without_effort', 'implausible', 'windows')
+"""What :class:`SinceLostMotion` counts for :func:`stale_reason`: samples and windows."""
+
+_EMPTY = np.zeros(0)
 
 UNLIKE_MOTIONS = 'the motor and link encoders do not measure the same motion'
 """How the reason for windows whose TE spans degrees begins (:func:`not_observed_reason`)."""
@@ -203,3 +226,106 @@ def stale_reason(analyzer, after_s, effort_source='the joint states'):
                      f'{math.degrees(analyzer.fit.largest_te_span):.3g} deg '
                      '(a frozen encoder?)'), True
     return gap, (f'no torque reversal under load in {since["windows"]} windows since'), False
+
+
+def effort_held(analyzer):
+    """
+    Say when the effort is held between updates slower than the stream, else None.
+
+    See :mod:`.held_effort`: its noise is then taken between its updates.
+    """
+    hz = analyzer.fit.held_effort.update_hz
+    if hz is None:
+        return None
+    return (f'the effort repeats itself on successive samples: it changes at about '
+            f'{hz:.0f} Hz on a {analyzer.rate_hz:.0f} Hz stream (held between slower updates, '
+            'or quantised more coarsely than it changes); its noise is taken between its '
+            'changes, and the lost motion rests on fewer independent samples than the '
+            "stream's rate suggests")
+
+
+def effort_correlated(analyzer):
+    """
+    Say when the effort's noise is correlated over samples, else None.
+
+    See :meth:`.torque_smoothing.TorqueSmoothing.mean_noise`. A filter that makes the
+    noise so also delays the load (a drive's torque filter: by its time constant), which
+    the noise cannot tell from a ripple of the current loop: the line names the setting
+    that undoes a filter (``effort_lag_s``, :mod:`.effort_lag`) while it is 0.
+    """
+    smoothing = analyzer.fit.smoothing
+    ratio = smoothing.correlated_ratio
+    if ratio is None:
+        return None
+    line = (f"the effort's noise is correlated over successive samples (band-limited or "
+            f'filtered): its averages are {ratio:.1f} times as noisy as its sample-to-sample '
+            f'scatter implies (in {smoothing.correlated_windows} windows); the '
+            "torque bands are widened to the averages' own noise, and the lost motion rests "
+            'on fewer independent samples')
+    if analyzer.effort_lag_s:
+        return line
+    return (line + '. If the drive low-pass filters its torque, the effort also lags the '
+            'load by about the time constant, which puts samples of each torque reversal '
+            'on the wrong flank (an unloaded joint read half its lost motion through a '
+            "50 ms filter): set twin.effort_lag_s to the drive's filter time constant")
+
+
+def te_stepped(analyzer):
+    """
+    Say where the TE's constant stepped between windows, else None.
+
+    A step of :data:`.flanks._POOL_JUMP` or more in a window's mean, less what the
+    time offset and the windup under its mean load give it, is an encoder re-homed or
+    whose offset changed, or a motor turn count lost across a gap (``2·pi/i``); the
+    flank pool starts afresh there, so the readings hold, but the step is said.
+    """
+    fit = analyzer.fit
+    if fit.te_step is None:
+        return None
+    into, step = fit.te_step
+    more = fit.te_steps - 1
+    also = f' (and {more} more)' if more else ''
+    return (f"the transmission error's constant stepped by about "
+            f'{rad_to_arcmin(step):+.0f} arcmin {into:.1f} s into the '
+            f'stream{also}: an encoder re-homed or its offset changed, or a motor turn '
+            'count lost across a gap; the windows after a step are read afresh')
+
+
+class SinceLostMotion:
+    """
+    Count a joint's samples and windows since its last window with a lost motion.
+
+    What :func:`stale_reason` tells the cause from (:data:`SINCE`): the samples seen
+    and those without an effort, the windows and those whose TE spans more than a
+    reducer's (``implausible``). A window with a lost motion starts the counts afresh
+    at its end, with the samples after it of the update that cut it.
+
+    Attributes
+    ----------
+    counts : dict
+        Count per name of :data:`SINCE`.
+
+    """
+
+    def __init__(self):
+        self.counts = dict.fromkeys(SINCE, 0)
+        # Stamps [s] of the last update's fresh samples, and of those without an effort.
+        self._recent = (_EMPTY, _EMPTY)
+
+    def samples(self, fresh_t, effortless_t):
+        """Count an update's fresh samples and those without an effort (their stamps [s])."""
+        self.counts['seen'] += fresh_t.size
+        self.counts['without_effort'] += effortless_t.size
+        self._recent = (fresh_t, effortless_t)
+
+    def windows(self, found):
+        """Count an update's windows, in order (:class:`.window_fit.WindowFeatures`)."""
+        for f in found:
+            if math.isfinite(f.lost_motion):
+                seen, without = self._recent
+                self.counts = {'seen': int(np.count_nonzero(seen > f.t_end)),
+                               'without_effort': int(np.count_nonzero(without > f.t_end)),
+                               'implausible': 0, 'windows': 0}
+            else:
+                self.counts['windows'] += 1
+                self.counts['implausible'] += int(f.implausible)

@@ -9,22 +9,25 @@ which is the observation of the wear estimator.
 
 The features of each batch of windows are read by :class:`.window_fit.WindowFit` (the
 lost-motion model, the flanks and harmonics, the friction and the checks of the effort);
-this module buffers the stream, bridges and cuts it, judges the encoders' and the
-effort's forms, and keeps what a joint's observability is told from.
+this module buffers the stream, bridges and cuts it across gaps and clock resets, and
+keeps the counts a joint's observability is told from (said in words by
+:mod:`.observability`). The output speed of the samples it buffers is
+:class:`.output_speed.OutputSpeed`'s (the velocity field, or the link angle's rate), the
+torque of a drive's filtered effort :class:`.effort_lag.EffortLag`'s.
 """
 
 import math
 
 import numpy as np
 
+from . import observability
+from .effort_lag import EffortLag
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
+from .output_speed import OutputSpeed
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .te_extraction import TIME_OFFSET_LINEAR_S
-from .torque_smoothing import nominal_step
-from .units import rad_to_arcmin
-from .velocity_check import VelocityCheck
 from .window_cut import cut_windows, WINDOW_MODES
 from .window_fit import WindowFit
 
@@ -74,7 +77,7 @@ class WindowAnalyzer:
     min_bin_samples : int
         Samples needed under each torque sign for a bin to count, at
         :data:`FLANK_RATE_HZ` and above; below it, those of the same stream time
-        (at least :data:`LOW_RATE_MIN_FLANK_SAMPLES`; see :meth:`flank_samples`).
+        (at least :data:`LOW_RATE_MIN_FLANK_SAMPLES`; see :func:`flank_samples`).
     min_bins : int
         Usable bins needed for a lost-motion value.
     memory_windows : float
@@ -110,7 +113,7 @@ class WindowAnalyzer:
         How late the effort is published against the encoders [s]: a drive that
         low-pass filters its torque estimate publishes the load of about one time
         constant before (a first-order filter delays slow signals by its time
-        constant). The filter is undone (:meth:`_unfiltered_torque`); 0 (default):
+        constant). The filter is undone (:class:`.effort_lag.EffortLag`); 0 (default):
         the effort is read as published.
 
     Raises
@@ -129,58 +132,41 @@ class WindowAnalyzer:
             raise InvalidParameter(out_of_range(
                 'window', window, '', 'one of ' + ', '.join(repr(m) for m in WINDOW_MODES)))
         self.window = window
-        self.window_s = checked_float('window_s', window_s, 's', '> 0', lambda v: v > 0.0)
+        self.window_s = _positive('window_s', window_s, 's')
         self.max_window_s = checked_float('max_window_s', max_window_s, 's',
                                           f'>= window_s = {window_s}',
                                           lambda v: v >= self.window_s)
-        self.aging_factor = checked_float('aging_factor', aging_factor, '', '>= 0',
-                                          lambda v: v >= 0.0)
-        self.memory_windows = checked_float('memory_windows', memory_windows, 'windows', '>= 0',
-                                            lambda v: v >= 0.0)
-        self.min_speed = checked_float('min_speed', min_speed, 'rad/s', '>= 0',
-                                       lambda v: v >= 0.0)
-        self.compliance_prior = checked_float('compliance_prior', compliance_prior, '', '> 0',
-                                              lambda v: v > 0.0)
+        self.aging_factor = _non_negative('aging_factor', aging_factor, '')
+        self.memory_windows = _non_negative('memory_windows', memory_windows, 'windows')
+        self.min_speed = _non_negative('min_speed', min_speed, 'rad/s')
+        self.compliance_prior = _positive('compliance_prior', compliance_prior, '')
         self.torque_bins = _whole('torque_bins', torque_bins, 1, 200)
         self.min_bin_samples = _whole('min_bin_samples', min_bin_samples, 3, 10 ** 9)
         self.min_bins = _whole('min_bins', min_bins, 1, 200)
         self.min_window_samples = _whole('min_window_samples', min_window_samples, 1, 10 ** 9)
-        self.torque_smoothing_s = checked_float('torque_smoothing_s', torque_smoothing_s, 's',
-                                                '>= 0', lambda v: v >= 0.0)
-        self.sign_sigmas = checked_float('sign_sigmas', sign_sigmas, '', '>= 0',
-                                         lambda v: v >= 0.0)
+        self.torque_smoothing_s = _non_negative('torque_smoothing_s', torque_smoothing_s, 's')
+        self.sign_sigmas = _non_negative('sign_sigmas', sign_sigmas, '')
         self.friction = bool(friction)
         self.effort_lag_s = checked_float('effort_lag_s', effort_lag_s, 's', '0-1',
                                           lambda v: 0.0 <= v <= 1.0)
-        friction_memory_windows = checked_float(
-            'friction_memory_windows', friction_memory_windows, 'windows', '> 0',
-            lambda v: v > 0.0)
-        try:
-            lo, hi = (float(v) for v in bin_range)
-        except (TypeError, ValueError):
-            raise InvalidParameter(out_of_range('bin_range', bin_range, '',
-                                                '(low, high) fractions of rated torque')) from None
-        if not (0.0 < lo < hi and math.isfinite(hi)):
-            raise InvalidParameter(out_of_range('bin_range', bin_range, '', '0 < low < high'))
+        friction_memory_windows = _positive('friction_memory_windows', friction_memory_windows,
+                                            'windows')
+        edges = _bin_edges(bin_range, self.torque_bins)
         g = params.geometry
         self.orders = tuple(int(k) for k in (orders or (1, 2, g.z_cycloid, g.z_pins)))
         if not self.orders or min(self.orders) < 1:
             raise InvalidParameter(out_of_range('orders', orders, '', 'whole numbers >= 1'))
         self.params = params
         self.rated_torque = params.rating.rated_torque
-        self.edges = np.geomspace(lo, hi, self.torque_bins + 1) * self.rated_torque
+        self.edges = edges * self.rated_torque
         memory = math.exp(-1.0 / self.memory_windows) if self.memory_windows > 0 else 0.0
-        self._velocity = VelocityCheck(self.min_speed, total_ratio(g))
-        self._held_effort = HeldEffort()
+        self._speed = OutputSpeed(self.min_speed, total_ratio(g))
         self.fit = WindowFit(params, self.orders, self.edges, self.min_bins, memory,
                              self.compliance_prior, self.torque_smoothing_s, self.sign_sigmas,
                              self.friction, friction_memory_windows, self.aging_factor,
-                             self._held_effort)
-        # Until the velocity check decides: the link angle's rate of the buffered samples
-        # (row 0) and whether they carry a field (row 1).
-        self._rate_held = None
+                             HeldEffort())
+        self._lag = EffortLag(self.effort_lag_s, self.fit.smoothing)
         self._buf = {name: np.empty(0) for name in _BUFFER}
-        self._lag_head = None   # (stamps, effort) just before the buffer (effort_lag_s)
         self._last_t = None
         self._last_theta = None
         self._aliased = False
@@ -188,7 +174,6 @@ class WindowAnalyzer:
         self.clock_resets = 0
         self.samples_without_effort = 0
         self.largest_effort = 0.0
-        self.derived_velocity = 0
         self.samples_seen = 0
         self.windows_emitted = 0
         self.windows_observed = 0
@@ -200,8 +185,7 @@ class WindowAnalyzer:
         self.latest_t = None            # latest stamp fed [s]
         self._segment = None            # (first stamp since the last clock reset [s], stream
         self._segment_origin_s = 0.0    # time before it [s]): stream time across resets
-        self._since = dict.fromkeys(_SINCE, 0)
-        self._recent_t = (_EMPTY, _EMPTY)  # fresh and effortless stamps of the last update
+        self._since = observability.SinceLostMotion()
         self._period_s = None
 
     def update(self, stream, effort, velocity):
@@ -261,49 +245,26 @@ class WindowAnalyzer:
         fresh = stream.valid if self._last_t is None else stream.valid & (stream.t > self._last_t)
         n_fresh = int(np.count_nonzero(fresh))
         self.samples_seen += n_fresh
-        self._since['seen'] += n_fresh
         if n_fresh:
             if self._segment is None:
                 self._segment = float(np.min(stream.t[fresh]))
             latest = float(np.max(stream.t[fresh]))
             self.latest_t = latest if self.latest_t is None else max(self.latest_t, latest)
-        self._recent_t = (stream.t[fresh], _EMPTY)
-        if self._period_s is None and np.count_nonzero(fresh) > 16:
-            steps = np.diff(stream.t[fresh][:4096])
-            steps = steps[steps > 0]
-            if steps.size:
-                self._period_s = float(np.median(steps))
+        if self._period_s is None and n_fresh > 16:
+            self._period_s = _median_step(stream.t[fresh][:4096])
         use = fresh & np.isfinite(effort)
-        if self._held_effort.watching:
-            self._held_effort.observe(stream.t[use], effort[use])
-        without = int(np.count_nonzero(fresh & ~use))
-        self.samples_without_effort += without
-        self._since['without_effort'] += without
-        if without:
-            self._recent_t = (self._recent_t[0], stream.t[fresh & ~use])
-        unknown = use & ~np.isfinite(velocity)
-        rate = None
-        if not self._velocity.decided and (use & ~unknown).any():
-            # A velocity field: is it the link angle's rate? Until that is decided the
-            # rate is held beside the buffered samples, to take the field's place in
-            # them too if it is not.
-            rate = self._link_rate(stream, use)
-            if self._velocity.check(stream.t[use], stream.output_angle[use], velocity[use]) \
-                    and self._rate_held is not None:
-                self._buf['speed'] = self._rate_held[0].copy()
-                self.derived_velocity += int(np.count_nonzero(self._rate_held[1]))
-        if self._velocity.replaced:
-            unknown = use
-        if unknown.any():
-            velocity = self._derive_velocity(stream, use, velocity, unknown, rate)
+        if self.fit.held_effort.watching:
+            self.fit.held_effort.observe(stream.t[use], effort[use])
+        effortless = fresh & ~use
+        self.samples_without_effort += int(np.count_nonzero(effortless))
+        self._since.samples(stream.t[fresh], stream.t[effortless])
+        velocity, buffered = self._speed.speeds(stream, use, velocity, self._last_t,
+                                                self._last_theta)
+        if buffered is not None:    # the field was found not to be the link angle's rate
+            self._buf['speed'] = buffered
         self.ignored_samples += int(np.count_nonzero(stream.valid & ~use))
-        if use.all():
-            def pick(a):
-                return a
-        else:
-            def pick(a):
-                return a[use]
-        t = pick(stream.t)
+        kept = slice(None) if use.all() else use    # all: no copy (see _aliased)
+        t = stream.t[kept]
         if t.size:
             previous = np.concatenate([[np.nan if self._last_t is None else self._last_t],
                                        t[:-1]])
@@ -314,22 +275,15 @@ class WindowAnalyzer:
                 self.gaps += int(np.count_nonzero(gap))
                 self.gap_time_s += float(step[gap].sum())
             self._last_t = float(t[-1])
-            self._last_theta = float(pick(stream.output_angle)[-1])
-            new = {'t': t, 'te': pick(stream.te), 'theta': pick(stream.output_angle),
-                   'torque': pick(effort), 'speed': pick(velocity), 'dt': dt,
+            self._last_theta = float(stream.output_angle[kept][-1])
+            new = {'t': t, 'te': stream.te[kept], 'theta': stream.output_angle[kept],
+                   'torque': effort[kept], 'speed': velocity[kept], 'dt': dt,
                    'gap': gap.astype(float)}
             self.largest_effort = max(self.largest_effort,
                                       float(np.max(np.abs(new['torque']))))
             self._buf = {k: np.concatenate([self._buf[k], new[k]]) if self._buf[k].size
                          else new[k] for k in _BUFFER}
             self._aliased = True
-            if not self._velocity.decided:
-                held = np.vstack([new['speed'] if rate is None else rate,
-                                  ~pick(unknown) if rate is not None else np.zeros(t.size)])
-                self._rate_held = held if self._rate_held is None \
-                    else np.hstack([self._rate_held, held])
-        if self._velocity.decided:
-            self._rate_held = None
         return self._emit(final=False)
 
     @property
@@ -353,14 +307,19 @@ class WindowAnalyzer:
         return self.fit.effort.effort_fault
 
     @property
+    def derived_velocity(self):
+        """Return the samples given the link angle's rate as speed (:mod:`.output_speed`)."""
+        return self._speed.derived
+
+    @property
     def velocity_fault(self):
         """Return why the velocity field is not the link angle's rate, once found, else None."""
-        return self._velocity.fault
+        return self._speed.check.fault
 
     @property
     def velocity_leads(self):
         """Say when the velocity field leads the link angle (``VelocityCheck.leads``)."""
-        return self._velocity.leads
+        return self._speed.check.leads
 
     @property
     def soft_zone(self):
@@ -374,64 +333,18 @@ class WindowAnalyzer:
 
     @property
     def effort_held(self):
-        """
-        Say when the effort is held between updates slower than the stream, else None.
-
-        See :mod:`.held_effort`: its noise is then taken between its updates.
-        """
-        hz = self._held_effort.update_hz
-        if hz is None:
-            return None
-        return (f'the effort repeats itself on successive samples: it changes at about '
-                f'{hz:.0f} Hz on a {self.rate_hz:.0f} Hz stream (held between slower updates, '
-                'or quantised more coarsely than it changes); its noise is taken between its '
-                'changes, and the lost motion rests on fewer independent samples than the '
-                "stream's rate suggests")
+        """Say if the effort updates slower than the stream, else None (:mod:`.observability`)."""
+        return observability.effort_held(self)
 
     @property
     def effort_correlated(self):
-        """
-        Say when the effort's noise is correlated over samples, else None.
-
-        See :meth:`.torque_smoothing.TorqueSmoothing.mean_noise`. A filter that makes the
-        noise so also delays the load (a drive's torque filter: by its time constant), which
-        the noise cannot tell from a ripple of the current loop: the line names the setting
-        that undoes a filter (``effort_lag_s``) while it is 0.
-        """
-        ratio = self.fit.smoothing.correlated_ratio
-        if ratio is None:
-            return None
-        line = (f"the effort's noise is correlated over successive samples (band-limited or "
-                f'filtered): its averages are {ratio:.1f} times as noisy as its sample-to-sample '
-                f'scatter implies (in {self.fit.smoothing.correlated_windows} windows); the '
-                "torque bands are widened to the averages' own noise, and the lost motion rests "
-                'on fewer independent samples')
-        if self.effort_lag_s:
-            return line
-        return (line + '. If the drive low-pass filters its torque, the effort also lags the '
-                'load by about the time constant, which puts samples of each torque reversal '
-                'on the wrong flank (an unloaded joint read half its lost motion through a '
-                "50 ms filter): set twin.effort_lag_s to the drive's filter time constant")
+        """Say when the effort's noise is correlated, else None (:mod:`.observability`)."""
+        return observability.effort_correlated(self)
 
     @property
     def te_stepped(self):
-        """
-        Say where the TE's constant stepped between windows, else None.
-
-        A step of :data:`.flanks._POOL_JUMP` or more in a window's mean, less what the
-        time offset and the windup under its mean load give it, is an encoder re-homed or
-        whose offset changed, or a motor turn count lost across a gap (``2·pi/i``); the
-        flank pool starts afresh there, so the readings hold, but the step is said.
-        """
-        if self.fit.te_step is None:
-            return None
-        into, step = self.fit.te_step
-        more = self.fit.te_steps - 1
-        also = f' (and {more} more)' if more else ''
-        return (f"the transmission error's constant stepped by about "
-                f'{rad_to_arcmin(step):+.0f} arcmin {into:.1f} s into the '
-                f'stream{also}: an encoder re-homed or its offset changed, or a motor turn '
-                'count lost across a gap; the windows after a step are read afresh')
+        """Say where the TE's constant stepped, else None (:mod:`.observability`)."""
+        return observability.te_stepped(self)
 
     def _stream_s(self, t):
         """Return the stream time [s] at stamp ``t`` of the current clock (counted over resets)."""
@@ -440,7 +353,7 @@ class WindowAnalyzer:
     @property
     def velocity_scale(self):
         """Return the velocity field's median ratio to the link angle's rate (NaN: no motion)."""
-        return self._velocity.scale
+        return self._speed.check.scale
 
     @property
     def coulomb_friction(self):
@@ -459,55 +372,16 @@ class WindowAnalyzer:
 
     def not_observed_reason(self, effort_source='the joint states'):
         """Say why no window has given a lost motion; None once one has (:mod:`.observability`)."""
-        from .observability import not_observed_reason
-        return not_observed_reason(self, effort_source)
+        return observability.not_observed_reason(self, effort_source)
 
     @property
     def since_lost_motion(self):
-        """Return the counts since the last lost motion (:data:`_SINCE`: samples, windows)."""
-        return dict(self._since)
+        """Return the counts since the last lost motion (``observability.SinceLostMotion``)."""
+        return dict(self._since.counts)
 
     def stale_reason(self, after_s, effort_source='the joint states'):
         """Say why an observed reducer's lost motion stopped (:mod:`.observability`)."""
-        from .observability import stale_reason
-        return stale_reason(self, after_s, effort_source)
-
-    def _link_rate(self, stream, use):
-        """
-        Rate of the unwrapped output angle at the samples in use [rad/s].
-
-        Central differences (one-sided at the ends; the chunk's first sample reaches
-        back to the last sample of the previous chunk when it lies within
-        ``max_gap_s``).
-        """
-        idx = np.flatnonzero(use)
-        t, theta = stream.t[idx], stream.output_angle[idx]
-        back = self._last_t is not None and t.size and t[0] - self._last_t <= stream.max_gap_s
-        if back:
-            t = np.concatenate([[self._last_t], t])
-            theta = np.concatenate([[self._last_theta], theta])
-        if t.size >= 2:
-            derived = np.gradient(theta, t)
-        else:
-            derived = np.zeros(t.size)
-        return derived[1:] if back else derived
-
-    def _derive_velocity(self, stream, use, velocity, unknown, rate=None):
-        """
-        Output speed from the unwrapped output angle where the stream has none.
-
-        The rate of :meth:`_link_rate` fills the samples in ``unknown``: those
-        without a velocity, or all once :class:`.velocity_check.VelocityCheck` found
-        the field not to be that rate. Counted in ``derived_velocity``.
-        """
-        idx = np.flatnonzero(use)
-        if rate is None:
-            rate = self._link_rate(stream, use)
-        out = np.array(velocity, dtype=float, copy=True)
-        fill = unknown[idx]
-        out[idx[fill]] = rate[fill]
-        self.derived_velocity += int(np.count_nonzero(fill))
-        return out
+        return observability.stale_reason(self, after_s, effort_source)
 
     def discard_buffer(self):
         """
@@ -518,8 +392,8 @@ class WindowAnalyzer:
         (:mod:`.held_encoders`), before which the stale samples went in.
         """
         self._buf = {name: np.empty(0) for name in _BUFFER}
-        self._rate_held = None
-        self._lag_head = None
+        self._speed.restart()
+        self._lag.restart()
         self.fit.flanks.restart()
 
     def retime(self, delta_s):
@@ -560,20 +434,17 @@ class WindowAnalyzer:
 
     def _emit(self, final):
         cuts = self._cut(final)
-        if final and not cuts:
-            self._lag_head = None   # the stream starts over (a reset, a flush): nothing before
         if not cuts:
+            if final:
+                self._lag.restart()     # the stream starts over (a reset, a flush)
             if self._aliased:
                 # The buffer must not alias arrays the caller may reuse.
                 self._buf = {k: v.copy() for k, v in self._buf.items()}
-                if self._rate_held is not None:
-                    self._rate_held = self._rate_held.copy()
                 self._aliased = False
             return []
         out, first = [], 0
-        buf = self._buf
-        if self.effort_lag_s:
-            buf = {**buf, 'torque': self._unfiltered_torque()}
+        b = self._buf
+        buf = {**b, 'torque': self._lag.torque(b['t'], b['torque'], b['gap'], self._period_s)}
         # Batches of windows of about _BATCH_SAMPLES samples keep the temporaries small.
         while first < len(cuts):
             base = cuts[first][0]
@@ -592,137 +463,44 @@ class WindowAnalyzer:
             for f in found:
                 if math.isfinite(f.lost_motion):
                     self.last_observed_t = f.t_end
-                    # The samples of the last update after it (the update that cut it).
-                    seen, without = self._recent_t
-                    self._since = {'seen': int(np.count_nonzero(seen > f.t_end)),
-                                   'without_effort': int(np.count_nonzero(without > f.t_end)),
-                                   'implausible': 0, 'windows': 0}
-                else:
-                    self._since['windows'] += 1
-                    self._since['implausible'] += int(f.implausible)
+            self._since.windows(found)
             out += found
             first = last
         end = cuts[-1][1]
-        if self.effort_lag_s:
-            head = slice(max(0, end - self._rate_reach()[0]), end)
-            self._lag_head = None if final else (self._buf['t'][head].copy(),
-                                                 self._buf['torque'][head].copy())
-        self._buf = {k: v[end:].copy() for k, v in self._buf.items()}
-        if self._rate_held is not None:
-            self._rate_held = self._rate_held[:, end:].copy()
+        if final:
+            self._lag.restart()
+        else:
+            self._lag.keep(b['t'], b['torque'], end, self._period_s)
+        self._buf = {k: v[end:].copy() for k, v in b.items()}
+        self._speed.drop(end)
         self._aliased = False
         return out
 
     def _cut(self, final):
         """Return ``[(start, end, reason)]`` of the windows complete in the buffer."""
         b = self._buf
-        known = b['t'].size
-        if self.effort_lag_s and not final and known:
-            # A sample's torque needs the effort's rate over the samples after it
-            # (:meth:`_unfiltered_torque`): windows end before those that have not come.
-            half, period = self._rate_reach()
-            known = int(np.searchsorted(b['t'], b['t'][-1] - half * period, side='right'))
+        # A sample's torque may need the effort after it (:meth:`.effort_lag.EffortLag.complete`).
+        known = b['t'].size if final else self._lag.complete(b['t'], self._period_s)
         return cut_windows(*(b[k][:known] for k in ('t', 'theta', 'speed', 'gap')), final,
                            self.window, self.window_s, self.max_window_s,
                            self.min_window_samples, self.min_speed)
 
-    def _rate_reach(self):
-        """Return the samples either side the effort's rate is taken over, and the step [s]."""
-        period = self._period_s or nominal_step(self._buf['t'])
-        return max(1, self.fit.smoothing.half_width(period)), period
-
-    def _unfiltered_torque(self):
-        """
-        Return the buffered samples' torque with the drive's torque filter undone.
-
-        A first-order filter of time constant ``tau`` (``effort_lag_s``) publishes
-        ``E`` with ``tau·dE/dt = T - E``, so the torque is ``E + tau·dE/dt``. The rate
-        is taken over the torque average's half-width either side
-        (:meth:`.torque_smoothing.TorqueSmoothing.half_width`: the average then quiets
-        the noise it adds as it quiets the effort's), within each run of samples
-        between gaps of the stream (never across one; one-sided at a run's ends).
-        """
-        b = self._buf
-        t, effort, gap = b['t'], b['torque'], b['gap']
-        half = self._rate_reach()[0]
-        head = self._lag_head
-        if head is not None and t.size and not gap[0] > 0.0:
-            # The samples before the buffer, of the windows cut already, in the same run.
-            t, effort = np.concatenate([head[0], t]), np.concatenate([head[1], effort])
-            gap = np.concatenate([np.zeros(head[0].size), gap])
-        skip = t.size - b['t'].size
-        out = effort.copy()
-        bounds = np.concatenate([[0], np.flatnonzero(gap[1:] > 0.0) + 1, [t.size]])
-        for a, z in zip(bounds[:-1].tolist(), bounds[1:].tolist()):
-            k = np.arange(a, z)
-            lo, hi = np.maximum(k - half, a), np.minimum(k + half, z - 1)
-            span = t[hi] - t[lo]
-            with np.errstate(invalid='ignore', divide='ignore'):
-                rate = np.where(span > 0.0, (effort[hi] - effort[lo]) / span, 0.0)
-            out[a:z] += self.effort_lag_s * rate
-        return out[skip:]
-
     def flank_samples(self):
-        """
-        Return the samples a flank (a ``|T|`` bin under one torque sign) needs to count.
-
-        ``min_bin_samples`` at :data:`FLANK_RATE_HZ` and above. Below it the bins near
-        the lost-motion test torque are those the load passes through quickly at each
-        reversal (a joint under gravity crosses zero torque at full speed): at 100 Hz
-        they kept 5-20 samples each and were dropped, so the lost motion was read by
-        extrapolating the bins from 15 % of rated torque on, along the model's curve
-        (a window holds at least ``min_window_samples``, 10 s at 100 Hz). There a
-        flank needs the samples of the same stream time as at :data:`FLANK_RATE_HZ`
-        (``min_bin_samples/FLANK_RATE_HZ``), at least
-        :data:`LOW_RATE_MIN_FLANK_SAMPLES`; its standard error counts its samples.
-
-        Returns
-        -------
-        int
-            The number of samples (``min_bin_samples`` before the rate is known).
-
-        """
-        rate = self.rate_hz
-        if not (math.isfinite(rate) and rate < FLANK_RATE_HZ):
-            return self.min_bin_samples
-        same_time = math.ceil(self.min_bin_samples * rate / FLANK_RATE_HZ - 1e-9)
-        return min(self.min_bin_samples, max(same_time, LOW_RATE_MIN_FLANK_SAMPLES))
+        """Return the samples a flank needs at the stream's rate (:func:`flank_samples`)."""
+        return flank_samples(self.min_bin_samples, self.rate_hz)
 
 
 _BUFFER = ('t', 'te', 'theta', 'torque', 'speed', 'dt', 'gap')
 
 
-_EMPTY = np.zeros(0)
-
-
-_SINCE = ('seen', 'without_effort', 'implausible', 'windows')
-"""What :meth:`WindowAnalyzer.stale_reason` counts since the last lost motion."""
-
-
-EFFORT_PLAUSIBLE_RATED = 5.0
-"""
-Largest effort, in rated torques, a joint's reducer is taken to carry.
-
-An RV reducer's momentary maximum torque is about 5 times its rated torque (RV-80E:
-3920 N·m against 784); an effort beyond it explains a joint without lost motion as an
-effort in other units.
-"""
-
-
-LOW_RATE_HZ = 200.0
-"""
-Below this sample rate [Hz] a joint without lost motion is reported as sampled too slowly.
-"""
-
-
 FLANK_RATE_HZ = 500.0
 """
 Below this sample rate [Hz] a flank of the hysteresis needs the samples of the same stream
-time as here (:meth:`WindowAnalyzer.flank_samples`).
+time as here (:func:`flank_samples`).
 
-Was :data:`LOW_RATE_HZ`: a 250 Hz recording of the model's simulator (its own, or 1 kHz
-thinned) kept only the bins from 200 N*m on and read the wear 14-20 % low, with P10-P90
-missing the truth on both joints; with this rule 1-2 % (README figures).
+Was :data:`.observability.LOW_RATE_HZ`: a 250 Hz recording of the model's simulator (its
+own, or 1 kHz thinned) kept only the bins from 200 N*m on and read the wear 14-20 % low,
+with P10-P90 missing the truth on both joints; with this rule 1-2 % (README figures).
 """
 
 
@@ -742,9 +520,76 @@ were noisier than the bins they added: over the bench's 72 truths (seeds 1000-10
 _BATCH_SAMPLES = 1 << 16
 
 
+def flank_samples(min_bin_samples, rate_hz):
+    """
+    Return the samples a flank (a ``|T|`` bin under one torque sign) needs to count.
+
+    ``min_bin_samples`` at :data:`FLANK_RATE_HZ` and above. Below it the bins near
+    the lost-motion test torque are those the load passes through quickly at each
+    reversal (a joint under gravity crosses zero torque at full speed): at 100 Hz
+    they kept 5-20 samples each and were dropped, so the lost motion was read by
+    extrapolating the bins from 15 % of rated torque on, along the model's curve
+    (a window holds at least ``min_window_samples``, 10 s at 100 Hz). There a
+    flank needs the samples of the same stream time as at :data:`FLANK_RATE_HZ`
+    (``min_bin_samples/FLANK_RATE_HZ``), at least
+    :data:`LOW_RATE_MIN_FLANK_SAMPLES`; its standard error counts its samples.
+
+    Parameters
+    ----------
+    min_bin_samples : int
+        Samples a flank needs at :data:`FLANK_RATE_HZ` and above.
+    rate_hz : float
+        Sample rate of the stream [Hz]; NaN while unknown.
+
+    Returns
+    -------
+    int
+        The number of samples (``min_bin_samples`` before the rate is known).
+
+    """
+    if not (math.isfinite(rate_hz) and rate_hz < FLANK_RATE_HZ):
+        return min_bin_samples
+    same_time = math.ceil(min_bin_samples * rate_hz / FLANK_RATE_HZ - 1e-9)
+    return min(min_bin_samples, max(same_time, LOW_RATE_MIN_FLANK_SAMPLES))
+
+
+def _median_step(t):
+    """Return the median of the stamps' ``t`` positive steps [s], None without one."""
+    steps = np.diff(t)
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if steps.size else None
+
+
 def _whole(name, value, lo, hi):
     """Return ``value`` as an int in ``[lo, hi]``, else raise."""
     whole = isinstance(value, (int, np.integer)) and not isinstance(value, bool)
     if not whole or not lo <= value <= hi:
         raise InvalidParameter(out_of_range(name, value, '', f'a whole number in [{lo}, {hi}]'))
     return int(value)
+
+
+def _positive(name, value, unit):
+    """Return ``value`` as a float if finite and > 0, else raise."""
+    return checked_float(name, value, unit, '> 0', lambda v: v > 0.0)
+
+
+def _non_negative(name, value, unit):
+    """Return ``value`` as a float if finite and >= 0, else raise."""
+    return checked_float(name, value, unit, '>= 0', lambda v: v >= 0.0)
+
+
+def _bin_edges(bin_range, bins):
+    """
+    Return the edges of ``bins`` log-spaced ``|T|`` bins, as fractions of rated torque.
+
+    ``bin_range`` holds the lowest and highest edge; raise InvalidParameter unless
+    ``0 < low < high``, both finite.
+    """
+    try:
+        lo, hi = (float(v) for v in bin_range)
+    except (TypeError, ValueError):
+        raise InvalidParameter(out_of_range('bin_range', bin_range, '',
+                                            '(low, high) fractions of rated torque')) from None
+    if not (0.0 < lo < hi and math.isfinite(hi)):
+        raise InvalidParameter(out_of_range('bin_range', bin_range, '', '0 < low < high'))
+    return np.geomspace(lo, hi, bins + 1)

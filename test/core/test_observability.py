@@ -1,8 +1,10 @@
 """Why a joint gives no lost motion, or stopped giving one: said in one line it can act on."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
-from reducer_twin.core.observability import not_observed_reason, stale_reason
+from reducer_twin.core.observability import not_observed_reason, SinceLostMotion, stale_reason
 from reducer_twin.core.te_extraction import compute_te
 from reducer_twin.core.window_analysis import WindowAnalyzer
 from te_streams import PARAMS, RATIO, simulated
@@ -121,3 +123,19 @@ def test_a_lost_motion_that_stops_with_the_effort_is_said_with_its_cause():
     assert cause.startswith('no effort on /arm/joint_states in ')
     assert stale_reason(analyzer, 30.0) is None      # not yet that long
     assert analyzer.stale_reason(5.0, '/arm/joint_states') == (gap, cause, faulty)
+
+
+def _window(t_end, lost_motion=np.nan, implausible=False):
+    return SimpleNamespace(t_end=t_end, lost_motion=lost_motion, implausible=implausible)
+
+
+def test_the_counts_since_a_lost_motion_start_at_its_end_and_count_what_came_after():
+    since = SinceLostMotion()
+    since.samples(np.arange(0.0, 10.0), np.array([1.0, 2.0]))     # 10 fresh, 2 without effort
+    since.windows([_window(4.0), _window(7.0, implausible=True)])
+    assert since.counts == {'seen': 10, 'without_effort': 2, 'implausible': 1, 'windows': 2}
+    since.samples(np.arange(10.0, 20.0), np.array([15.0, 16.0, 17.0]))
+    # A lost motion at 14 s: of this update's samples, 5 came after it, 3 of them without
+    # an effort; the windows after it count afresh.
+    since.windows([_window(12.0), _window(14.0, lost_motion=1e-4), _window(18.0)])
+    assert since.counts == {'seen': 5, 'without_effort': 3, 'implausible': 0, 'windows': 1}
