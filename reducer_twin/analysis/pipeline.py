@@ -69,8 +69,8 @@ from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE, TwinFront
 from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.life_basis import rate_resolved, rate_unresolved
 from reducer_twin.core.observability import EFFORT_PLAUSIBLE_RATED
-from reducer_twin.core.pipeline import rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.core.travel_ratio import motor_angle_form
 from reducer_twin.io.bag import BagDirWriter, open_bag

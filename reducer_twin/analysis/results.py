@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from reducer_twin.analysis.joints import JointPlan
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import life_basis
+from reducer_twin.core.life_basis import life_basis
 from reducer_twin.core.units import rad_to_arcmin
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
@@ -102,14 +102,14 @@ class JointResult:
             shortfall, less where the play followed lies nearer the width,
             :func:`.pipeline.taken_off`; None when not observed; else None) and
             ``rate_resolved`` (whether the remaining life rests on
-            the unit's own growth, :func:`.pipeline.rate_resolved`; None when not observed),
+            the unit's own growth, :func:`.life_basis.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
             law rather than the wear model's curve: its ``probability``, its ``weight`` in
             the remaining life, ``exponent`` and ``extrapolation``, the times the exposure
-            seen it is extrapolated to, :func:`.pipeline.growth_law`; else None),
+            seen it is extrapolated to, :func:`.life_basis.growth_law`; else None),
             ``curve_extrapolation`` (where the remaining life follows the wear model's curve
             beyond the span its shape was compared with the observed growth over: the times
-            the exposure seen its P50 reaches, :func:`.pipeline.curve_extrapolation`; else
+            the exposure seen its P50 reaches, :func:`.life_basis.curve_extrapolation`; else
             None) and ``service`` (how the service time of a reducer met without state was
             taken: ``hours``, ``taken``, ``rate_scale``; ``taken`` None while too few
             windows have judged it; None without one).

@@ -23,7 +23,7 @@ there; its standard error counts the windows' scatter. Once it is said
 motion it gives is that play less the shortfall but not below that width (windows whose
 loads seldom pass the knee read less than the far flanks' play:
 :func:`.pipeline.taken_off`), the remaining life the time to the play reaching the limit
-plus what was taken off (:func:`.pipeline.play_limit`).
+plus what was taken off (:func:`.life_basis.play_limit`).
 
 Measured per joint (one-off survey, 300-h recordings at 1 kHz): third-generator units
 with knees at 4.0-6.0 % of rated fell 0.55-2.2 arcmin (26-73 %) short at the test torque;

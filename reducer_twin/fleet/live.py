@@ -35,7 +35,8 @@ import uuid
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.pipeline import features_from_record, life_basis, LifeStage
+from reducer_twin.core.life_basis import life_basis
+from reducer_twin.core.pipeline import features_from_record, LifeStage
 from reducer_twin.core.pipeline import reducer_state
 from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.core.units import HOUR

@@ -26,7 +26,8 @@ Rows are ranked by P10, most urgent first; not observed and retired reducers fol
 import math
 
 import numpy as np
-from reducer_twin.core.pipeline import faster_than_wear_words, SOFT_ZONE_KEY
+from reducer_twin.core.life_basis import faster_than_wear_words
+from reducer_twin.core.pipeline import SOFT_ZONE_KEY
 from reducer_twin.core.units import ARCMIN, HOUR, UM
 from reducer_twin.fleet.store import iso_from_ns
 

@@ -18,14 +18,15 @@ from reducer_twin.core import wear
 from reducer_twin.core.duty_summary import DutySummary
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
+from reducer_twin.core.life_basis import curve_extrapolation, faster_than_wear, growth_law
+from reducer_twin.core.life_basis import implied_log_rate, life_trend_probability
+from reducer_twin.core.life_basis import LOG_RATE_PLAUSIBLE, rate_resolved
 from reducer_twin.core.params import ReducerParams
-from reducer_twin.core.pipeline import CLOCK_RESET_S, curve_extrapolation, duty_to_record
-from reducer_twin.core.pipeline import EstimatorStage, faster_than_wear
-from reducer_twin.core.pipeline import features_from_record, growth_law, implied_log_rate
-from reducer_twin.core.pipeline import life_trend_probability, LifeConfig, LifeStage
-from reducer_twin.core.pipeline import LOG_RATE_PLAUSIBLE
-from reducer_twin.core.pipeline import rate_resolved, state_from_record, TimeOffsetCalibration
-from reducer_twin.core.pipeline import reducer_state, taken_off
+from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record
+from reducer_twin.core.pipeline import EstimatorStage, features_from_record
+from reducer_twin.core.pipeline import LifeConfig, LifeStage
+from reducer_twin.core.pipeline import reducer_state, state_from_record, taken_off
+from reducer_twin.core.pipeline import TimeOffsetCalibration
 from reducer_twin.core.transmission_error import model_tables
 from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.msg_adapters.layouts import REMAINING_LIFE, TE_FEATURES, WEAR_ESTIMATE
