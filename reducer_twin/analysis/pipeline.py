@@ -43,6 +43,9 @@ analysis of every sixth joint (:data:`WORKER_FRONT_EVERY`; their paired samples 
 their TE batches and window records come back to be written here). The bag can be read
 and decoded a few chunks ahead by a second forked process (``reader_process=True``);
 results are identical.
+
+What the analysis says of each joint (why it is not observed or observed in part, how its
+inputs were read, what carried over from its last bag) is worded by :mod:`.joint_words`.
 """
 
 from dataclasses import replace
@@ -52,6 +55,7 @@ from pathlib import Path
 import time
 
 import numpy as np
+from reducer_twin.analysis import joint_words
 from reducer_twin.analysis.joints import check_configured_topics, late_joints, plan_joints
 from reducer_twin.analysis.joints import robot_plans, say_unpaired
 from reducer_twin.analysis.reading import BagChunks, ForkedBagChunks, joint_columns
@@ -61,18 +65,17 @@ from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, stamp_ns
 from reducer_twin.analysis.stages import te_values, WorkerBacks
-from reducer_twin.core.errors import InvalidInput, StateFileError
+from reducer_twin.core.errors import InvalidInput
 from reducer_twin.core.ingest import motor_effort_scale, motor_torque_seen
 from reducer_twin.core.ingest import pair_columns, PAIRING_FACTS
 from reducer_twin.core.ingest import SHARED_STAMPS
 from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
-from reducer_twin.core.joint_twin import TOPIC_NAMESPACE, TwinFront
+from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
-from reducer_twin.core.life_basis import rate_resolved, rate_unresolved
 from reducer_twin.core.observability import EFFORT_PLAUSIBLE_RATED
-from reducer_twin.core.soft_zone import carried_line
-from reducer_twin.core.travel_ratio import motor_angle_form
+from reducer_twin.core.travel_ratio import MIN_DETECT_TRAVEL_RAD, motor_angle_form
+from reducer_twin.core.travel_ratio import motor_direction, motor_travel_ratio
 from reducer_twin.io.bag import BagDirWriter, open_bag
 from reducer_twin.io.outputs import refuse_inside_inputs
 from reducer_twin.io.rosbag2_metadata import DEFAULT_QOS
@@ -145,80 +148,6 @@ def _motor_scale(settings, joint, angles=None, direction=1.0):
     if (angles or settings.motor_angles) == 'output':
         return direction * total_ratio(settings.params_of(joint).geometry)
     return direction
-
-
-GAP_SHARE = 0.05
-"""Share of a joint's stream in holes without samples from which the time lost is said."""
-
-PARTIAL_SHARE = 0.2
-"""Share of a joint's stream after its last lost motion from which the estimate is partial."""
-
-PARTIAL_WINDOWS = 3
-"""Windows of stream after the last lost motion below which the estimate is taken as current."""
-
-MIN_DETECT_TRAVEL_RAD = 0.05
-"""Link travel [rad] a chunk must show before its motor angles are classified."""
-
-
-def motor_travel_ratio(link, motor):
-    """
-    Motor travel over link travel (total variation) of one joint in one chunk.
-
-    About the reduction ratio for raw motor angles and about 1 for angles
-    already divided by it; NaN when the link moved less than
-    :data:`MIN_DETECT_TRAVEL_RAD` (nothing to tell them apart by).
-
-    Parameters
-    ----------
-    link, motor : ndarray
-        Positions of the link and motor entries [rad] (NaN where absent).
-
-    Returns
-    -------
-    float
-        The ratio of travels.
-
-    """
-    def travel(x):
-        x = x[np.isfinite(x)]
-        return float(np.abs(np.diff(x)).sum()) if x.size > 1 else 0.0
-    t_link, t_motor = travel(link), travel(motor)
-    return t_motor / t_link if t_link >= MIN_DETECT_TRAVEL_RAD else math.nan
-
-
-def motor_direction(t_link, link, t_motor, motor):
-    """
-    Whether the motor encoder counts with the link (+1) or against it (-1), in one chunk.
-
-    A gear stage or the encoder's mounting may reverse the motor's sense (ros2_control
-    then carries a negative reduction): the motor's steps, taken at the link's stamps,
-    then correlate negatively with the link's. NaN when the link moved less than
-    :data:`MIN_DETECT_TRAVEL_RAD` or the two do not overlap in time.
-
-    Parameters
-    ----------
-    t_link, link, t_motor, motor : ndarray
-        Stamps [ns] and positions [rad] of the link and motor entries (NaN where absent).
-
-    Returns
-    -------
-    float
-        +1, -1 or NaN.
-
-    """
-    lk, mk = np.isfinite(link), np.isfinite(motor)
-    t_l, x_l, t_m, x_m = t_link[lk], link[lk], t_motor[mk], motor[mk]
-    if x_l.size < 2 or x_m.size < 2 or np.abs(np.diff(x_l)).sum() < MIN_DETECT_TRAVEL_RAD:
-        return math.nan
-    inside = (t_l >= t_m[0]) & (t_l <= t_m[-1])
-    if np.count_nonzero(inside) < 2:
-        return math.nan
-    order = np.argsort(t_m, kind='stable')
-    # Single-turn encoders wrap at +-pi: each side unwrapped before its steps are taken.
-    steps_l = np.diff(np.unwrap(x_l)[inside])
-    steps_m = np.diff(np.interp(t_l[inside], t_m[order], np.unwrap(x_m[order])))
-    product = float(steps_l @ steps_m)
-    return math.copysign(1.0, product) if product else math.nan
 
 
 def stamps_before_epoch(bag, topic, earliest_ns):
@@ -377,15 +306,12 @@ class _Run:
         self.out = _Output(writer, plan.joints, truth, diagnostics, (bag, plan.link_topic))
         for joint in plan.joints:
             if topic_token(joint) != joint:
-                warn(bag, f'{joint}: its derived topics are {joint_topic(joint, "...")} (a '
-                     "ROS 2 topic name takes letters, digits and '_', and no part of it "
-                     'starts with a digit)')
+                self._say(joint, joint_words.derived_topics_line(joint_topic(joint, '...')))
         count = bag.topics[plan.link_topic].count
         keep = max(1, count // REPORT_TE_POINTS)
         # What each reducer's last bag left its front, if anything (checked here: a
         # front in the worker must not fail on it).
-        carried = {j: self._carried(j, (initial_states or {}).get(j), settings)
-                   for j in plan.joints}
+        carried = {j: self._carried(j, (initial_states or {}).get(j)) for j in plan.joints}
         self.fronts = {j: JointFront(j, settings, aging, _motor_scale(settings, j), keep,
                                      carried[j]) for j in plan.joints}
         # With a worker, some joints' fronts run there (their paired samples go through
@@ -452,8 +378,7 @@ class _Run:
             self._against_config('motor_direction', int(sense), joint,
                                  f'step {"with" if sense > 0 else "against"} the link')
             if sense < 0 and settings.motor_direction == 'auto':   # never silent: said
-                warn(self.bag, f'the motor encoder of {joint} counts against '
-                     'the link (a negative reduction): its angles are taken reversed')
+                warn(self.bag, joint_words.reversed_motor_line(joint))
             found, units = motor_angle_form(r, ratio)
             if units is not None:
                 # Neither raw nor output in one unit: the joint's reason, never read.
@@ -482,12 +407,8 @@ class _Run:
                                  EFFORT_PLAUSIBLE_RATED * front.analyzer.rated_torque)
         if peak is None:
             return 'auto'
-        where = self.plan.motor_topic or self.plan.link_topic
-        warn(self.bag, f'{joint}: the effort of its motor entry on {where} stays within '
-             f'+-{peak:.3g} N*m beside motor angles divided by the ratio, below the '
-             f'{lowest:.3g} N*m from which the lost motion is read: it is read as the '
-             f"motor's torque, times the ratio {front.ratio:g} (set twin.motor_effort_units "
-             'in --config to joint to read it as the output torque)')
+        self._say(joint, joint_words.motor_torque_line(
+            self.plan.motor_topic or self.plan.link_topic, peak, lowest, front.ratio))
         return 'motor'
 
     def _against_config(self, key, found, joint, seen):
@@ -495,9 +416,9 @@ class _Run:
         configured = getattr(self.settings, key)
         if configured in ('auto', found):
             return
-        where = self.plan.motor_topic or self.plan.link_topic
-        raise InvalidInput(f'{self.bag.path}: twin.{key} is {configured!r} in --config, but '
-                           f'the motor angles of {joint} on {where} {seen}: {key} {found!r}')
+        raise InvalidInput(joint_words.config_contradicted(
+            self.bag.path, key, configured, joint, self.plan.motor_topic or self.plan.link_topic,
+            seen, found))
 
     def _set_angles(self, joint, angles, direction=1.0, efforts=None):
         front = self.fronts[joint]
@@ -644,271 +565,64 @@ class _Run:
         for joint, values in rows.items():
             self.results[joint].truth = np.array(values) if values else None
 
-    def _swap_reason(self, joint):
-        """Say that a joint's link and motor entries are swapped (None when they are not)."""
-        if joint not in self.swapped:
-            return None
-        plan = self.plan
-        motor = plan.motor_names[plan.joints.index(joint)]
-        where = f'{plan.motor_topic} ' if plan.motor_topic else ''
-        return (f'its link entry {joint} moves {self.swapped[joint]:.3g} times its motor '
-                f'entry {where}{motor}, where a motor moves about '
-                f'{self.fronts[joint].ratio:g} times its link: the two are swapped (the '
-                "motor encoder published under the joint's name); the twin reads the link "
-                'from the joint entry and the motor from the motor entry')
-
-    def _units_reason(self, joint):
-        """Say that a joint's encoders read in mixed units (None when they do not)."""
-        if joint not in self.mixed:
-            return None
-        travel, (factor, what, remedy, raw) = self.mixed[joint]
-        plan = self.plan
-        motor = plan.motor_names[plan.joints.index(joint)]
-        where = f'{plan.motor_topic} ' if plan.motor_topic else ''
-        ratio = self.fronts[joint].ratio
-        form = f'{ratio:g} x {factor:.4g}' if raw else f'{factor:.4g}'
-        return (f'its motor entry {where}{motor} moves {travel:.4g} times its link entry '
-                f'{joint}, where a motor in radians moves {ratio:g} times its link (raw '
-                f'angles) or once (divided by the ratio): {form}, which {what} gives; no '
-                f'transmission error can be read from the two: {remedy}')
-
-    def _not_observed(self, joint, front, counts, sides):
-        """Why a joint gave no lost motion it trusts, naming the topic; None when it did."""
-        if front.analyzer.windows_read and front.analyzer.effort_fault is None:
-            return None
-        plan = self.plan
-        for side, _, _ in sides:
-            topic = plan.motor_topic if side == 'motor' else plan.link_topic
-            dup = counts.get(f'{side}_duplicate', 0)
-            if dup and dup >= 0.5 * max(front.samples + dup, 1):
-                return (f'stamps do not advance on {topic}: {dup} samples repeat an earlier '
-                        'stamp (frozen clock or all-zero header stamps)')
-        slow = self._too_slow(joint, front, counts)
-        if slow is not None:
-            return slow
-        spikes = counts.get('spike', 0)
-        if spikes and spikes >= front.samples:
-            return (f'{spikes} of {spikes + front.samples} motor/link sample pairs were '
-                    'dropped as spikes of the transmission error: the encoders jump against '
-                    'each other (positions in degrees or counts, a wrong reduction ratio or '
-                    'motor_angles, link and motor entries swapped, or faulty encoders)')
-        if front.samples == 0:
-            return (f'no motor/link sample pairs on {plan.link_topic}'
-                    + (f' and {plan.motor_topic}' if plan.motor_topic else '')
-                    + f' ({counts.get("unpaired", 0)} unpaired)')
-        return front.analyzer.not_observed_reason(front.effort_topic)
-
-    def _too_slow(self, joint, front, counts):
-        """
-        Say a stream whose samples are further apart than the twin bridges (None if not).
-
-        Every step then starts a new segment: no transmission error, and the motor's turns
-        between samples look like spikes (a 10 Hz stream was said to be in degrees).
-        """
-        pairs = front.samples + counts.get('spike', 0)
-        if joint not in self.span or pairs < 2:
-            return None
-        first, last = (t * 1e-9 for t in self.span[joint])
-        step = (last - first) / (pairs - 1)
-        if not step > self.settings.max_gap_s:
-            return None
-        return (f'its samples on {self.plan.link_topic} are {step:.3f} s apart on average '
-                f'({1.0 / step:.0f} Hz), further than the {self.settings.max_gap_s:g} s the '
-                'twin bridges (twin.max_gap_s): too slow to read the transmission error; '
-                'record the joint states at 100 Hz or more')
-
-    def _effort_said(self, reason):
-        """Name malformed effort arrays as the cause of a joint's missing effort."""
-        faults = self.entries.effort_faults
-        if reason is None or not reason.startswith('no effort on ') or not faults:
-            return reason
-        said = '; '.join(f'{count:,} of {self.entries.rows[topic]:,} JointState messages '
-                         f'on {topic} are malformed: {first}'
-                         for topic, (count, first) in faults.items())
-        return f'{said}; their efforts are not read: {reason}'
-
-    def _note_gaps(self, joint, front):
-        """Say how much of a joint's stream fell in holes, not counted as operation."""
-        a = front.analyzer
-        if joint not in self.span or not a.gaps:
-            return
-        first, last = (t * 1e-9 for t in self.span[joint])
-        if a.gap_time_s < GAP_SHARE * max(last - first, 1e-9):
-            return
-        warn(self.bag, f'{joint}: {a.gap_time_s:,.1f} s of its '
-             f'{last - first:,.1f} s stream ({100 * a.gap_time_s / (last - first):.0f} %) fall '
-             f'in {a.gaps:,} hole{"s" if a.gaps > 1 else ""} longer than '
-             f'{self.settings.max_gap_s:g} s without samples '
-             '(lost messages, or a pause in publishing): that time is not counted as '
-             'operation; if the robot ran meanwhile, its wear rate per operating hour reads '
-             'high and its remaining life short by up to that share')
-
-    def _inputs_said(self, joint, front):
-        """Say how the inputs are read otherwise than published; return the lines said."""
-        said = list(front.twin.input_warnings().values())
+    def _say(self, joint, *lines):
+        """Say each line about ``joint`` (None: nothing to say); return the lines said."""
+        said = [line for line in lines if line is not None]
         for line in said:
             warn(self.bag, f'{joint}: {line}')
         return said
 
-    def _carried(self, joint, state, settings):
-        """
-        Return what the reducer's last bag left its front (``JointFront``'s ``carried``).
+    def _carried(self, joint, state):
+        """Return what the reducer's last bag left its front, saying one not usable."""
+        carried, unusable = joint_words.carried_front(state, self.settings.params_of(joint))
+        self._say(joint, unusable)
+        return carried
 
-        The front's state, or from a store written before it was kept the time offset
-        alone; a front state this analysis cannot continue from (another version, or
-        values out of range) is said, and only its time offset is carried.
-        """
-        state = state or {}
-        front = state.get('front')
-        if front is None:
-            return {'time_offset_s': state.get('time_offset_s')}
-        try:
-            TwinFront(settings.params_of(joint)).continue_from(front)
-        except StateFileError as err:
-            warn(self.bag, f'{joint}: what its last bag learnt of the encoders and the soft '
-                 f'zone is not usable ({err}): learnt afresh from this bag')
-            return {'time_offset_s': state.get('time_offset_s')}
-        return {'front': front}
-
-    def _soft_zone_carried(self, joint, res):
-        """
-        Say a soft zone carried over from the reducer's last bag that this one has not shown.
-
-        Its shortfall still gives the lost motion at the test torque (``initial_states``,
-        :meth:`.pipeline.EstimatorStage.step`); return the lines said.
-        """
-        if res.soft_zone is not None or res.wear is None or not len(res.wear):
-            return []
-        short = float(res.wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
-        if not short > 0.0:
-            return []
-        line = carried_line(short)
-        warn(self.bag, f'{joint}: {line}')
-        return [line]
-
-    def _rate_said(self, joint, res):
-        """Say when an observed joint's wear rate is not yet its own (not resolved)."""
-        if not (res.observed and len(res.wear)):
-            return
-        last = dict(zip(WEAR_ESTIMATE.fields, res.wear[-1]))
-        if not rate_resolved(last):
-            warn(self.bag, f'{joint}: {rate_unresolved(last)}; watch it longer, analyse its '
-                 'recordings in time order with --store, or give its operating time before '
-                 'the recording (service_time_s in --config: the hour meter)')
-
-    def _service_said(self, joint, res, outputs):
-        """
-        Give how a joint's service time was taken; say one that was not, and why.
-
-        ``taken`` None: the reducer met without state has a service time the windows have
-        not judged yet (fewer than the duty needs); it is judged in a later bag of its
-        history (``--store``).
-        """
-        for out in outputs:
-            if 'service' in out:
-                taken, scale, line, hours = out['service']
-                res.service = {'hours': hours, 'taken': taken, 'rate_scale': scale}
-                if taken is False:
-                    warn(self.bag, f'{joint}: {line}')
+    def _reason(self, joint, front, counts, sides):
+        """Why a joint gave no lost motion it trusts (:mod:`.joint_words`); None when it did."""
+        plan = self.plan
+        k = plan.joints.index(joint)
+        if joint in self.swapped:
+            return joint_words.swap_reason(joint, plan.motor_names[k], plan.motor_topic,
+                                           self.swapped[joint], front.ratio)
+        if joint in self.mixed:
+            travel, units = self.mixed[joint]
+            return joint_words.units_reason(joint, plan.motor_names[k], plan.motor_topic,
+                                            travel, units, front.ratio)
+        a = front.analyzer
+        reason = None
+        if not (a.windows_read and a.effort_fault is None):
+            reason = joint_words.stream_reason(
+                [side for side, _, _ in sides], counts, front.samples, self.span.get(joint),
+                self.settings.max_gap_s, plan.link_topic, plan.motor_topic)
+            if reason is None:
+                reason = a.not_observed_reason(front.effort_topic)
+        return joint_words.effort_faults_reason(front.twin.refusal(reason),
+                                                self.entries.effort_faults, self.entries.rows)
 
     def _partial(self, joint, front):
-        """
-        Say when an observed joint's lost motion stopped well before its stream did.
-
-        The estimate then stands as of its last observed window (without effort the
-        operating time after it is not even counted): never presented as the end's
-        without a word.
-        """
-        a = front.analyzer
-        if not a.windows_observed or joint not in self.span:
+        """Say when an observed joint's lost motion stopped well before its stream did."""
+        a, span = front.analyzer, self.span.get(joint)
+        if not a.windows_observed or span is None:
             return None
-        first, last = (t * 1e-9 for t in self.span[joint])
-        start = min(s[0] for s in self.span.values()) * 1e-9
-        end = max(s[1] for s in self.span.values()) * 1e-9
-        if end - last >= max(PARTIAL_SHARE * (end - start),
-                             PARTIAL_WINDOWS * self.settings.window_s):
-            # Its entries went missing while the others' went on: renamed, or no longer
-            # published (nothing about its reducer after that is in the recording).
-            return (f'its samples stop {end - last:.1f} s before the recording ends (after '
-                    f'{last - start:.1f} s of {end - start:.1f} s): the later messages do not '
-                    f'carry {joint} with its motor entry (renamed, or no longer published); '
-                    'the wear and remaining life stand as of its last observed window')
-        stale = a.stale_reason(max(PARTIAL_SHARE * (last - first),
-                                   PARTIAL_WINDOWS * self.settings.window_s),
+        stale = a.stale_reason(joint_words.stale_after_s(span, self.settings.window_s),
                                front.effort_topic)
-        if stale is not None:
-            gap, why, _ = stale
-            return (f'no lost motion in the last {100 * gap / (last - first):.0f} % of the '
-                    f'stream (after {a.last_observed_t - first:.1f} s of {last - first:.1f} '
-                    f's): {why}; the wear and remaining life stand as of the last observed '
-                    'window')
-        if a.samples_without_effort >= PARTIAL_SHARE * max(a.samples_seen, 1):
-            return (f'no effort on {front.effort_topic} in {a.samples_without_effort} of '
-                    f'{a.samples_seen} samples: their operating time is not counted in the '
-                    'wear')
-        return None
+        return joint_words.partial_reason(
+            joint, span, self.span.values(), self.settings.window_s, stale,
+            a.last_observed_t, a.samples_without_effort, a.samples_seen, front.effort_topic)
 
     def _finish(self, chunks, link_clean, motor_clean):
+        """Say the streams' faults, fill each joint's result, write the ingest statuses."""
         plan = self.plan
         self.messages_read = sum(chunks.messages.values())
-        if self.settings.motor_angles == 'auto':
-            unknown = [j for j in plan.joints if j not in self.angles]
-            if unknown:     # never a silent guess: say what was assumed and how to say it
-                warn(self.bag, f'motor angles of {", ".join(unknown)} could not '
-                     f'be told raw from output (the link moved less than '
-                     f'{MIN_DETECT_TRAVEL_RAD:g} rad in a chunk): taken as raw; set '
-                     'twin.motor_angles in --config')
-        for topic, cleaner in ((plan.link_topic, link_clean), (plan.motor_topic, motor_clean)):
-            if cleaner is not None:
-                stamp_scatter(self.bag, topic, chunks.step_scatter.get(topic), cleaner.clock)
-            late = cleaner.counts['out_of_order'] if cleaner is not None else 0
-            if late and late * 100 >= chunks.messages[topic]:   # a loss that size is said
-                warn(self.bag, f'{late:,} of {chunks.messages[topic]:,} '
-                     f'JointState messages on {topic} were logged after a later stamp (out of '
-                     'stamp order) and were dropped, as encoder_ingest drops them live')
-        for topic, count in chunks.malformed.items():
-            if count:   # as Bag.read_joint_states reports them
-                warn(self.bag, f'{count} malformed JointState message(s) on '
-                     f'{topic} skipped; the first: {chunks.first_problem.get(topic)}')
-        effort_faults = self.entries.effort_faults
-        for topic, (count, first) in effort_faults.items():
-            warn(self.bag, f'{count} malformed JointState message(s) on {topic}: {first}; '
-                 'their efforts are not read (which entry a value belongs to cannot be '
-                 'known), their positions are')
+        self._say_streams(chunks, link_clean, motor_clean)
         statuses = []
         last_ns = 0
         for k, (joint, front) in enumerate(self.fronts.items()):
             res = self.results[joint]
-            counts = {}
-            # As encoder_ingest counts them: row rules of the whole stream, value rules of
-            # this joint's columns.
-            sides = (('stream', link_clean, [2 * k, 2 * k + 1]),) if motor_clean is None else (
-                ('link', link_clean, [k]), ('motor', motor_clean, [k]))
-            for side, cleaner, columns in sides:
-                for reason, count in cleaner.counts_for(columns).items():
-                    counts[f'{side}_{reason}'] = int(count)
-                counts[f'{side}_missing'] = int(cleaner.missing)
-                counts[f'{side}_retimed'] = int(cleaner.clock.retimed)
-            counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
-            counts.update(front.pairer.ticks.facts() if motor_clean is not None else
-                          {'pairing': SHARED_STAMPS, 'tick_paired': 0})
-            counts.update({k: int(v) for k, v in front.spikes.counts.items()})
-            counts['published'] = int(front.samples)
-            malformed = sum(chunks.malformed.values()) + sum(
-                count for count, _ in effort_faults.values())
-            counts['malformed_messages'] = int(malformed)
-            res.messages = 0
-            for side, _, columns in sides:
-                # An entry a message did not name is absent, not a non-finite value.
-                topic = plan.motor_topic if side == 'motor' else plan.link_topic
-                named, absent = self.entries.of(topic, columns, chunks)
-                res.messages += named[0]     # the joint's own entry: <joint> or its motor
-                counts[f'{side}_non_finite'] = max(
-                    0, counts.get(f'{side}_non_finite', 0) - int(sum(absent)))
+            counts, sides, res.messages, res.rejected = _ingest_counts(
+                k, front, plan, self.entries, chunks, link_clean, motor_clean)
             res.counts = counts
-            res.rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
-                counts.get(f'{side}_{r}', 0) for side, _, _ in sides for r in _REPAIRED
-                if r != 'clock_jump')
             outputs = self.back_out[joint]
             res.wear = np.array([o['wear'] for o in outputs])
             res.life = np.array([o['life'] for o in outputs])
@@ -921,29 +635,101 @@ class _Run:
             if len(res.wear):
                 last_ns = max(last_ns, stamp_ns(res.wear[-1][0]))
             res.windows = int(front.analyzer.windows_observed)
-            res.reason = self._swap_reason(joint) or self._units_reason(joint) or \
-                self._effort_said(
-                front.twin.refusal(self._not_observed(joint, front, counts, sides)))
+            res.reason = self._reason(joint, front, counts, sides)
             res.partial = self._partial(joint, front)
             res.velocity = _velocity_source(front.analyzer)
-            res.inputs = self._inputs_said(joint, front)
+            res.inputs = self._say(joint, *front.twin.input_warnings().values())
             res.soft_zone = front.twin.soft_zone
-            res.inputs += self._soft_zone_carried(joint, res)
+            res.inputs += self._say(joint, joint_words.soft_zone_carried_line(res.soft_zone,
+                                                                              res.wear))
             res.time_offset_s = front.twin.calibration.to_carry
             res.front_state = front.twin.state()
-            self._rate_said(joint, res)
-            self._service_said(joint, res, outputs)
-            self._note_gaps(joint, front)
+            self._say(joint, joint_words.rate_line(res.observed, res.wear))
+            service, refused = joint_words.service_taken(outputs)
+            if service is not None:
+                res.service = service
+            self._say(joint, *refused)
+            self._say(joint, joint_words.gaps_line(front.analyzer.gap_time_s,
+                                                   front.analyzer.gaps, self.span.get(joint),
+                                                   self.settings.max_gap_s))
             bad = sum(v for k, v in counts.items()
                       if k not in ('published', 'step', *PAIRING_FACTS)
                       and not k.endswith('_wrap'))
-            statuses.append(Status('OK' if bad == 0 else 'WARN',
-                                   f'reducer_twin: {joint} encoder ingest', 'streams clean'
-                                   if bad == 0 else f'{bad} samples dropped or repaired',
+            level, message = joint_words.ingest_status(bad)
+            statuses.append(Status(level, f'reducer_twin: {joint} encoder ingest', message,
                                    joint, counts))
         if statuses and last_ns:
             self.out.raw(self.out.diagnostics, [last_ns],
                          [encode_diagnostic_array(last_ns, statuses)])
+
+    def _say_streams(self, chunks, link_clean, motor_clean):
+        """Say the bag's stream faults: angles assumed raw, scatter, late, malformed."""
+        plan = self.plan
+        if self.settings.motor_angles == 'auto':
+            unknown = [j for j in plan.joints if j not in self.angles]
+            if unknown:     # never a silent guess: say what was assumed and how to say it
+                warn(self.bag, joint_words.angles_assumed_raw_line(unknown,
+                                                                   MIN_DETECT_TRAVEL_RAD))
+        for topic, cleaner in ((plan.link_topic, link_clean), (plan.motor_topic, motor_clean)):
+            if cleaner is not None:
+                stamp_scatter(self.bag, topic, chunks.step_scatter.get(topic), cleaner.clock)
+            late = cleaner.counts['out_of_order'] if cleaner is not None else 0
+            if late:    # a loss of 1 % or more is said
+                line = joint_words.out_of_order_line(late, chunks.messages[topic], topic)
+                if line is not None:
+                    warn(self.bag, line)
+        for topic, count in chunks.malformed.items():
+            if count:   # as Bag.read_joint_states reports them
+                warn(self.bag, joint_words.malformed_line(count, topic,
+                                                          chunks.first_problem.get(topic)))
+        for topic, (count, first) in self.entries.effort_faults.items():
+            warn(self.bag, joint_words.effort_faults_line(count, topic, first))
+
+
+def _ingest_counts(k, front, plan, entries, chunks, link_clean, motor_clean):
+    """
+    Count the ingest of a plan's ``k``-th joint as encoder_ingest counts it.
+
+    Row rules of the whole stream, value rules of this joint's columns; an entry a
+    message did not name is absent, not a non-finite value.
+
+    Returns
+    -------
+    counts : dict
+        :attr:`.results.JointResult.counts`.
+    sides : tuple of (str, StreamCleaner, list of int)
+        Where they were taken: the stream or link and motor sides, their columns.
+    messages, rejected : int
+        :attr:`.results.JointResult.messages` and ``rejected``.
+
+    """
+    counts = {}
+    sides = (('stream', link_clean, [2 * k, 2 * k + 1]),) if motor_clean is None else (
+        ('link', link_clean, [k]), ('motor', motor_clean, [k]))
+    for side, cleaner, columns in sides:
+        for reason, count in cleaner.counts_for(columns).items():
+            counts[f'{side}_{reason}'] = int(count)
+        counts[f'{side}_missing'] = int(cleaner.missing)
+        counts[f'{side}_retimed'] = int(cleaner.clock.retimed)
+    counts['unpaired'] = int(front.unpaired + front.pairer.unpaired)
+    counts.update(front.pairer.ticks.facts() if motor_clean is not None else
+                  {'pairing': SHARED_STAMPS, 'tick_paired': 0})
+    counts.update({k: int(v) for k, v in front.spikes.counts.items()})
+    counts['published'] = int(front.samples)
+    malformed = sum(chunks.malformed.values()) + sum(
+        count for count, _ in entries.effort_faults.values())
+    counts['malformed_messages'] = int(malformed)
+    messages = 0
+    for side, _, columns in sides:
+        topic = plan.motor_topic if side == 'motor' else plan.link_topic
+        named, absent = entries.of(topic, columns, chunks)
+        messages += named[0]     # the joint's own entry: <joint> or its motor
+        counts[f'{side}_non_finite'] = max(
+            0, counts.get(f'{side}_non_finite', 0) - int(sum(absent)))
+    rejected = malformed + counts['unpaired'] + counts['spike'] + sum(
+        counts.get(f'{side}_{r}', 0) for side, _, _ in sides for r in _REPAIRED
+        if r != 'clock_jump')
+    return counts, sides, messages, rejected
 
 
 def _velocity_source(analyzer):

@@ -17,6 +17,10 @@ its moves' squares), and says when it differs from the configured one by more th
 half of every move, which that gate leaves out: the median ratio of those moves is taken
 instead, and a factor of encoders in mixed units or of the other sense is named
 (:data:`UNIT_FACTORS`).
+
+Offline, where the motor angles' form and sense are found from the data, a chunk's travels
+(:func:`motor_travel_ratio`) are classified by :func:`motor_angle_form` and the motor's
+sense is :func:`motor_direction`.
 """
 
 import math
@@ -168,6 +172,71 @@ def motor_angle_form(travel, ratio):
     if travel < 1.0 / math.sqrt(ratio):
         return 'swapped', None
     return ('raw' if travel > math.sqrt(ratio) else 'output'), None
+
+
+MIN_DETECT_TRAVEL_RAD = 0.05
+"""Link travel [rad] a chunk must show before its motor angles are classified."""
+
+
+def motor_travel_ratio(link, motor):
+    """
+    Motor travel over link travel (total variation) of one joint in one chunk.
+
+    About the reduction ratio for raw motor angles and about 1 for angles
+    already divided by it; NaN when the link moved less than
+    :data:`MIN_DETECT_TRAVEL_RAD` (nothing to tell them apart by).
+
+    Parameters
+    ----------
+    link, motor : ndarray
+        Positions of the link and motor entries [rad] (NaN where absent).
+
+    Returns
+    -------
+    float
+        The ratio of travels.
+
+    """
+    def travel(x):
+        x = x[np.isfinite(x)]
+        return float(np.abs(np.diff(x)).sum()) if x.size > 1 else 0.0
+    t_link, t_motor = travel(link), travel(motor)
+    return t_motor / t_link if t_link >= MIN_DETECT_TRAVEL_RAD else math.nan
+
+
+def motor_direction(t_link, link, t_motor, motor):
+    """
+    Whether the motor encoder counts with the link (+1) or against it (-1), in one chunk.
+
+    A gear stage or the encoder's mounting may reverse the motor's sense (ros2_control
+    then carries a negative reduction): the motor's steps, taken at the link's stamps,
+    then correlate negatively with the link's. NaN when the link moved less than
+    :data:`MIN_DETECT_TRAVEL_RAD` or the two do not overlap in time.
+
+    Parameters
+    ----------
+    t_link, link, t_motor, motor : ndarray
+        Stamps [ns] and positions [rad] of the link and motor entries (NaN where absent).
+
+    Returns
+    -------
+    float
+        +1, -1 or NaN.
+
+    """
+    lk, mk = np.isfinite(link), np.isfinite(motor)
+    t_l, x_l, t_m, x_m = t_link[lk], link[lk], t_motor[mk], motor[mk]
+    if x_l.size < 2 or x_m.size < 2 or np.abs(np.diff(x_l)).sum() < MIN_DETECT_TRAVEL_RAD:
+        return math.nan
+    inside = (t_l >= t_m[0]) & (t_l <= t_m[-1])
+    if np.count_nonzero(inside) < 2:
+        return math.nan
+    order = np.argsort(t_m, kind='stable')
+    # Single-turn encoders wrap at +-pi: each side unwrapped before its steps are taken.
+    steps_l = np.diff(np.unwrap(x_l)[inside])
+    steps_m = np.diff(np.interp(t_l[inside], t_m[order], np.unwrap(x_m[order])))
+    product = float(steps_l @ steps_m)
+    return math.copysign(1.0, product) if product else math.nan
 
 
 class TravelRatio:
