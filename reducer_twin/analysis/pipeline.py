@@ -65,15 +65,15 @@ from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, LATEST_QOS
 from reducer_twin.analysis.stages import FRONT_OUTPUT, JointFront, LocalBacks, stamp_ns
 from reducer_twin.analysis.stages import te_values, WorkerBacks
+from reducer_twin.core.effort_source import motor_effort_scale, motor_torque_seen
 from reducer_twin.core.errors import InvalidInput
-from reducer_twin.core.ingest import motor_effort_scale, motor_torque_seen
-from reducer_twin.core.ingest import pair_columns, PAIRING_FACTS
-from reducer_twin.core.ingest import SHARED_STAMPS
 from reducer_twin.core.ingest import stream_cleaners
 from reducer_twin.core.joint_twin import check_topic_tokens, joint_topic, topic_token
 from reducer_twin.core.joint_twin import TOPIC_NAMESPACE
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.observability import EFFORT_PLAUSIBLE_RATED
+from reducer_twin.core.pairing import pair_columns
+from reducer_twin.core.tick_pairing import PAIRING_FACTS, SHARED_STAMPS
 from reducer_twin.core.travel_ratio import MIN_DETECT_TRAVEL_RAD, motor_angle_form
 from reducer_twin.core.travel_ratio import motor_direction, motor_travel_ratio
 from reducer_twin.io.bag import BagDirWriter, open_bag

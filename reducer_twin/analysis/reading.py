@@ -11,9 +11,8 @@ from dataclasses import replace
 
 import numpy as np
 from reducer_twin.analysis.forking import end_process, end_with_parent, parent_of_fork
-from reducer_twin.core.ingest import CLOCK_SCATTER
-from reducer_twin.core.ingest import retimed_message, step_scatter
-from reducer_twin.core.ingest import unstamped_message
+from reducer_twin.core.stamp_clock import CLOCK_SCATTER, retimed_message, step_scatter
+from reducer_twin.core.stamp_clock import unstamped_message
 from reducer_twin.io.mcap_reader import ReadWarning
 from reducer_twin.msg_adapters.jointstate_cdr import concat_batches, JointStateBatch
 
@@ -90,8 +89,8 @@ class BagChunks:
         chunk zero) leaves the log times, when the recorder received each message, as
         the only clock: they are taken for the whole topic, and said. They carry the
         delivery's delays, which the stamp clock re-times where they scatter about the
-        period (:class:`.ingest.StampClock`). A topic that has stamps keeps them: zero
-        stamps among them are a clock that stands, and said so.
+        period (:class:`.stamp_clock.StampClock`). A topic that has stamps keeps them:
+        zero stamps among them are a clock that stands, and said so.
         """
         if topic not in self.unstamped and len(batch):
             logs = batch.log_time_ns

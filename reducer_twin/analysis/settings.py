@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 import math
 
 from reducer_twin.config import joint_reducers, load_config_sources, twin_config
+from reducer_twin.core.effort_source import EFFORT_SOURCES, MOTOR_EFFORT_UNITS
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
-from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig
-from reducer_twin.core.ingest import MOTOR_EFFORT_UNITS
+from reducer_twin.core.ingest import IngestConfig
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import LifeConfig
@@ -50,7 +50,7 @@ class AnalysisSettings:
         The motor entry's effort: ``'motor'`` (motor torque, times the ratio),
         ``'joint'`` (already output torque) or ``'auto'`` (motor torque when the
         motor angles are raw, or beside output angles when its size says so:
-        :func:`.ingest.motor_torque_seen`).
+        :func:`.effort_source.motor_torque_seen`).
     effort_scale : float
         Output torque [N·m] per unit of the effort so read (-1: an effort of the other
         sign; a torque constant times the ratio for a motor current in A).

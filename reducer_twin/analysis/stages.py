@@ -17,12 +17,14 @@ from typing import NamedTuple
 
 import numpy as np
 from reducer_twin.analysis.forking import end_process, end_with_parent, parent_of_fork
+from reducer_twin.core.effort_source import motor_effort_scale
 from reducer_twin.core.errors import ReducerTwinError
 from reducer_twin.core.estimator import EstimatorConfig
-from reducer_twin.core.ingest import motor_effort_scale, Pairer, SpikeFilter
 from reducer_twin.core.joint_twin import CALIBRATION_PIECE_S
 from reducer_twin.core.joint_twin import reducer_status_name, TwinBack, TwinConfig, TwinFront
+from reducer_twin.core.pairing import Pairer
 from reducer_twin.core.pipeline import EstimatorStage
+from reducer_twin.core.spikes import SpikeFilter
 from reducer_twin.core.units import HOUR
 from reducer_twin.core.wear import depth_per_mesh_pass
 from reducer_twin.msg_adapters.diagnostic_cdr import encode_diagnostic_array, Status

@@ -12,14 +12,17 @@ out in the ``encoder_pairs`` layout (stamp [s], motor and link angle [rad], effo
 Two forms: *combined* (one message with ``<joint>`` and ``<joint><motor_suffix>``,
 columns ``link_1, motor_1, link_2, ...``; every joint is paired and despiked at
 once) and *split* (link and motor on two topics, each joint paired by a
-:class:`~reducer_twin.core.ingest.Pairer`).
+:class:`~reducer_twin.core.pairing.Pairer`).
 """
 
 import numpy as np
 
+from .effort_source import choose_effort, motor_effort_scale
 from .errors import InvalidParameter
-from .ingest import choose_effort, IngestConfig, motor_effort_scale, Pairer, SpikeFilter
-from .ingest import SHARED_STAMPS, SpikeFilterBank, stream_cleaners
+from .ingest import IngestConfig, stream_cleaners
+from .pairing import Pairer
+from .spikes import SpikeFilter, SpikeFilterBank
+from .tick_pairing import SHARED_STAMPS
 
 
 STREAMS = {

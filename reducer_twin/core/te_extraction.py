@@ -16,7 +16,7 @@ import numpy as np
 from .encoder_steps import EncoderSteps
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_encoders import HeldEncoders
-from .ingest import TickPairing
+from .tick_pairing import TickPairing
 from .travel_ratio import TravelRatio
 
 
@@ -430,7 +430,7 @@ class TEExtractor:
     reset are not taken for late ones.
 
     Link and motor samples on stamps of their own go through the rule of
-    :class:`~reducer_twin.core.ingest.TickPairing` (the one ``encoder_ingest``
+    :class:`~reducer_twin.core.tick_pairing.TickPairing` (the one ``encoder_ingest``
     and the bag analysis apply): once the data show that the stamps of one
     controller tick differ by jitter only, each link sample is paired with its
     tick's motor sample (the motor sample takes the link stamp) instead of the

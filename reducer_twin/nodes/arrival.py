@@ -8,7 +8,7 @@ topics (:func:`.diagnostics.ingest_statuses`). Zeros among real stamps stay what
 (a clock that stands, which the ingestion drops and counts).
 """
 
-from reducer_twin.core.ingest import unstamped_message
+from reducer_twin.core.stamp_clock import unstamped_message
 
 
 class ArrivalStamps:

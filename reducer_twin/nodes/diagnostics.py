@@ -4,10 +4,10 @@ import math
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
-from reducer_twin.core.ingest import PAIRING_FACTS
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.observability import derived_link_reason, link_from_motor
 from reducer_twin.core.service_time import service_note
+from reducer_twin.core.tick_pairing import PAIRING_FACTS
 from reducer_twin.core.units import HOUR, m_to_um, rad_to_arcmin
 from reducer_twin.msg_adapters.ros import diagnostic_array, diagnostic_status
 from reducer_twin.nodes.parameters import SpecParameters

@@ -22,14 +22,15 @@ communication does; the topic is then published only while something subscribes.
 """
 
 from rclpy.node import Node
+from reducer_twin.core.effort_source import EFFORT_SOURCES, MOTOR_EFFORT_UNITS
 from reducer_twin.core.errors import InvalidInput, InvalidParameter
-from reducer_twin.core.ingest import EFFORT_SOURCES, IngestConfig, MOTOR_EFFORT_UNITS
-from reducer_twin.core.ingest import retimed_message
+from reducer_twin.core.ingest import IngestConfig
 from reducer_twin.core.joint_twin import joint_topic
 from reducer_twin.core.kinematics import total_ratio
 from reducer_twin.core.params import Geometry
 from reducer_twin.core.robot_ingest import check_streams, RobotIngest
 from reducer_twin.core.robot_ingest import STREAMS
+from reducer_twin.core.stamp_clock import retimed_message
 from reducer_twin.msg_adapters.jointstate_cdr import JointStateReader
 from reducer_twin.msg_adapters.jointstate_cdr import MSGTYPE as JOINT_STATE
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES

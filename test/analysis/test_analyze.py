@@ -13,11 +13,13 @@ from reducer_twin.analysis.pipeline import analyze_bag
 from reducer_twin.analysis.settings import AnalysisSettings
 from reducer_twin.analysis.simulate import AGING_KEY, simulate_bag, SimulationSpec
 from reducer_twin.core.errors import BagError
-from reducer_twin.core.ingest import pair_columns, SpikeFilter, StreamCleaner
+from reducer_twin.core.ingest import StreamCleaner
 from reducer_twin.core.joint_twin import TwinConfig
 from reducer_twin.core.kinematics import total_ratio
+from reducer_twin.core.pairing import pair_columns
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import features_record, TimeOffsetCalibration
+from reducer_twin.core.spikes import SpikeFilter
 from reducer_twin.core.te_extraction import TEExtractor
 from reducer_twin.core.transmission_error import lost_motion
 from reducer_twin.core.units import ARCMIN
