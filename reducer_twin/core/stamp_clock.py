@@ -77,6 +77,13 @@ def step_scatter(steps):
     return period, 1.4826 * float(np.median(np.abs(steps - period)))
 
 
+def median_step(t):
+    """Return the median of the positive steps between the stamps ``t`` [s], None without one."""
+    steps = np.diff(t)
+    steps = steps[steps > 0.0]
+    return float(np.median(steps)) if steps.size else None
+
+
 class StampClock:
     """
     Re-time stamps that scatter about a regular controller clock (stamped on arrival).

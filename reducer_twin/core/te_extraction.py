@@ -16,6 +16,7 @@ import numpy as np
 from .encoder_steps import EncoderSteps
 from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_encoders import HeldEncoders
+from .stamp_clock import median_step
 from .tick_pairing import TickPairing
 from .travel_ratio import TravelRatio
 
@@ -532,9 +533,7 @@ class TEExtractor:
                             self.max_gap_s, self.link_time_offset_s, self.last_te)
         if self.held is not None and stream.t.size and self.held.watching:
             if self._period_s is None and stream.t.size > 16:
-                steps = np.diff(stream.t[:4096])
-                steps = steps[steps > 0.0]
-                self._period_s = float(np.median(steps)) if steps.size else None
+                self._period_s = median_step(stream.t[:4096])
             shared = _shared(t_motor, t_link)
             motor_at = motor_angle if shared else _motor_at(t_motor, motor_angle, t_link)
             stale = None if motor_at is None else self.held.stale_mask(link_angle, motor_at,

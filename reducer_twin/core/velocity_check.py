@@ -32,6 +32,8 @@ import math
 
 import numpy as np
 
+from .stamp_clock import median_step
+
 VELOCITY_CHECK_SAMPLES = 200
 """Samples turning at ``min_speed`` or faster (by the link angle's rate) that decide the check."""
 
@@ -373,9 +375,7 @@ class VelocityCheck:
     def _pool_lag(self, t, rate, field, both):
         """Add a chunk's turning samples to the regression of the rate on the field, its rate."""
         if self._period_s is None and t.size >= 3:    # a node's chunks may be a few samples
-            steps = np.diff(t)
-            steps = steps[steps > 0.0]
-            self._period_s = float(np.median(steps)) if steps.size else None
+            self._period_s = median_step(t)
         slope = baseline_rate(t, np.where(np.isfinite(field), field, np.nan))
         ok = both & np.isfinite(slope)
         f, d, r = field[ok], slope[ok], rate[ok]

@@ -26,6 +26,7 @@ from .errors import InvalidInput, InvalidParameter, out_of_range
 from .held_effort import HeldEffort
 from .kinematics import total_ratio
 from .output_speed import OutputSpeed
+from .stamp_clock import median_step
 from .te_extraction import checked_float, cut_pieces, reset_indices, stream_slice
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .window_cut import cut_windows, WINDOW_MODES
@@ -251,7 +252,7 @@ class WindowAnalyzer:
             latest = float(np.max(stream.t[fresh]))
             self.latest_t = latest if self.latest_t is None else max(self.latest_t, latest)
         if self._period_s is None and n_fresh > 16:
-            self._period_s = _median_step(stream.t[fresh][:4096])
+            self._period_s = median_step(stream.t[fresh][:4096])
         use = fresh & np.isfinite(effort)
         if self.fit.held_effort.watching:
             self.fit.held_effort.observe(stream.t[use], effort[use])
@@ -551,13 +552,6 @@ def flank_samples(min_bin_samples, rate_hz):
         return min_bin_samples
     same_time = math.ceil(min_bin_samples * rate_hz / FLANK_RATE_HZ - 1e-9)
     return min(min_bin_samples, max(same_time, LOW_RATE_MIN_FLANK_SAMPLES))
-
-
-def _median_step(t):
-    """Return the median of the stamps' ``t`` positive steps [s], None without one."""
-    steps = np.diff(t)
-    steps = steps[steps > 0]
-    return float(np.median(steps)) if steps.size else None
 
 
 def _whole(name, value, lo, hi):
