@@ -13,7 +13,9 @@ OUT --json`` is run as a user would run it on a recording it has never seen.
 Printed per generator: runs whose command failed (an exit status other than 0 or 3, a
 traceback, no JSON), joints observed and not observed (with their reasons' counts),
 answers that contradict themselves (:func:`contradictions`: e.g. no life left beside a
-lost motion clearly below the limit), and
+lost motion clearly below the limit), joints called worn out whose truth has life left
+(and how many of them say their lost motion is the loaded flanks' play, the width at the
+test torque not compared: ``test_torque_check``), and
 for the observed ones the lost motion's error against the generator's truth at the
 recording's end (median, p90 and max of the absolute relative error; the share within
 10 %) and where the true remaining life lies against the P10-P90 given (within, below,
@@ -94,7 +96,12 @@ def run_one(seed, work):
             # Where the true remaining life lies against P10-P90: -1 below, 0 in, +1 above.
             'life': None if p10 is None or p90 is None else
             (-1 if life < p10 else 1 if life > p90 else 0),
-            'contradictions': contradictions(got, limit=LIMIT_ARCMIN)}
+            'contradictions': contradictions(got, limit=LIMIT_ARCMIN),
+            # What comparing the width at the test torque found (a lost motion that is the
+            # play of the loaded flanks, said, where 'unconfirmed' or 'not compared').
+            'check': got.get('test_torque_check'),
+            # Called worn out (no life left at all) where the truth has life left.
+            'false_worn_out': p90 == 0.0 and life > 0.0}
     return outcome
 
 
@@ -147,6 +154,15 @@ def summary(outcomes, gen):
             print(f'  true remaining life within P10-P90: {100 * np.mean(side == 0):.0f} % '
                   f'(below P10 {100 * np.mean(side < 0):.0f} %, above P90 '
                   f'{100 * np.mean(side > 0):.0f} %; a recording of 20-300 h, no history)')
+        for check in ('none found', 'soft zone', 'unconfirmed', 'not compared'):
+            k = np.array([j['error'] for j in seen if j['check'] == check])
+            if k.size:
+                print(f'  test torque {check}: {k.size} joints, median |rel| '
+                      f'{100 * np.median(np.abs(k)):.1f} %, signed {100 * np.median(k):+.1f} %')
+        false = [j for j in seen if j['false_worn_out']]
+        print(f'  called worn out with life left: {len(false)} ('
+              f'{sum(j["check"] in ("unconfirmed", "not compared") for j in false)} of them '
+              "saying their lost motion may be the loaded flanks' play)")
         for kind in KINDS:
             k = np.abs([j['error'] for j in seen if j['kind'] == kind])
             if k.size:

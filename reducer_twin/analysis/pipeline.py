@@ -640,6 +640,7 @@ class _Run:
             res.velocity = _velocity_source(front.analyzer)
             res.inputs = self._say(joint, *front.twin.input_warnings().values())
             res.soft_zone = front.twin.soft_zone
+            res.test_torque_check = front.analyzer.test_torque_check
             res.inputs += self._say(joint, joint_words.soft_zone_carried_line(res.soft_zone,
                                                                               res.wear))
             res.time_offset_s = front.twin.calibration.to_carry

@@ -66,6 +66,7 @@ class JointResult:
     velocity: str = None
     service: dict = None
     soft_zone: dict = None
+    test_torque_check: str = None
     time_offset_s: float = None
     front_state: dict = None
     inputs: list = field(default_factory=list)
@@ -100,7 +101,12 @@ class JointResult:
             ``shortfall_sd_arcmin``, stream means, ``windows``, ``few_samples`` and
             ``taken_off_arcmin``, what the lost motion given was taken off the play by: the
             shortfall, less where the play followed lies nearer the width,
-            :func:`.pipeline.taken_off`; None when not observed; else None) and
+            :func:`.pipeline.taken_off`; None when not observed; else None),
+            ``test_torque_check`` (what comparing the width at the test torque with the
+            flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (one window
+            showed one), ``'none found'`` or ``'not compared'``, the last two with the lost
+            motion given the play, :attr:`.soft_zone.SoftZoneCheck.outcome`; None when not
+            observed) and
             ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.life_basis.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth
@@ -131,6 +137,7 @@ class JointResult:
         out['velocity'] = self.velocity
         out['inputs'] = list(self.inputs)
         out['soft_zone'] = soft_zone_numbers(self.soft_zone)
+        out['test_torque_check'] = self.test_torque_check if observed else None
         if out['soft_zone'] is not None:
             # What the lost motion given was taken off the play by (pipeline.taken_off).
             taken = wear.get('soft_zone_shortfall_rad') if observed else None
@@ -197,7 +204,7 @@ class BagResult:
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
                             **life_basis({}, {}, False), 'service': None, 'inputs': [],
-                            'soft_zone': None}
+                            'soft_zone': None, 'test_torque_check': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 

@@ -621,7 +621,10 @@ class TwinFront:
         ratio (:mod:`.travel_ratio`); ``'time_offset'``: encoders stamped 3 ms or
         more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`); ``'te_step'``: the TE's
         constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`);
-        ``'soft_zone'``: a play still being taken up at the test torque (:mod:`.soft_zone`).
+        ``'soft_zone'``: a play still being taken up at the test torque (:mod:`.soft_zone`);
+        ``'test_torque'``: a lost motion that is the play of the loaded flanks, the width at
+        the test torque compared in too few windows to tell a soft zone
+        (:attr:`.soft_zone.SoftZoneCheck.caveat`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('velocity_leads', self.analyzer.velocity_leads),
@@ -632,7 +635,8 @@ class TwinFront:
                  ('ratio', self.extractor.ratio_reason),
                  ('time_offset', self.calibration.reason),
                  ('te_step', self.analyzer.te_stepped),
-                 ('soft_zone', self.analyzer.soft_zone))
+                 ('soft_zone', self.analyzer.soft_zone),
+                 ('test_torque', self.analyzer.test_torque_caveat))
         return {kind: line for kind, line in found if line is not None}
 
     @property

@@ -275,17 +275,104 @@ class SoftZoneCheck:
             return None
         short, sd, play = found
         if self._standing:      # said: it stands while clear of zero
-            if not short >= KEEP_SIGMAS * sd:
+            if not (short >= KEEP_SIGMAS * sd and short < play):
                 return None
-        elif not (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play
-                  and short >= SHORTFALL_SIGMAS * sd):
+        elif not _strong(short, sd, play):
             return None
-        if not short < play:
-            # No width left at the test torque: a hysteresis is never narrower than none,
-            # so the bins there are misread (the load's sign mistaken), not a soft zone.
-            return None
+        return self._figures(found)
+
+    def _figures(self, found):
+        """Return :attr:`said`'s dict of the pooled ``(shortfall, sd, play)``."""
+        short, sd, play = found
         return {'shortfall': short, 'shortfall_sd': sd, 'play': play, 'width': play - short,
                 'windows': self.windows, 'few_samples': self._pool is self._sums['thin']}
+
+    @property
+    def unconfirmed(self):
+        """
+        Return the pooled figures where they would say the soft zone but from too few windows.
+
+        The rules of :attr:`said` hold but for :data:`MIN_WINDOWS`: one window compared, and
+        the soft zone stays unsaid (nothing is taken off the play).
+
+        Returns
+        -------
+        dict or None
+            As :attr:`said`'s, or None.
+
+        """
+        found = self.shortfall
+        if found is None or self.windows >= MIN_WINDOWS or not _strong(*found):
+            return None
+        return self._figures(found)
+
+    @property
+    def outcome(self):
+        """
+        Return what the comparisons at the test torque found, or None before any window.
+
+        Returns
+        -------
+        str or None
+            ``'soft zone'`` (:attr:`said`), ``'unconfirmed'`` (:attr:`unconfirmed`),
+            ``'not compared'`` (no window compared) or ``'none found'``.
+
+        """
+        if not self._seen:
+            return None
+        if self.said is not None:
+            return 'soft zone'
+        if self.unconfirmed is not None:
+            return 'unconfirmed'
+        return 'none found' if self.windows else 'not compared'
+
+    @property
+    def caveat(self):
+        """
+        Say when the lost motion read may exceed the catalogue's for want of comparisons.
+
+        Until the width at the test torque has been compared with the flanks of higher
+        loads in :data:`MIN_WINDOWS` windows, the lost motion given is the play those
+        flanks give: a unit whose play is still being taken up at the test torque has less
+        there. Said where a window was analysed but none compared (no far line, or no bin
+        at the test torque), and where one window compared and showed a soft zone
+        (:attr:`unconfirmed`); None once the soft zone is said, or windows compared showed
+        none.
+
+        Returns
+        -------
+        str or None
+            The line.
+
+        """
+        outcome = self.outcome
+        if outcome not in ('unconfirmed', 'not compared'):
+            return None
+        tt = self.takeup_torque
+        if outcome == 'unconfirmed':
+            unconfirmed = self.unconfirmed
+            short, sd, play = (unconfirmed[k] / ARCMIN
+                               for k in ('shortfall', 'shortfall_sd', 'play'))
+            return (f"the transmission error's hysteresis at the lost-motion test torque "
+                    f'({tt:.1f} N·m) read {short:.2f} +- {sd:.2f} arcmin narrower than the '
+                    f'flanks of higher loads give, in the one window that compared them (a '
+                    f'soft zone is said from {MIN_WINDOWS}): the lost motion given is the '
+                    f'play those flanks give ({play:.2f} arcmin); the width at the test '
+                    f"torque, the catalogue's lost motion, may be as little as "
+                    f'{play - short:.2f} arcmin. A longer recording decides')
+        if not self._line_defined():
+            why = (f'no window held {FAR_BINS} bins of loads beyond {FAR_LOADS * tt:.0f} N·m, '
+                   f'the straight flanks the width at the lost-motion test torque ({tt:.1f} '
+                   'N·m) is compared with')
+        else:
+            why = (f'no window held the load at the lost-motion test torque ({tt:.1f} N·m) '
+                   'long enough under both signs to compare the width there with the flanks '
+                   'of higher loads')
+        return (f'{why}: whether the play is still being taken up at the test torque (a soft '
+                'zone whose knee lies above it, as on catalogue-style units) is not known, so '
+                "the lost motion given is the play those flanks give, more than the catalogue's "
+                'lost motion where there is such a zone. A longer recording, or one whose load '
+                'dwells near the test torque, compares them')
 
     def state(self):
         """
@@ -378,6 +465,14 @@ class SoftZoneCheck:
                 'the lost motion and remaining life are given at the test torque from here on '
                 '(the play the estimate follows, less this shortfall but not below that '
                 'width); the wear is that of the play')
+
+
+def _strong(short, sd, play):
+    """Return whether a pooled shortfall is strong enough to be said (:attr:`SoftZoneCheck.said`)."""
+    # short < play: no width left at the test torque means the bins there are misread
+    # (the load's sign mistaken), not a soft zone; a hysteresis is never narrower than none.
+    return (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play
+            and short >= SHORTFALL_SIGMAS * sd and short < play)
 
 
 def carried_line(shortfall):

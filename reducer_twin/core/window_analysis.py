@@ -328,6 +328,16 @@ class WindowAnalyzer:
         return self.fit.soft_zone.reason
 
     @property
+    def test_torque_caveat(self):
+        """Say when the lost motion read may exceed the catalogue's (``SoftZoneCheck.caveat``)."""
+        return self.fit.soft_zone.caveat if self.windows_observed else None
+
+    @property
+    def test_torque_check(self):
+        """Return what the width at the test torque showed (``SoftZoneCheck.outcome``), or None."""
+        return self.fit.soft_zone.outcome if self.windows_observed else None
+
+    @property
     def soft_zone_said(self):
         """Return the soft zone's pooled figures once said, else None (``SoftZoneCheck.said``)."""
         return self.fit.soft_zone.said

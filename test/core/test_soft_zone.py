@@ -74,6 +74,41 @@ def test_one_window_or_a_small_zone_is_not_enough():
     assert _checked(*_catalogue_bins(0.3, 0.06)).reason is None
 
 
+def test_one_window_showing_a_soft_zone_says_the_lost_motion_given_may_be_the_play():
+    # A 20-s recording compared one window: 0.8 arcmin narrower at 100 standard errors.
+    # The soft zone is said from two windows, so nothing is taken off the play, but the
+    # answer says the catalogue's lost motion may be that much less (a third-generator
+    # shoulder read 4.85 arcmin, "worn out", for a true 2.53; its one window gave 2.67).
+    check = _checked(*_catalogue_bins(2.0, 0.05, windows=1))
+    assert check.said is None and check.reason is None and check.outcome == 'unconfirmed'
+    assert check.unconfirmed['width'] == pytest.approx(1.2 * ARCMIN, rel=0.05)
+    assert 'one window' in check.caveat and 'may be as little as 1.2' in check.caveat
+    assert 'play those flanks give (2.00 arcmin)' in check.caveat
+    # With a second window it is said, and the caveat gives way to the line.
+    check.observe(*_catalogue_bins(2.0, 0.05, windows=1))
+    assert check.outcome == 'soft zone' and check.said is not None and check.caveat is None
+
+
+def test_windows_that_cannot_compare_say_the_lost_motion_is_the_play():
+    torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=3)
+    low = CENTRES < 2.0 * TEST_TORQUE
+    check = _checked(torque, width, std, usable & ~low)    # loaded far beyond it only
+    assert check.outcome == 'not compared' and check.windows == 0
+    assert 'no window held the load at the lost-motion test torque' in check.caveat
+    assert 'the lost motion given is the play' in check.caveat
+    check = _checked(torque, width, std, usable & low)     # near it only: no straight line
+    assert check.outcome == 'not compared'
+    assert check.caveat.startswith('no window held 3 bins of loads beyond 59 N·m')
+    assert SoftZoneCheck(TEST_TORQUE, STIFFNESS).outcome is None      # nothing seen
+    assert SoftZoneCheck(TEST_TORQUE, STIFFNESS).caveat is None
+
+
+@pytest.mark.parametrize('windows', [1, 4])
+def test_windows_compared_without_a_soft_zone_say_nothing(windows):
+    check = _checked(*_catalogue_bins(2.0, 0.02, windows=windows))
+    assert check.outcome == 'none found' and check.caveat is None
+
+
 def test_a_width_at_the_test_torque_of_none_or_less_is_no_soft_zone():
     # Bins at the test torque narrower than no hysteresis at all are misread bins (the
     # load's sign mistaken there), not a play still being taken up: taken off the play,
