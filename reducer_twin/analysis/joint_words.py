@@ -311,6 +311,39 @@ def soft_zone_carried_line(soft_zone, wear):
     return carried_line(short)
 
 
+def not_compared_line(observed, levels, wear, line):
+    """
+    Say that an alarm rests on the loaded flanks' play, the test torque never compared.
+
+    Said only where the answer is a warning or worse: a clean short recording whose
+    loads seldom dwell at the test torque is common, and on a unit without a soft zone the
+    play is its lost motion. Nothing where a soft zone carried over from the reducer's last
+    recording gives the lost motion at the test torque.
+
+    Parameters
+    ----------
+    observed : bool
+        Whether the joint is observed (:attr:`.results.JointResult.observed`).
+    levels : list of str
+        Its ``/diagnostics`` levels, one per window.
+    wear : ndarray
+        Its wear records (rows of :data:`.layouts.WEAR_ESTIMATE`).
+    line : str or None
+        Why no window compared (:attr:`.soft_zone.SoftZoneCheck.not_compared`), or None.
+
+    Returns
+    -------
+    str or None
+        ``line`` where it is to be said, else None.
+
+    """
+    if line is None or not observed or not levels or not len(wear) \
+            or levels[-1] not in ('WARN', 'ERROR'):
+        return None
+    short = float(wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
+    return None if short > 0.0 else line
+
+
 def rate_line(observed, wear):
     """
     Say when an observed joint's wear rate is not yet its own (not resolved).

@@ -641,6 +641,8 @@ class _Run:
             res.inputs = self._say(joint, *front.twin.input_warnings().values())
             res.soft_zone = front.twin.soft_zone
             res.test_torque_check = front.analyzer.test_torque_check
+            res.inputs += self._say(joint, joint_words.not_compared_line(
+                res.observed, res.levels, res.wear, front.analyzer.test_torque_not_compared))
             res.inputs += self._say(joint, joint_words.soft_zone_carried_line(res.soft_zone,
                                                                               res.wear))
             res.time_offset_s = front.twin.calibration.to_carry

@@ -622,8 +622,8 @@ class TwinFront:
         more apart (:attr:`.pipeline.TimeOffsetCalibration.reason`); ``'te_step'``: the TE's
         constant stepped (an encoder re-homed, :attr:`.window_analysis.WindowAnalyzer.te_stepped`);
         ``'soft_zone'``: a play still being taken up at the test torque (:mod:`.soft_zone`);
-        ``'test_torque'``: a lost motion that is the play of the loaded flanks, the width at
-        the test torque compared in too few windows to tell a soft zone
+        ``'test_torque'``: a lost motion that is the play of the loaded flanks where the one
+        window that compared the width at the test torque showed a soft zone
         (:attr:`.soft_zone.SoftZoneCheck.caveat`).
         """
         found = (('velocity', self.analyzer.velocity_fault),

@@ -329,37 +329,52 @@ class SoftZoneCheck:
     @property
     def caveat(self):
         """
-        Say when the lost motion read may exceed the catalogue's for want of comparisons.
+        Say when the one window compared showed a soft zone, too few to say it.
 
         Until the width at the test torque has been compared with the flanks of higher
         loads in :data:`MIN_WINDOWS` windows, the lost motion given is the play those
         flanks give: a unit whose play is still being taken up at the test torque has less
-        there. Said where a window was analysed but none compared (no far line, or no bin
-        at the test torque), and where one window compared and showed a soft zone
-        (:attr:`unconfirmed`); None once the soft zone is said, or windows compared showed
-        none.
+        there. Where the one window compared showed a soft zone (:attr:`unconfirmed`), the
+        line gives the width it read.
 
         Returns
         -------
         str or None
-            The line.
+            The line, or None.
 
         """
-        outcome = self.outcome
-        if outcome not in ('unconfirmed', 'not compared'):
+        unconfirmed = self.unconfirmed if self.outcome == 'unconfirmed' else None
+        if unconfirmed is None:
+            return None
+        short, sd, play = (unconfirmed[k] / ARCMIN for k in ('shortfall', 'shortfall_sd', 'play'))
+        return (f"the transmission error's hysteresis at the lost-motion test torque "
+                f'({self.takeup_torque:.1f} N·m) read {short:.2f} +- {sd:.2f} arcmin narrower '
+                'than the flanks of higher loads give, in the one window that compared them '
+                f'(a soft zone is said from {MIN_WINDOWS}): the lost motion given is the play '
+                f'those flanks give ({play:.2f} arcmin); the width at the test torque, the '
+                f"catalogue's lost motion, may be as little as {play - short:.2f} arcmin. A "
+                'longer recording decides')
+
+    @property
+    def not_compared(self):
+        """
+        Say why no window compared the width at the test torque, where none did, else None.
+
+        The lost motion given is then the play of the loaded flanks, whether or not the
+        unit has a soft zone beyond the test torque. Said by the analysis of a recording
+        where its answer is a warning or worse (a short recording whose loads seldom dwell
+        at the test torque is common, and on a unit without a soft zone the play is its
+        lost motion).
+
+        Returns
+        -------
+        str or None
+            The line, or None.
+
+        """
+        if self.outcome != 'not compared':
             return None
         tt = self.takeup_torque
-        if outcome == 'unconfirmed':
-            unconfirmed = self.unconfirmed
-            short, sd, play = (unconfirmed[k] / ARCMIN
-                               for k in ('shortfall', 'shortfall_sd', 'play'))
-            return (f"the transmission error's hysteresis at the lost-motion test torque "
-                    f'({tt:.1f} N·m) read {short:.2f} +- {sd:.2f} arcmin narrower than the '
-                    f'flanks of higher loads give, in the one window that compared them (a '
-                    f'soft zone is said from {MIN_WINDOWS}): the lost motion given is the '
-                    f'play those flanks give ({play:.2f} arcmin); the width at the test '
-                    f"torque, the catalogue's lost motion, may be as little as "
-                    f'{play - short:.2f} arcmin. A longer recording decides')
         if not self._line_defined():
             why = (f'no window held {FAR_BINS} bins of loads beyond {FAR_LOADS * tt:.0f} N·m, '
                    f'the straight flanks the width at the lost-motion test torque ({tt:.1f} '
@@ -468,7 +483,7 @@ class SoftZoneCheck:
 
 
 def _strong(short, sd, play):
-    """Return whether a pooled shortfall is strong enough to be said (:attr:`SoftZoneCheck.said`)."""
+    """Return whether a pooled shortfall is strong enough to be said (``SoftZoneCheck.said``)."""
     # short < play: no width left at the test torque means the bins there are misread
     # (the load's sign mistaken), not a soft zone; a hysteresis is never narrower than none.
     return (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play

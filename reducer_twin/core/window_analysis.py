@@ -329,8 +329,13 @@ class WindowAnalyzer:
 
     @property
     def test_torque_caveat(self):
-        """Say when the lost motion read may exceed the catalogue's (``SoftZoneCheck.caveat``)."""
+        """Say when one window showed a soft zone, too few to say (``SoftZoneCheck.caveat``)."""
         return self.fit.soft_zone.caveat if self.windows_observed else None
+
+    @property
+    def test_torque_not_compared(self):
+        """Say why no window compared the width at the test torque (``SoftZoneCheck``)."""
+        return self.fit.soft_zone.not_compared if self.windows_observed else None
 
     @property
     def test_torque_check(self):

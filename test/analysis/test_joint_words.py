@@ -1,7 +1,9 @@
 """Spec: the words of a joint (:mod:`reducer_twin.analysis.joint_words`) from plain values."""
 
+import numpy as np
 from reducer_twin.analysis import joint_words
 from reducer_twin.core.params import ReducerParams
+from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
 
 def test_a_swap_names_both_entries_and_the_motor_topic_when_split():
@@ -86,3 +88,19 @@ def test_stream_warnings_say_a_loss_of_one_percent_or_more():
         '10 of 1,000 JointState messages on /js were logged after a later stamp')
     assert joint_words.ingest_status(0) == ('OK', 'streams clean')
     assert joint_words.ingest_status(3) == ('WARN', '3 samples dropped or repaired')
+
+
+def test_an_alarm_on_the_loaded_flanks_play_says_the_test_torque_was_not_compared():
+    line = 'no window held the load at the lost-motion test torque ...'
+    wear = np.zeros((3, len(WEAR_ESTIMATE.fields)))
+    said = joint_words.not_compared_line
+    assert said(True, ['OK', 'ERROR'], wear, line) == line
+    assert said(True, ['ERROR', 'WARN'], wear, line) == line
+    # A clean answer, a joint not observed, nothing to say: no line.
+    assert said(True, ['WARN', 'OK'], wear, line) is None
+    assert said(False, ['ERROR'], wear, line) is None
+    assert said(True, ['ERROR'], wear, None) is None
+    # A soft zone carried over from the reducer's last recording gives the lost motion at
+    # the test torque already.
+    wear[-1, WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')] = 1e-4
+    assert said(True, ['ERROR'], wear, line) is None

@@ -87,26 +87,28 @@ def test_one_window_showing_a_soft_zone_says_the_lost_motion_given_may_be_the_pl
     # With a second window it is said, and the caveat gives way to the line.
     check.observe(*_catalogue_bins(2.0, 0.05, windows=1))
     assert check.outcome == 'soft zone' and check.said is not None and check.caveat is None
+    assert check.not_compared is None
 
 
-def test_windows_that_cannot_compare_say_the_lost_motion_is_the_play():
+def test_windows_that_cannot_compare_say_why_and_that_the_lost_motion_is_the_play():
     torque, width, std, usable = _catalogue_bins(2.0, 0.05, windows=3)
     low = CENTRES < 2.0 * TEST_TORQUE
     check = _checked(torque, width, std, usable & ~low)    # loaded far beyond it only
-    assert check.outcome == 'not compared' and check.windows == 0
-    assert 'no window held the load at the lost-motion test torque' in check.caveat
-    assert 'the lost motion given is the play' in check.caveat
+    assert check.outcome == 'not compared' and check.windows == 0 and check.caveat is None
+    assert 'no window held the load at the lost-motion test torque' in check.not_compared
+    assert 'the lost motion given is the play' in check.not_compared
     check = _checked(torque, width, std, usable & low)     # near it only: no straight line
     assert check.outcome == 'not compared'
-    assert check.caveat.startswith('no window held 3 bins of loads beyond 59 N·m')
-    assert SoftZoneCheck(TEST_TORQUE, STIFFNESS).outcome is None      # nothing seen
-    assert SoftZoneCheck(TEST_TORQUE, STIFFNESS).caveat is None
+    assert check.not_compared.startswith('no window held 3 bins of loads beyond 59 N·m')
+    nothing = SoftZoneCheck(TEST_TORQUE, STIFFNESS)          # no window seen
+    assert nothing.outcome is None and nothing.caveat is None and nothing.not_compared is None
 
 
 @pytest.mark.parametrize('windows', [1, 4])
 def test_windows_compared_without_a_soft_zone_say_nothing(windows):
     check = _checked(*_catalogue_bins(2.0, 0.02, windows=windows))
-    assert check.outcome == 'none found' and check.caveat is None
+    assert check.outcome == 'none found'
+    assert check.caveat is None and check.not_compared is None
 
 
 def test_a_width_at_the_test_torque_of_none_or_less_is_no_soft_zone():
