@@ -294,6 +294,8 @@ def te_status(twin, topic, level, message, values, stale_after_s, quiet_s, silen
     if soft is not None:     # the soft zone's line as numbers (analyze --json's soft_zone)
         values['lost_motion_at_test_torque_arcmin'] = rad_to_arcmin(soft['width'])
         values['soft_zone_play_arcmin'] = rad_to_arcmin(soft['play'])
+    if analyzer.test_torque_check is not None:    # analyze --json's test_torque_check
+        values['test_torque_check'] = analyzer.test_torque_check
     stale = analyzer.stale_reason(stale_after_s, topic)
     if reason is not None:
         fixed = analyzer.effort_fault is not None or link_from_motor(analyzer)

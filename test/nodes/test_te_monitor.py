@@ -427,6 +427,7 @@ def test_a_play_still_taken_up_at_the_test_torque_is_said_with_its_width_as_a_ke
     values = ros.key_values(status)
     assert float(values['lost_motion_at_test_torque_arcmin']) == pytest.approx(0.9, rel=0.15)
     assert float(values['soft_zone_play_arcmin']) == pytest.approx(1.5, rel=0.15)
+    assert values['test_torque_check'] == 'soft zone'
     logged = [x for x in capfd.readouterr().err.splitlines() if 'narrower than the' in x]
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
 
