@@ -225,3 +225,12 @@ def test_the_row_carries_the_soft_zones_figures_of_the_latest_analysis():
                'shortfall_sd_arcmin': 0.05, 'windows': 10}
     reducer.summary['soft_zone'] = figures
     assert fleet_row(reducer, PARAMS)['soft_zone'] == figures
+
+
+def test_the_row_says_what_the_comparisons_at_the_test_torque_found():
+    # 'not compared': the lost motion the row gives is the loaded flanks' play; a store
+    # written before the analysis said so gives None (unknown), never a verdict.
+    reducer = _reducer(5000.0)
+    assert fleet_row(reducer, PARAMS)['test_torque_check'] is None
+    reducer.summary['test_torque_check'] = 'not compared'
+    assert fleet_row(reducer, PARAMS)['test_torque_check'] == 'not compared'
