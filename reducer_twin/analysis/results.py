@@ -103,10 +103,10 @@ class JointResult:
             shortfall, less where the play followed lies nearer the width,
             :func:`.pipeline.taken_off`; None when not observed; else None),
             ``test_torque_check`` (what comparing the width at the test torque with the
-            flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (one window
-            showed one), ``'none found'`` or ``'not compared'``, the last two with the lost
-            motion given the play, :attr:`.soft_zone.SoftZoneCheck.outcome`; None when not
-            observed) and
+            flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (one of the
+            size that is said, from too few windows or standard errors), ``'none found'`` or
+            ``'not compared'``; but for the first, the lost motion given is the play;
+            :attr:`.soft_zone.SoftZoneCheck.outcome`; None when not observed) and
             ``rate_resolved`` (whether the remaining life rests on
             the unit's own growth, :func:`.life_basis.rate_resolved`; None when not observed),
             ``growth_law`` (where the remaining life follows the lost motion's observed growth

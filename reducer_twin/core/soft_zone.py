@@ -68,6 +68,13 @@ SHORTFALL_SHARE = 0.2
 SHORTFALL_SIGMAS = 5.0
 """... and this many standard errors above zero ..."""
 
+HINT_SIGMAS = 1.0
+"""
+Standard errors above zero from which a shortfall of the size that is said, but not said
+(too few windows, or too few standard errors), is told: the lost motion given may be the
+play (:attr:`SoftZoneCheck.unconfirmed`).
+"""
+
 MIN_WINDOWS = 2
 """... from at least this many windows."""
 
@@ -290,10 +297,13 @@ class SoftZoneCheck:
     @property
     def unconfirmed(self):
         """
-        Return the pooled figures where they would say the soft zone but from too few windows.
+        Return the pooled figures of a soft zone of the size that is said, but not said.
 
-        The rules of :attr:`said` hold but for :data:`MIN_WINDOWS`: one window compared, and
-        the soft zone stays unsaid (nothing is taken off the play).
+        The shortfall is as large as :data:`SHORTFALL_RAD` and :data:`SHORTFALL_SHARE` of
+        the play and :data:`HINT_SIGMAS` standard errors above zero, but the windows compared
+        are too few (:data:`MIN_WINDOWS`) or their evidence short of
+        :data:`SHORTFALL_SIGMAS`: nothing is taken off the play, and the width at the test
+        torque may be as little as these figures give.
 
         Returns
         -------
@@ -302,7 +312,11 @@ class SoftZoneCheck:
 
         """
         found = self.shortfall
-        if found is None or self.windows >= MIN_WINDOWS or not _strong(*found):
+        if found is None or self.said is not None:
+            return None
+        short, sd, play = found
+        if not (short >= SHORTFALL_RAD and short >= SHORTFALL_SHARE * play
+                and short >= HINT_SIGMAS * sd and short < play):
             return None
         return self._figures(found)
 
@@ -329,13 +343,12 @@ class SoftZoneCheck:
     @property
     def caveat(self):
         """
-        Say when the one window compared showed a soft zone, too few to say it.
+        Say when the windows compared show a soft zone that is not said.
 
-        Until the width at the test torque has been compared with the flanks of higher
-        loads in :data:`MIN_WINDOWS` windows, the lost motion given is the play those
-        flanks give: a unit whose play is still being taken up at the test torque has less
-        there. Where the one window compared showed a soft zone (:attr:`unconfirmed`), the
-        line gives the width it read.
+        Until a soft zone is said, the lost motion given is the play the flanks of higher
+        loads give: a unit whose play is still being taken up at the test torque has less
+        there. Where the windows compared show one of the size that is said, from too few
+        windows or standard errors (:attr:`unconfirmed`), the line gives the width they read.
 
         Returns
         -------
@@ -347,11 +360,15 @@ class SoftZoneCheck:
         if unconfirmed is None:
             return None
         short, sd, play = (unconfirmed[k] / ARCMIN for k in ('shortfall', 'shortfall_sd', 'play'))
+        n = unconfirmed['windows']
+        where = (f'in the one window that compared them (a soft zone is said from {MIN_WINDOWS})'
+                 if n == 1 else f'pooled over the {n} windows that compared them, '
+                 f'{short / sd:.1f} standard errors (a soft zone is said at '
+                 f'{SHORTFALL_SIGMAS:.0f})')
         return (f"the transmission error's hysteresis at the lost-motion test torque "
                 f'({self.takeup_torque:.1f} N·m) read {short:.2f} +- {sd:.2f} arcmin narrower '
-                'than the flanks of higher loads give, in the one window that compared them '
-                f'(a soft zone is said from {MIN_WINDOWS}): the lost motion given is the play '
-                f'those flanks give ({play:.2f} arcmin); the width at the test torque, the '
+                f'than the flanks of higher loads give, {where}: the lost motion given is the '
+                f'play those flanks give ({play:.2f} arcmin); the width at the test torque, the '
                 f"catalogue's lost motion, may be as little as {play - short:.2f} arcmin. A "
                 'longer recording decides')
 
