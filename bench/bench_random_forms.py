@@ -159,10 +159,14 @@ def summary(outcomes, gen):
             if k.size:
                 print(f'  test torque {check}: {k.size} joints, median |rel| '
                       f'{100 * np.median(np.abs(k)):.1f} %, signed {100 * np.median(k):+.1f} %')
-        false = [j for j in seen if j['false_worn_out']]
+        false = [(o['args'].split()[1], name, j) for o in runs if not o['failed']
+                 for name, j in o['joints'].items() if j in seen and j['false_worn_out']]
         print(f'  called worn out with life left: {len(false)} ('
-              f'{sum(j["check"] in ("unconfirmed", "not compared") for j in false)} of them '
-              "saying their lost motion may be the loaded flanks' play)")
+              f'{sum(j["check"] in ("unconfirmed", "not compared") for *_, j in false)} of '
+              "them saying their lost motion may be the loaded flanks' play)")
+        for seed, name, j in false:
+            print(f'    seed {seed} {name} ({j["kind"]}): {100 * j["error"]:+.0f} %, test '
+                  f'torque {j["check"]}')
         for kind in KINDS:
             k = np.abs([j['error'] for j in seen if j['kind'] == kind])
             if k.size:
