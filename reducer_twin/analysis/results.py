@@ -103,8 +103,9 @@ class JointResult:
             shortfall, less where the play followed lies nearer the width,
             :func:`.pipeline.taken_off`; None when not observed; else None),
             ``test_torque_check`` (what comparing the width at the test torque with the
-            flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (one of the
-            size that is said, from too few windows or standard errors), ``'none found'`` or
+            flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (a shortfall
+            past the floor that is not said: too few windows or standard errors, or under a
+            fifth of the play), ``'none found'`` or
             ``'not compared'``; but for the first, the lost motion given is the play;
             :attr:`.soft_zone.SoftZoneCheck.outcome`; None when not observed) and
             ``rate_resolved`` (whether the remaining life rests on
