@@ -160,7 +160,8 @@ def summary(outcomes, gen):
                 print(f'  test torque {check}: {k.size} joints, median |rel| '
                       f'{100 * np.median(np.abs(k)):.1f} %, signed {100 * np.median(k):+.1f} %')
         false = [(o['args'].split()[1], name, j) for o in runs if not o['failed']
-                 for name, j in o['joints'].items() if j in seen and j['false_worn_out']]
+                 for name, j in o['joints'].items()
+                 if j['observed'] and j['error'] is not None and j['false_worn_out']]
         print(f'  called worn out with life left: {len(false)} ('
               f'{sum(j["check"] in ("unconfirmed", "not compared") for *_, j in false)} of '
               "them saying their lost motion may be the loaded flanks' play)")

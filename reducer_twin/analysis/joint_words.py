@@ -303,12 +303,17 @@ def soft_zone_carried_line(soft_zone, wear):
         The line, or None when this bag showed its soft zone or none was carried.
 
     """
-    if soft_zone is not None or wear is None or not len(wear):
-        return None
-    short = float(wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
-    if not short > 0.0:
+    short = _latest_shortfall(wear)
+    if soft_zone is not None or not short > 0.0:
         return None
     return carried_line(short)
+
+
+def _latest_shortfall(wear):
+    """Return the soft zone's shortfall the latest wear record gives the lost motion less [rad]."""
+    if wear is None or not len(wear):
+        return 0.0
+    return float(wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
 
 
 def not_compared_line(observed, levels, wear, line):
@@ -337,11 +342,9 @@ def not_compared_line(observed, levels, wear, line):
         ``line`` where it is to be said, else None.
 
     """
-    if line is None or not observed or not levels or not len(wear) \
-            or levels[-1] not in ('WARN', 'ERROR'):
+    if line is None or not observed or not levels or levels[-1] not in ('WARN', 'ERROR'):
         return None
-    short = float(wear[-1][WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')])
-    return None if short > 0.0 else line
+    return None if _latest_shortfall(wear) > 0.0 else line
 
 
 def rate_line(observed, wear):
