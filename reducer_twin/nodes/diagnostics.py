@@ -210,7 +210,11 @@ def say_faults(logger, joint, twin, said):
     for kind, (level, line) in faults.items():
         if line and kind not in said:
             said.add(kind)
-            getattr(logger, level)(f'{joint}: {line}')
+            # One call site per severity: rclpy refuses a call site's second severity.
+            if level == 'error':
+                logger.error(f'{joint}: {line}')
+            else:
+                logger.warning(f'{joint}: {line}')
 
 
 def te_monitor_statuses(monitor, stale_after_s):

@@ -74,7 +74,8 @@ class FrontKeeper:
             for line in lines:
                 self.log.info(f'{joint}: {line} (state {used})')
         node.create_subscription(String, joint_topic(joint, 'maintenance'),
-                                 lambda msg: WORKER.submit(self._follow, msg.data), latest_qos())
+                                 lambda msg: WORKER.post(node, self._follow, msg.data),
+                                 latest_qos())
 
     def _follow(self, event):
         """Start the window analysis afresh for a replaced reducer, once per event (worker)."""

@@ -81,7 +81,7 @@ class LifePublisher(Node):
             self.rejects.reject('bad_features', str(err))
             return
         self.last_features = rec
-        WORKER.submit(self._observe_duty, duty)
+        WORKER.post(self, self._observe_duty, duty)
 
     def _observe_duty(self, duty):
         self.rejects.guard('life', 'bad_features', self.stage.observe_duty, duty)
@@ -92,7 +92,7 @@ class LifePublisher(Node):
         except InvalidInput as err:
             self.rejects.reject('bad_wear', str(err))
             return
-        WORKER.submit(self._assess, wear)
+        WORKER.post(self, self._assess, wear)
 
     def _assess(self, wear):
         """Sample the remaining life of one estimate and publish it (on the worker)."""

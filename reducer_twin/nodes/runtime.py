@@ -11,7 +11,7 @@ import threading
 import time
 
 import rclpy
-from rclpy.exceptions import ParameterException
+from rclpy.exceptions import InvalidHandle, ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
@@ -86,6 +86,21 @@ class BackgroundWorker:
         self._queue.put((future, fn, args, kwargs))
         return future
 
+    def post(self, node, fn, *args):
+        """
+        Queue ``fn(*args)`` that nobody waits for; a failure is logged on ``node``'s log.
+
+        An exception of a task from :meth:`submit` waits in its future; one no caller
+        reads would vanish. A node that was destroyed meanwhile is skipped quietly.
+
+        Returns
+        -------
+        concurrent.futures.Future
+            Holds the result (None if the task failed).
+
+        """
+        return self.submit(run_logged, node, fn, *args)
+
     def wait_idle(self, timeout=None):
         """Wait until everything submitted so far has run (end of a demo, tests)."""
         self.submit(lambda: None).result(timeout)
@@ -105,6 +120,25 @@ class BackgroundWorker:
             rest = min((time.perf_counter() - start) * self.rest_ratio, self.max_rest_s)
             if rest > 0.0:
                 time.sleep(rest)
+
+
+def run_logged(node, fn, *args):
+    """
+    Return ``fn(*args)``; log an exception on ``node``'s log instead of raising it.
+
+    For work nobody waits for (:meth:`BackgroundWorker.post`, the background timers): a
+    failure must be seen. Nothing is said for a node destroyed meanwhile
+    (``InvalidHandle``) or once its context is shut down.
+    """
+    try:
+        return fn(*args)
+    except InvalidHandle:
+        return None
+    except Exception as err:  # noqa: B902 - logged: a failing task must be seen
+        if node.context.ok():
+            node.get_logger().error(f'{getattr(fn, "__name__", "background task")} '
+                                    f'failed: {err!r}')
+        return None
 
 
 WORKER = BackgroundWorker()

@@ -147,7 +147,7 @@ class TEMonitor(Node):
         """Hand the accumulated samples to the worker thread (the executor must not wait)."""
         self._publish_te()
         if self.batches.pending.n:
-            WORKER.submit(self._analyze_rows, self.batches.pending.take())
+            WORKER.post(self, self._analyze_rows, self.batches.pending.take())
 
     def analyze_now(self):
         """Analyse what has accumulated and wait for it (end of a demo, tests)."""

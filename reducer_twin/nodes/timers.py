@@ -2,7 +2,6 @@
 
 import itertools
 
-from rclpy.exceptions import InvalidHandle
 from reducer_twin.nodes.runtime import WORKER
 
 LISTENERS_PERIOD_S = 0.5
@@ -75,14 +74,4 @@ def create_background_timer(node, period_s, fn):
         The timer.
 
     """
-    def run():
-        try:
-            fn()
-        except InvalidHandle:
-            pass                # the node was destroyed while the task waited
-        except Exception as err:  # noqa: B902 - logged: a failing report must be seen
-            if node.context.ok():
-                node.get_logger().error(f'{getattr(fn, "__name__", "periodic task")} '
-                                        f'failed: {err!r}')
-
-    return create_spread_timer(node, period_s, lambda: WORKER.submit(run))
+    return create_spread_timer(node, period_s, lambda: WORKER.post(node, fn))

@@ -112,7 +112,7 @@ class WearEstimatorNode(Node):
         except InvalidInput as err:
             self.rejects.reject('bad_features', str(err))
             return
-        WORKER.submit(self._update, features, record)
+        WORKER.post(self, self._update, features, record)
 
     def _update(self, features, record=None):
         """Step the filter with one window and publish the estimate (on the worker)."""

@@ -9,6 +9,7 @@ import threading
 import time
 
 import pytest
+import rclpy.node
 from reducer_twin.nodes.runtime import BackgroundWorker
 
 pytestmark = pytest.mark.timeout(30, method='thread')
@@ -49,3 +50,20 @@ def test_the_worker_rests_after_a_task_in_proportion_to_it():
     second = worker.submit(time.perf_counter)
     # The second task starts only after the first one's rest: as long again as it ran.
     assert second.result(timeout=10) - first.result(timeout=10) >= busy_s * 0.9
+
+
+def test_a_posted_task_that_fails_is_logged_on_its_nodes_log_and_the_worker_goes_on(
+        ros, capfd):
+    # Work nobody waits for (a batch's analysis, an estimator update) once failed without a
+    # word: its exception stayed in a future no one read.
+    node = ros.add(rclpy.node.Node('posting_node', context=ros.context))
+    worker = BackgroundWorker(rest_ratio=0.0)
+
+    def analyse_batch(rows):
+        raise ValueError(f'cannot read {rows}')
+
+    assert worker.post(node, analyse_batch, 'rows 1-100').result(timeout=10) is None
+    assert worker.post(node, lambda x: x + 1, 2).result(timeout=10) == 3
+    logged = [x for x in capfd.readouterr().err.splitlines() if 'failed' in x]
+    assert len(logged) == 1 and '[ERROR]' in logged[0] and 'posting_node' in logged[0]
+    assert "analyse_batch failed: ValueError('cannot read rows 1-100')" in logged[0]

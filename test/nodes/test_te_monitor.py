@@ -547,3 +547,30 @@ def test_a_stream_that_stops_turns_the_diagnostics_to_warn_never_ok(ros, simulat
     assert status.level == DiagnosticStatus.WARN
     assert 'stopped publishing this joint' in status.message
     assert float(ros.key_values(status)['seconds_since_pairs']) >= 1.0
+
+
+def test_an_error_found_after_a_warning_is_logged_and_its_windows_still_published(
+        ros, simulated, capfd):
+    # Both lines came from one logging call whose severity was chosen at run time: rclpy
+    # refuses a call site's second severity, so the error raised in the worker, was never
+    # logged, and that batch's windows were not published.
+    _, rows = simulated
+    degrees = rows.copy()
+    degrees[:, 4] = np.degrees(degrees[:, 4])
+    monitor = Monitor(ros)
+    monitor.feed(degrees)
+    monitor.status(lambda s: 'velocity field' in s.message)
+    span = rows[-1, 0] - rows[0, 0] + 1e-3
+    for k in range(1, 4):
+        flipped = degrees.copy()
+        flipped[:, 0] += k * span
+        flipped[:, 3] *= -1.0
+        monitor.feed(flipped)
+    monitor.status(lambda s: 'opposite sign' in s.message)
+    err = capfd.readouterr().err.splitlines()
+    assert len([x for x in err if 'velocity field' in x and '[WARN]' in x]) == 1
+    assert len([x for x in err if 'opposite sign' in x and '[ERROR]' in x]) == 1
+    assert not [x for x in err if 'Logger severity' in x]
+    analyzer = monitor.node.twin.analyzer
+    ros.spin_until(lambda: len(monitor.features) >= analyzer.windows_emitted,
+                   what='every window on te_features')
