@@ -15,7 +15,7 @@ there is nothing to say; the run says them (:func:`.reading.warn`) and keeps the
 
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.joint_twin import TwinFront
-from reducer_twin.core.life_basis import rate_resolved, rate_unresolved
+from reducer_twin.core.life_basis import play_clause, rate_resolved, rate_unresolved
 from reducer_twin.core.soft_zone import carried_line
 from reducer_twin.msg_adapters.layouts import WEAR_ESTIMATE
 
@@ -323,7 +323,8 @@ def not_compared_line(observed, levels, wear, line):
     Said only where the answer is a warning or worse: a clean short recording whose
     loads seldom dwell at the test torque is common, and on a unit without a soft zone the
     play is its lost motion. Nothing where a soft zone carried over from the reducer's last
-    recording gives the lost motion at the test torque.
+    recording gives the lost motion at the test torque. The rule is
+    :func:`.life_basis.play_clause`, the live ``life_publisher``'s too.
 
     Parameters
     ----------
@@ -342,9 +343,10 @@ def not_compared_line(observed, levels, wear, line):
         ``line`` where it is to be said, else None.
 
     """
-    if line is None or not observed or not levels or levels[-1] not in ('WARN', 'ERROR'):
+    if not observed or not levels:
         return None
-    return None if _latest_shortfall(wear) > 0.0 else line
+    return play_clause(levels[-1], 'not compared', line,
+                       {'soft_zone_shortfall_rad': _latest_shortfall(wear)})
 
 
 def rate_line(observed, wear):

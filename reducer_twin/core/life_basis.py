@@ -8,8 +8,8 @@ or damage, not a rate), the observed growth law's weight in the remaining life a
 how far it is extrapolated (:func:`life_trend_probability`, :func:`growth_law`), the
 limit a soft zone moves (:func:`play_limit`), the wear model's extrapolation
 (:func:`curve_extrapolation`), and the clauses of the life message
-(:func:`rate_note`, :func:`growth_note`, :func:`curve_note`; :func:`life_basis` for
-``analyze --json``, the report and the fleet). Pure functions of records:
+(:func:`rate_note`, :func:`growth_note`, :func:`curve_note`, :func:`play_clause`;
+:func:`life_basis` for ``analyze --json``, the report and the fleet). Pure functions of records:
 :class:`.pipeline.LifeStage` (live and offline) and the fleet read them alike.
 """
 
@@ -385,3 +385,44 @@ def growth_note(wear_record, limit=None):
         if law['weight'] < law['probability']:
             note += f' (weighed {law["weight"]:.2f}: its score spans less)'
     return note
+
+
+TEST_TORQUE_CAVEATS = ('unconfirmed', 'not compared')
+"""
+Outcomes of :class:`.soft_zone.SoftZoneCheck` whose line goes beside an alarm.
+
+The lost motion is then the loaded flanks' play, whether or not the unit has a soft zone
+reaching beyond the test torque: the windows compared the width there too little to say
+one (``'unconfirmed'``), or not at all (``'not compared'``).
+"""
+
+
+def play_clause(level, check, line, wear_record):
+    """
+    Say beside an alarm that its lost motion may be the play, not the width at the test torque.
+
+    Said only where the life's level is ``'WARN'`` or ``'ERROR'``: a short clean recording
+    whose loads seldom dwell at the test torque is common, and on a unit without a soft zone
+    the play is its lost motion. Nothing where the lost motion is already given less a soft
+    zone (the record's ``soft_zone_shortfall_rad``, this stream's or carried over).
+
+    Parameters
+    ----------
+    level : str
+        The life's ``/diagnostics`` level.
+    check : str or None
+        What the comparison at the test torque found (:attr:`.soft_zone.SoftZoneCheck.outcome`).
+    line : str or None
+        Its line (:attr:`.soft_zone.SoftZoneCheck.caveat` or ``not_compared``).
+    wear_record : Mapping
+        The ``wear`` record the life was assessed from.
+
+    Returns
+    -------
+    str or None
+        ``line`` where it is to be said, else None.
+
+    """
+    if not line or check not in TEST_TORQUE_CAVEATS or level not in ('WARN', 'ERROR'):
+        return None
+    return None if float(wear_record.get('soft_zone_shortfall_rad', 0.0)) > 0.0 else line

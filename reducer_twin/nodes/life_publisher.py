@@ -9,7 +9,9 @@ reducer (``hardware_id`` = the reducer id) whose level is OK / WARN / ERROR
 by the configured remaining-life thresholds, with wear, lost motion, TE and
 remaining life as key/values: the joint's
 :class:`~reducer_twin.core.joint_twin.HealthSummary`, as the bag analysis
-writes it.
+writes it. It also hears ``/reducer_twin/<joint>/test_torque_check``
+(:mod:`.torque_check`): a warning or an error resting on the loaded flanks' play, the
+width at the test torque compared too little or not at all, says so.
 """
 
 from rclpy.node import Node
@@ -26,6 +28,7 @@ from reducer_twin.nodes.parameters import declare_plain, SpecParameters
 from reducer_twin.nodes.qos import latest_qos, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes, WORKER
+from reducer_twin.nodes.torque_check import CheckListener
 from std_msgs.msg import Float64MultiArray
 
 
@@ -63,6 +66,7 @@ class LifePublisher(Node):
                                  self._on_wear, latest_qos())
         self.create_subscription(Float64MultiArray, joint_topic(self.joint, 'te_features'),
                                  self._on_features, stream_qos(WINDOW_DEPTH))
+        self.check = CheckListener(self, self.joint)
         publish_diagnostics(self, self._statuses)
 
     def _reconfig(self, config):
@@ -130,6 +134,7 @@ class LifePublisher(Node):
             values = {'rejected_messages': self.rejects.total}
         else:
             level, message, values = health.diagnostic(self.rejects.total)
+            message, values = self.check.said(level, message, values, self.last[0])
         return [(reducer_status_name(self.joint), self.hardware_id, level, message, values)]
 
 

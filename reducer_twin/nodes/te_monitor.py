@@ -8,11 +8,12 @@ has already unwrapped and aligned the streams), and published in batches on
 the joint's :class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the learnt
 link-encoder time offset, the window analysis); each completed window is published on
 ``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost motion, order amplitudes,
-duty). Window length, gap bridging, aging and analysis period: the fields of
-:class:`~reducer_twin.core.joint_twin.TwinConfig`. What the front learnt of the reducer (the
-encoders' time offset, the soft-zone check) is kept in a state file after every batch of
-windows and continued from on start; a replaced reducer (the ``maintenance`` event) starts the
-window analysis afresh (:mod:`~reducer_twin.nodes.front_state`).
+duty), what the comparison at the test torque found on ``.../test_torque_check``
+(:mod:`~reducer_twin.nodes.torque_check`). Window length, gap bridging, aging, analysis
+period: the fields of :class:`~reducer_twin.core.joint_twin.TwinConfig`. What the front
+learnt of the reducer (the encoders' time offset, the soft-zone check) is kept in a state
+file after every batch of windows and continued from on start; a replaced reducer (the
+``maintenance`` event) starts the window analysis afresh (:mod:`~reducer_twin.nodes.front_state`).
 
 In ``twin_bringup`` the ingest node of the same process hands the pairs over directly
 (:meth:`TEMonitor.take_pairs`, ``subscribe=False``) and the TE batches are published only
@@ -29,8 +30,7 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, record_values, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, BatchPublisherMessage, to_multiarray
 from reducer_twin.nodes.buffers import ArrivalBatches
-from reducer_twin.nodes.diagnostics import publish_diagnostics, say_faults
-from reducer_twin.nodes.diagnostics import te_monitor_statuses
+from reducer_twin.nodes.diagnostics import publish_diagnostics, say_faults, te_monitor_statuses
 from reducer_twin.nodes.front_state import FrontKeeper, PARAMETERS
 from reducer_twin.nodes.parameters import check_choice, declare_plain
 from reducer_twin.nodes.parameters import SpecParameters
@@ -39,6 +39,7 @@ from reducer_twin.nodes.rejects import RejectCounter
 from reducer_twin.nodes.runtime import run_nodes, WORKER
 from reducer_twin.nodes.settings import TEMonitorSettings
 from reducer_twin.nodes.timers import create_spread_timer, LISTENERS_PERIOD_S
+from reducer_twin.nodes.torque_check import CheckPublisher
 from std_msgs.msg import Float64MultiArray
 
 _TE_COLUMNS = [0, 2, 5, 3]
@@ -85,6 +86,7 @@ class TEMonitor(Node):
         self.twin = TwinFront(self.params, self.config, window=p['window'])
         self.state = FrontKeeper(self, self.joint, self.twin, p['state_file'], p['state_dir'])
         self.rejects = RejectCounter(self)
+        self.check = CheckPublisher(self, self.joint)
         self.te_pub = self.create_publisher(Float64MultiArray, joint_topic(self.joint, 'te'),
                                             stream_qos())
         self.feat_pub = self.create_publisher(
@@ -165,6 +167,7 @@ class TEMonitor(Node):
             self.get_logger().info(f'{self.joint}: link encoder time offset '
                                    f'{self.twin.calibration.applied * 1e6:.1f} us, compensated')
         say_faults(self.get_logger(), self.joint, self.twin, self._said)
+        self.check.update(self.twin.analyzer)
         if windows:
             self.state.save()
         for f in windows:

@@ -11,7 +11,7 @@ import itertools
 import math
 import re
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 import pytest
 from rcl_interfaces.srv import SetParameters
@@ -185,6 +185,55 @@ def test_a_worn_out_reducer_is_an_error_with_no_life_left(ros, estimate):
     status = life.status(lambda s: s.level != DiagnosticStatus.STALE)
     assert status.level == DiagnosticStatus.ERROR
     assert 'worn out' in status.message
+
+
+NOT_COMPARED = ('no window held the load at the lost-motion test torque (23.5 N·m) long enough '
+                'under both signs to compare the width there with the flanks of higher loads: '
+                'the lost motion given is the play those flanks give')
+
+
+def _check(life, check, line):
+    """Publish what te_monitor's comparison at the test torque found, as te_monitor does."""
+    pub = life.probe.publisher(joint_topic(life.joint, 'test_torque_check'), KeyValue,
+                               latest_qos())
+    life.ros.wait_matched(pub)
+    pub.publish(KeyValue(key=check, value=line))
+    life.ros.spin_until(lambda: life.node.check.latest[0] == check,
+                        what='the test-torque check at the life publisher')
+
+
+def test_a_worn_out_verdict_on_the_flanks_play_says_the_test_torque_was_not_compared(
+        ros, estimate):
+    # Offline the analysis said it beside such an alarm; live, te_monitor knew it (its
+    # /diagnostics key) and the reducer's ERROR said nothing of it.
+    wear_record, _ = estimate
+    life = Life(ros)
+    _check(life, 'not compared', NOT_COMPARED)
+    life.send({**wear_record, 'wear_m': 150e-6, 'trend_growth_rad': 4.0 * ARCMIN})
+    status = life.status(lambda s: s.level == DiagnosticStatus.ERROR)
+    assert 'worn out' in status.message
+    assert status.message.endswith('; ' + NOT_COMPARED)
+    assert ros.key_values(status)['test_torque_check'] == 'not compared'
+
+
+def test_a_healthy_reducer_carries_the_check_without_its_line(ros, estimate):
+    wear_record, features = estimate
+    life = Life(ros, warn_s=1.0 * HOUR, error_s=0.5 * HOUR)
+    _check(life, 'not compared', NOT_COMPARED)
+    life.send(wear_record, features)
+    status = life.status(lambda s: 'test_torque_check' in ros.key_values(s))
+    assert status.level == DiagnosticStatus.OK
+    assert 'test torque' not in status.message
+
+
+def test_a_lost_motion_given_less_a_soft_zone_needs_no_such_line(ros, estimate):
+    wear_record, _ = estimate
+    life = Life(ros)
+    _check(life, 'not compared', NOT_COMPARED)
+    life.send({**wear_record, 'wear_m': 150e-6, 'trend_growth_rad': 4.0 * ARCMIN,
+               'soft_zone_shortfall_rad': 1.4 * ARCMIN})
+    status = life.status(lambda s: s.level == DiagnosticStatus.ERROR)
+    assert 'test torque' not in status.message
 
 
 @pytest.mark.parametrize('changes, reason', [

@@ -11,7 +11,7 @@ import itertools
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
@@ -25,7 +25,7 @@ from reducer_twin.core.units import ARCMIN
 from reducer_twin.core.window_analysis import WindowAnalyzer
 from reducer_twin.msg_adapters.layouts import PAIRED_SAMPLES, TE_BATCH, TE_FEATURES
 from reducer_twin.msg_adapters.ros import batch_array, from_multiarray, to_multiarray
-from reducer_twin.nodes.qos import encoder_qos
+from reducer_twin.nodes.qos import encoder_qos, latest_qos
 from reducer_twin.nodes.runtime import WORKER
 from reducer_twin.nodes.te_monitor import TEMonitor
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
@@ -430,6 +430,33 @@ def test_a_play_still_taken_up_at_the_test_torque_is_said_with_its_width_as_a_ke
     assert values['test_torque_check'] == 'soft zone'
     logged = [x for x in capfd.readouterr().err.splitlines() if 'narrower than the' in x]
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
+def test_what_the_test_torque_comparison_found_is_published_for_the_life_publisher(ros, simulated):
+    # The life publisher sees only the wear estimate: an alarm resting on the loaded flanks'
+    # play, the width at the test torque never compared, said nothing of it live.
+    _, rows = simulated
+    monitor = Monitor(ros)
+    monitor.feed(rows)
+    analyzer = monitor.node.twin.analyzer
+    ros.spin_until(lambda: analyzer.test_torque_check is not None, what='a comparison')
+    WORKER.wait_idle()
+    # Transient local: a life publisher started later hears the latest.
+    heard = monitor.probe.listen(joint_topic(monitor.joint, 'test_torque_check'), KeyValue,
+                                 latest_qos())
+    ros.spin_until(lambda: heard, what='the test-torque check')
+    # The model's own simulator: compared, no soft zone found, so no line.
+    assert heard[-1].key == analyzer.test_torque_check == 'none found'
+    assert heard[-1].value == ''
+    # Not published again while nothing changes: 8 s more of stream, more windows.
+    windows = analyzer.windows_emitted
+    later = rows.copy()
+    later[:, 0] += rows[-1, 0] - rows[0, 0] + 1e-3
+    monitor.feed(later)
+    ros.spin_until(lambda: analyzer.windows_emitted > windows, what='more windows')
+    WORKER.wait_idle()
+    ros.spin_for(0.2)
+    assert analyzer.test_torque_check == 'none found' and len(heard) == 1
 
 
 def _swing_rows(seed, t0, late_s):
