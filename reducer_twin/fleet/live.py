@@ -35,7 +35,7 @@ import uuid
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.life_basis import life_basis
+from reducer_twin.core.life_basis import life_basis, play_clause
 from reducer_twin.core.pipeline import features_from_record, LifeStage
 from reducer_twin.core.pipeline import reducer_state
 from reducer_twin.core.soft_zone import carried_line
@@ -235,6 +235,9 @@ class LiveHistory:
         self.name = name
         self.source = f'live {name}'
         self.log = log or (lambda text: None)
+        # What the joint's comparison at the test torque found and its line (``te_monitor``'s,
+        # :mod:`reducer_twin.nodes.torque_check`), set by the node; None: not heard.
+        self.test_torque_check = None
         stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
         self.session = f'{stamp}-{uuid.uuid4().hex[:8]}'
         self.worker = {'engine': 'live', 'node': socket.gethostname(), 'pid': os.getpid(),
@@ -443,7 +446,7 @@ class LiveHistory:
         start = features[0, _START] if np.isfinite(features[0, _START]) else features[0, _END]
         first_ns, last_ns = _ns(start), _ns(features[-1, _END])
         samples = features[:, _SAMPLES]
-        summary = self._summary(features, wear, life)
+        summary = self._summary(features, wear, life, chunk.levels)
         return Segment(
             joint=self.joint, expected_revision=self.expected, state=chunk.state,
             first_ns=first_ns, last_ns=last_ns, windows=len(features), exposure_s=exposure,
@@ -453,8 +456,7 @@ class LiveHistory:
             warn_s=self.life_config.warn_s, error_s=self.life_config.error_s,
             worker=dict(self.worker, session=self.session)), aging
 
-    @staticmethod
-    def _summary(features, wear, life):
+    def _summary(self, features, wear, life, levels):
         """Return the ``--json`` summary of the joint at the segment's end (as a bag's)."""
         w = dict(zip(WEAR_ESTIMATE.fields, wear[-1])) if len(wear) else {}
         lf = dict(zip(REMAINING_LIFE.fields, life[-1])) if len(life) else {}
@@ -469,6 +471,11 @@ class LiveHistory:
 
         out['rul_censored'] = bool(len(life) and life[-1][_CENSORED] > 0)
         out.update(life_basis(w, lf, observed))
+        # Beside an alarm resting on the loaded flanks' play, as a bag's "inputs" say it.
+        check, line = self.test_torque_check or (None, None)
+        out['test_torque_check'] = check if observed else None
+        clause = play_clause(levels[-1] if levels else None, check, line, w) if observed else None
+        out['inputs'] = [clause] if clause else []
         return out
 
     def _requeue(self, chunks):

@@ -153,6 +153,9 @@ latency-critical callbacks.
 
 _STORE_WORKER = []
 
+CLOSE_FLUSH_TIMEOUT_S = 30.0
+"""Longest wait for a live estimator's last segment on the store thread when it stops [s]."""
+
 
 def store_worker():
     """

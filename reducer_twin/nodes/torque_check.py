@@ -56,22 +56,32 @@ class CheckListener:
     """
     The latest outcome at the test torque of a joint, and the clause it gives an alarm.
 
+    Heard by ``life_publisher`` (its status) and by a ``wear_estimator`` that writes the
+    reducer's live history to a fleet store (the segments' summaries).
+
     Parameters
     ----------
     node : rclpy.node.Node
         The ``life_publisher``.
     joint : str
         The joint's name.
+    live : LiveHistory, optional
+        A ``wear_estimator``'s live history in the fleet store, told each outcome heard
+        (:attr:`.fleet.live.LiveHistory.test_torque_check`): its segments' summaries carry
+        it as a bag's do.
 
     """
 
-    def __init__(self, node, joint):
+    def __init__(self, node, joint, live=None):
         self.latest = (None, None)
+        self.live = live
         node.create_subscription(KeyValue, joint_topic(joint, TOPIC), self._on_check,
                                  latest_qos())
 
     def _on_check(self, msg):
         self.latest = (msg.key, msg.value or None)
+        if self.live is not None:
+            self.live.test_torque_check = self.latest
 
     def said(self, level, message, values, wear_record):
         """

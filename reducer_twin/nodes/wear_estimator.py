@@ -12,10 +12,11 @@ replaced) and restarts the filter; the latest event goes on ``maintenance``
 (``std_msgs/String``, transient-local) for ``te_monitor`` to start its windows afresh.
 
 With ``store`` and ``robot`` the node joins the reducer's history in a fleet store
-(:mod:`reducer_twin.fleet.live`): it starts from the stored state when that is newer,
-and writes every window's records every ``store_period_s`` as one live segment on a
-thread of its own; store trouble never holds the stream (``/diagnostics`` says WARN
-or ERROR until a write succeeds).
+(:mod:`reducer_twin.fleet.live`): it starts from the stored state when that is newer, and
+writes every window's records every ``store_period_s`` as one live segment on a thread of its
+own; store trouble never holds the stream (``/diagnostics`` says WARN or ERROR until a write
+succeeds). The segments carry what ``te_monitor``'s comparison at the test torque found
+(:mod:`~reducer_twin.nodes.torque_check`), as a bag's summary does.
 """
 
 from rclpy.node import Node
@@ -31,14 +32,13 @@ from reducer_twin.nodes.diagnostics import estimator_status, publish_diagnostics
 from reducer_twin.nodes.parameters import declare_plain, SpecParameters
 from reducer_twin.nodes.qos import latest_qos, stream_qos, WINDOW_DEPTH
 from reducer_twin.nodes.rejects import RejectCounter
-from reducer_twin.nodes.runtime import run_nodes, state_path, store_worker, WORKER
+from reducer_twin.nodes.runtime import CLOSE_FLUSH_TIMEOUT_S, run_nodes, state_path
+from reducer_twin.nodes.runtime import store_worker, WORKER
 from reducer_twin.nodes.settings import StoreSettings
 from reducer_twin.nodes.timers import create_spread_timer
+from reducer_twin.nodes.torque_check import CheckListener
 from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
-
-CLOSE_FLUSH_TIMEOUT_S = 30.0
-"""Longest wait for the last live segment when the node stops [s]."""
 
 
 class WearEstimatorNode(Node):
@@ -77,8 +77,7 @@ class WearEstimatorNode(Node):
         self.live = None
         if p['store']:
             self._join_store(p['store'], p['robot'])
-        self.rejects = RejectCounter(self)
-        self._rejected_seen, self.statuses = 0, {}
+        self.rejects, self._rejected_seen, self.statuses = RejectCounter(self), 0, {}
         self.pub = self.create_publisher(Float64MultiArray, joint_topic(joint, 'wear'),
                                          latest_qos())
         self.create_subscription(Float64MultiArray, joint_topic(joint, 'te_features'),
@@ -100,6 +99,7 @@ class WearEstimatorNode(Node):
         self.live = join_store(self.stage, store, robot, self.joint, self.params,
                                self.est_params.value, self.life_params.value, self.get_name(),
                                log=self.get_logger().info, warn=self.get_logger().warning)
+        self.check = CheckListener(self, self.joint, self.live)
 
     def _life_changed(self, config):
         # The live history's life stage lives on the worker; swap it there, between windows.

@@ -33,11 +33,11 @@ def records():
 class Live:
     """An estimator stage and its live history, as the node holds them."""
 
-    def __init__(self, store, robot='r1', joint='joint_1', file_t_end=None):
+    def __init__(self, store, robot='r1', joint='joint_1', file_t_end=None, life=None):
         self.start = read_start(store, robot, joint, file_t_end)
         self.stage = EstimatorStage(PARAMS)
-        self.history = LiveHistory(store, robot, joint, PARAMS, LifeConfig(), self.start,
-                                   'wear_estimator_test')
+        self.history = LiveHistory(store, robot, joint, PARAMS, life or LifeConfig(),
+                                   self.start, 'wear_estimator_test')
 
     def feed(self, recs):
         for rec in recs:
@@ -158,9 +158,31 @@ def test_a_live_reducer_says_what_its_remaining_life_rests_on_as_a_bag_s_would(
     assert 'wear rate' not in late['reason']
 
 
-def _fleet_row(store, recs, capsys):
+NOT_COMPARED = ('no window held the load at the lost-motion test torque (23.5 N·m) long enough '
+                'under both signs to compare the width there with the flanks of higher loads: '
+                'the lost motion given is the play those flanks give')
+
+
+@pytest.mark.parametrize('warn_h, said', [(1e6, True), (1.0, False)], ids=['warn', 'ok'])
+def test_a_live_alarm_on_the_flanks_play_says_the_test_torque_was_not_compared(
+        tmp_path, records, capsys, warn_h, said):
+    # A bag's summary said it beside such an alarm ("inputs"); a live segment's did not.
+    life = LifeConfig(warn_s=warn_h * 3600.0, error_s=0.5 * 3600.0)
+    row = _fleet_row(tmp_path / 'f.db', records, capsys, life,
+                     ('not compared', NOT_COMPARED))
+    assert row['test_torque_check'] == 'not compared'
+    assert row['inputs'] == ([NOT_COMPARED] if said else [])
+
+
+def test_a_live_segment_without_a_check_heard_says_nothing_of_it(tmp_path, records, capsys):
+    row = _fleet_row(tmp_path / 'f.db', records, capsys)
+    assert row['test_torque_check'] is None and row['inputs'] == []
+
+
+def _fleet_row(store, recs, capsys, life=None, check=None):
     """Feed ``recs`` live into ``store`` and return the reducer's ``fleet --json`` row."""
-    live = Live(store)
+    live = Live(store, life=life)
+    live.history.test_torque_check = check
     live.feed(recs)
     assert live.history.flush() == 1
     capsys.readouterr()

@@ -14,7 +14,7 @@ import json
 import subprocess
 
 from cli_runs import run_cli
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from full_disk import fill, small_tmpfs
 import numpy as np
 import pytest
@@ -32,7 +32,7 @@ from reducer_twin.core.units import ARCMIN, HOUR
 from reducer_twin.fleet.store import FleetStore, iso_from_ns
 from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
-from reducer_twin.nodes.qos import stream_qos
+from reducer_twin.nodes.qos import latest_qos, stream_qos
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -187,6 +187,22 @@ def test_live_windows_become_segments_that_fleet_lists_with_the_nodes_estimate(
     status, values = est.status(lambda s: s.values and 'store_segments_written' in
                                 {kv.key for kv in s.values})
     assert status.level == DiagnosticStatus.OK and values['robot'] == 'r7'
+
+
+def test_the_live_history_carries_what_te_monitor_found_at_the_test_torque(
+        ros, tmp_path, records, capsys):
+    # The fleet row of a bag says it; one of a live reducer had nothing to say it from.
+    est = LiveEstimator(ros, tmp_path)
+    pub = est.probe.publisher(joint_topic(est.joint, 'test_torque_check'), KeyValue,
+                              latest_qos())
+    ros.wait_matched(pub)
+    pub.publish(KeyValue(key='none found', value=''))
+    ros.spin_until(lambda: est.node.live.test_torque_check == ('none found', None),
+                   what='the check at the wear estimator')
+    est.send(records[:3])
+    assert est.node.flush_store() == 0
+    [row] = fleet(est.store, capsys)
+    assert row['test_torque_check'] == 'none found' and row['inputs'] == []
 
 
 def test_a_restarted_node_continues_from_the_store_when_it_is_newer_than_its_state_file(
