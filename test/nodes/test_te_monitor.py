@@ -341,10 +341,8 @@ def test_a_velocity_field_in_degrees_is_replaced_by_the_angles_rate_and_said(
     # Read as it is, a velocity field in another form (zeros, deg/s, the motor's speed,
     # the other sense) gave a confident wrong wear and remaining life, and OK.
     _, rows = simulated
-    degrees = rows.copy()
-    degrees[:, 4] = np.degrees(degrees[:, 4])
     monitor = Monitor(ros)
-    monitor.feed(degrees)
+    monitor.feed(_velocity_in_degrees(rows))
     status = monitor.status(lambda s: 'velocity field' in s.message)
     assert status.level == DiagnosticStatus.WARN
     assert 'reads 57.' in status.message and 'degrees per second' in status.message
@@ -355,6 +353,12 @@ def test_a_velocity_field_in_degrees_is_replaced_by_the_angles_rate_and_said(
     assert analyzer.derived_velocity == analyzer.samples_seen == len(rows)
     logged = [x for x in capfd.readouterr().err.splitlines() if 'velocity field' in x]
     assert len(logged) == 1 and '[WARN]' in logged[0] and monitor.joint in logged[0]
+
+
+def _velocity_in_degrees(rows):
+    out = rows.copy()
+    out[:, 4] = np.degrees(rows[:, 4])
+    return out
 
 
 def _held(rows, column, hold):
@@ -582,8 +586,7 @@ def test_an_error_found_after_a_warning_is_logged_and_its_windows_still_publishe
     # refuses a call site's second severity, so the error raised in the worker, was never
     # logged, and that batch's windows were not published.
     _, rows = simulated
-    degrees = rows.copy()
-    degrees[:, 4] = np.degrees(degrees[:, 4])
+    degrees = _velocity_in_degrees(rows)
     monitor = Monitor(ros)
     monitor.feed(degrees)
     monitor.status(lambda s: 'velocity field' in s.message)
