@@ -15,7 +15,9 @@ traceback, no JSON), joints observed and not observed (with their reasons' count
 answers that contradict themselves (:func:`contradictions`: e.g. no life left beside a
 lost motion clearly below the limit), joints called worn out whose truth has life left
 (and how many of them say their lost motion is the loaded flanks' play, the width at the
-test torque not compared: ``test_torque_check``), and
+test torque not compared: ``test_torque_check``), the joints that say their lost motion
+reads below their bins' width at the test torque (:mod:`reducer_twin.core.within_zone`)
+and how many of those read 30 % low or more say it, and
 for the observed ones the lost motion's error against the generator's truth at the
 recording's end (median, p90 and max of the absolute relative error; the share within
 10 %) and where the true remaining life lies against the P10-P90 given (within, below,
@@ -101,12 +103,21 @@ def run_one(seed, work):
             # play of the loaded flanks, said, where 'unconfirmed' or 'not compared').
             'check': got.get('test_torque_check'),
             # Called worn out (no life left at all) where the truth has life left.
-            'false_worn_out': p90 == 0.0 and life > 0.0}
+            'false_worn_out': p90 == 0.0 and life > 0.0,
+            # Said that its lost motion reads below its bins' width at the test torque
+            # (core/within_zone.py): loads that never leave a soft zone.
+            'within_zone': any(WITHIN_ZONE in line for line in got.get('inputs') or ())}
     return outcome
 
 
 LIMIT_ARCMIN = 3.0
 """The twin's default lost-motion limit [arcmin] (``life.lost_motion_limit``)."""
+
+WITHIN_ZONE = 'their extrapolation to no load'
+"""A fragment of the line of :attr:`.within_zone.WithinZoneCheck.reason`."""
+
+LOW = -0.3
+"""A lost motion read this far below the truth (relative) or more: the life far too long."""
 
 
 def contradictions(got, limit):
@@ -168,6 +179,13 @@ def summary(outcomes, gen):
         for seed, name, j in false:
             print(f'    seed {seed} {name} ({j["kind"]}): {100 * j["error"]:+.0f} %, test '
                   f'torque {j["check"]}')
+        said = [j['error'] for j in seen if j['within_zone']]
+        low = [j for j in seen if j['error'] <= LOW]
+        print(f"  said to read below its bins' width at the test torque: {len(said)} joints"
+              + (f', signed errors {", ".join(f"{100 * e:+.0f} %" for e in sorted(said))}'
+                 if said else '')
+              + f'; of the {len(low)} read {-100 * LOW:.0f} % low or more, '
+              f'{sum(j["within_zone"] for j in low)} say it')
         for kind in KINDS:
             k = np.abs([j['error'] for j in seen if j['kind'] == kind])
             if k.size:

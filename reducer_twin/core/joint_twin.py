@@ -624,7 +624,9 @@ class TwinFront:
         ``'soft_zone'``: a play still being taken up at the test torque (:mod:`.soft_zone`);
         ``'test_torque'``: a lost motion that is the play of the loaded flanks where the one
         window that compared the width at the test torque showed a soft zone
-        (:attr:`.soft_zone.SoftZoneCheck.caveat`).
+        (:attr:`.soft_zone.SoftZoneCheck.caveat`); ``'within_zone'``: a lost motion read
+        below its bins' width at the test torque, loads that never leave a soft zone
+        (:mod:`.within_zone`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('velocity_leads', self.analyzer.velocity_leads),
@@ -636,7 +638,8 @@ class TwinFront:
                  ('time_offset', self.calibration.reason),
                  ('te_step', self.analyzer.te_stepped),
                  ('soft_zone', self.analyzer.soft_zone),
-                 ('test_torque', self.analyzer.test_torque_caveat))
+                 ('test_torque', self.analyzer.test_torque_caveat),
+                 ('within_zone', self.analyzer.within_zone))
         return {kind: line for kind, line in found if line is not None}
 
     @property

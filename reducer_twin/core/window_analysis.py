@@ -335,7 +335,16 @@ class WindowAnalyzer:
     @property
     def test_torque_not_compared(self):
         """Say why no window compared the width at the test torque (``SoftZoneCheck``)."""
-        return self.fit.soft_zone.not_compared if self.windows_observed else None
+        # Its claim, the play given where the width there may be less, is wrong where the
+        # lost motion reads below that width (:attr:`within_zone`).
+        if not self.windows_observed or self.within_zone is not None:
+            return None
+        return self.fit.soft_zone.not_compared
+
+    @property
+    def within_zone(self):
+        """Say when the lost motion read is below its bins' width at the test torque."""
+        return self.fit.within_zone.reason if self.windows_observed else None
 
     @property
     def test_torque_check(self):

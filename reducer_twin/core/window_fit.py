@@ -46,6 +46,7 @@ from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step, TorqueSmoothing
 from .transmission_error import model_tables
 from .wear_fit import LostMotionFit
+from .within_zone import WithinZoneCheck
 
 _HARMONIC_FIT_TORQUE = 0.5
 """
@@ -182,7 +183,8 @@ class WindowFit:
     (:class:`.friction_fit.FrictionFit`), the effort's check
     (:class:`.effort_check.EffortCheck`), the torque smoothing
     (:class:`.torque_smoothing.TorqueSmoothing`), the soft-zone check
-    (:class:`.soft_zone.SoftZoneCheck`) and the lost-motion fit
+    (:class:`.soft_zone.SoftZoneCheck`), the lost motion read against its bins' width at
+    the test torque (:class:`.within_zone.WithinZoneCheck`) and the lost-motion fit
     (:class:`.wear_fit.LostMotionFit`); and the counts of windows that read no lost
     motion, by reason, with the largest figures behind them (:mod:`.observability`
     words them).
@@ -237,6 +239,7 @@ class WindowFit:
         self.lost_motion_fit = LostMotionFit(tables, self.flanks.centres, self.takeup_torque,
                                              compliance_prior, min_bins)
         self.soft_zone = SoftZoneCheck(self.takeup_torque, tables.series_stiffness)
+        self.within_zone = WithinZoneCheck(self.takeup_torque, tables.series_stiffness)
         self.windows_friction_unknown = 0
         self.windows_offset_unremoved = 0   # withheld: a time offset not yet removed
         self.largest_unremoved_offset_s = 0.0
@@ -393,6 +396,7 @@ class WindowFit:
         # Nor a time offset: fitted to a TE no reducer has, it says nothing of the clocks
         # (encoders in other units read as stamped 0.1-1 s apart, and it was learnt).
         offset[implausible] = np.nan
+        self.within_zone.observe(torque_h, width, std, usable, fit[2])
         fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
