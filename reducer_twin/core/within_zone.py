@@ -72,10 +72,10 @@ class WithinZoneCheck:
 
         Parameters
         ----------
-        torque_b, width_b, std_b : ndarray, shape (W, B)
-            Mean load [N·m], hysteresis width [rad] and its standard error [rad] per bin.
-        usable : ndarray of bool, shape (W, B)
-            Bins that take part in the lost motion.
+        torque_b, width_b, std_b, usable : ndarray, shape (W, B)
+            Per bin, as :meth:`.soft_zone.SoftZoneCheck.observe` takes them: the mean load
+            [N·m], the hysteresis width and its standard error [rad], the bins of the lost
+            motion.
         lost_motion : ndarray, shape (W,)
             The lost motion each window read [rad] (NaN: none).
 
