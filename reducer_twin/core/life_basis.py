@@ -8,11 +8,13 @@ or damage, not a rate), the observed growth law's weight in the remaining life a
 how far it is extrapolated (:func:`life_trend_probability`, :func:`growth_law`), the
 limit a soft zone moves (:func:`play_limit`), the wear model's extrapolation
 (:func:`curve_extrapolation`), and the clauses of the life message
-(:func:`rate_note`, :func:`growth_note`, :func:`curve_note`, :func:`play_clause`;
-:func:`life_basis` for ``analyze --json``, the report and the fleet). Pure functions of records:
+(:func:`rate_note`, :func:`growth_note`, :func:`curve_note`, :func:`play_clause`,
+:func:`torque_check_lines`; :func:`life_basis` for ``analyze --json``, the report and the
+fleet). Pure functions of records:
 :class:`.pipeline.LifeStage` (live and offline) and the fleet read them alike.
 """
 
+from dataclasses import dataclass
 import math
 
 from .estimator import EstimatorConfig
@@ -426,3 +428,58 @@ def play_clause(level, check, line, wear_record):
     if not line or check not in TEST_TORQUE_CAVEATS or level not in ('WARN', 'ERROR'):
         return None
     return None if float(wear_record.get('soft_zone_shortfall_rad', 0.0)) > 0.0 else line
+
+
+@dataclass(frozen=True)
+class TorqueCheckFinding:
+    """
+    What a joint's window analysis found at the lost-motion test torque, as told live.
+
+    ``te_monitor`` reads it; ``life_publisher`` and a ``wear_estimator`` writing a fleet
+    store hear it (:mod:`reducer_twin.nodes.torque_check`) and say it beside the life
+    (:func:`torque_check_lines`).
+
+    Attributes
+    ----------
+    check : str
+        The soft-zone comparison's outcome (:attr:`.soft_zone.SoftZoneCheck.outcome`).
+    line : str or None
+        Its caveat (``'unconfirmed'``) or why nothing was compared (``'not compared'``).
+    within_zone : str or None
+        Why the lost motion read is below its bins' width at the test torque
+        (:attr:`.within_zone.WithinZoneCheck.reason`), or None.
+
+    """
+
+    check: str
+    line: str = None
+    within_zone: str = None
+
+
+def torque_check_lines(level, finding, wear_record):
+    """
+    Return the lines said beside a life about what was found at the test torque.
+
+    A lost motion read below its bins' width at the test torque is said whatever the
+    life's level: its error is the optimistic one (the life too long), as ``analyze``
+    says it among the joint's ``"inputs"``. The play's caveat follows :func:`play_clause`.
+
+    Parameters
+    ----------
+    level : str
+        The life's ``/diagnostics`` level.
+    finding : TorqueCheckFinding or None
+        What was heard (None: nothing).
+    wear_record : Mapping
+        The ``wear`` record the life was assessed from.
+
+    Returns
+    -------
+    list of str
+        The lines, in the order said (none, one or both).
+
+    """
+    if finding is None:
+        return []
+    clause = play_clause(level, finding.check, finding.line, wear_record)
+    return [x for x in (finding.within_zone, clause) if x]

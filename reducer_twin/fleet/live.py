@@ -35,7 +35,7 @@ import uuid
 import numpy as np
 from reducer_twin.core.errors import InvalidParameter, out_of_range, ReducerTwinError
 from reducer_twin.core.joint_twin import estimate_numbers
-from reducer_twin.core.life_basis import life_basis, play_clause
+from reducer_twin.core.life_basis import life_basis, torque_check_lines
 from reducer_twin.core.pipeline import features_from_record, LifeStage
 from reducer_twin.core.pipeline import reducer_state
 from reducer_twin.core.soft_zone import carried_line
@@ -235,8 +235,9 @@ class LiveHistory:
         self.name = name
         self.source = f'live {name}'
         self.log = log or (lambda text: None)
-        # What the joint's comparison at the test torque found and its line (``te_monitor``'s,
-        # :mod:`reducer_twin.nodes.torque_check`), set by the node; None: not heard.
+        # What the joint's window analysis found at the test torque (``te_monitor``'s
+        # :class:`.life_basis.TorqueCheckFinding`, :mod:`reducer_twin.nodes.torque_check`),
+        # set by the node; None: not heard.
         self.test_torque_check = None
         stamp = datetime.datetime.now(datetime.timezone.utc).strftime('%Y%m%dT%H%M%SZ')
         self.session = f'{stamp}-{uuid.uuid4().hex[:8]}'
@@ -471,11 +472,10 @@ class LiveHistory:
 
         out['rul_censored'] = bool(len(life) and life[-1][_CENSORED] > 0)
         out.update(life_basis(w, lf, observed))
-        # Beside an alarm resting on the loaded flanks' play, as a bag's "inputs" say it.
-        check, line = self.test_torque_check or (None, None)
-        out['test_torque_check'] = check if observed else None
-        clause = play_clause(levels[-1] if levels else None, check, line, w) if observed else None
-        out['inputs'] = [clause] if clause else []
+        # What was found at the test torque, as a bag's "inputs" say it.
+        found = self.test_torque_check if observed else None
+        out['test_torque_check'] = None if found is None else found.check
+        out['inputs'] = torque_check_lines(levels[-1] if levels else None, found, w)
         return out
 
     def _requeue(self, chunks):

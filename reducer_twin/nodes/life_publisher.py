@@ -11,7 +11,8 @@ remaining life as key/values: the joint's
 :class:`~reducer_twin.core.joint_twin.HealthSummary`, as the bag analysis
 writes it. It also hears ``/reducer_twin/<joint>/test_torque_check``
 (:mod:`.torque_check`): a warning or an error resting on the loaded flanks' play, the
-width at the test torque compared too little or not at all, says so.
+width at the test torque compared too little or not at all, says so, and a life read from a
+lost motion below its bins' width at the test torque says so whatever its level.
 """
 
 from rclpy.node import Node

@@ -8,7 +8,7 @@ has already unwrapped and aligned the streams), and published in batches on
 the joint's :class:`~reducer_twin.core.joint_twin.TwinFront` (TE extraction, the learnt
 link-encoder time offset, the window analysis); each completed window is published on
 ``/reducer_twin/<joint>/te_features`` (paper Table 5 figures, lost motion, order amplitudes,
-duty), what the comparison at the test torque found on ``.../test_torque_check``
+duty), what the window analysis found at the test torque on ``.../test_torque_check``
 (:mod:`~reducer_twin.nodes.torque_check`). Window length, gap bridging, aging, analysis
 period: the fields of :class:`~reducer_twin.core.joint_twin.TwinConfig`. What the front
 learnt of the reducer (the encoders' time offset, the soft-zone check) is kept in a state

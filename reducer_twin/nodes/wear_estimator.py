@@ -15,7 +15,7 @@ With ``store`` and ``robot`` the node joins the reducer's history in a fleet sto
 (:mod:`reducer_twin.fleet.live`): it starts from the stored state when that is newer, and
 writes every window's records every ``store_period_s`` as one live segment on a thread of its
 own; store trouble never holds the stream (``/diagnostics`` says WARN or ERROR until a write
-succeeds). The segments carry what ``te_monitor``'s comparison at the test torque found
+succeeds). The segments carry what ``te_monitor``'s window analysis found at the test torque
 (:mod:`~reducer_twin.nodes.torque_check`), as a bag's summary does.
 """
 

@@ -6,7 +6,7 @@ specified with the life stage in ``test_pipeline.py``.
 """
 
 import pytest
-from reducer_twin.core.life_basis import play_clause
+from reducer_twin.core.life_basis import play_clause, torque_check_lines, TorqueCheckFinding
 from reducer_twin.core.units import ARCMIN
 
 LINE = ('no window held the load at the lost-motion test torque (23.5 N·m) long enough '
@@ -40,3 +40,22 @@ def test_a_lost_motion_given_less_a_soft_zone_is_already_the_width_at_the_test_t
 def test_no_line_no_clause():
     assert play_clause('ERROR', 'not compared', None, {}) is None
     assert play_clause('ERROR', 'not compared', '', {}) is None
+
+
+def test_a_lost_motion_read_within_a_soft_zone_is_said_whatever_the_level():
+    # Its error is the optimistic one, the life too long: an OK life says it too.
+    within = 'the lost motion read from the flanks ... is less than the width its bins give'
+    for level in ('OK', 'WARN', 'ERROR', 'STALE'):
+        found = TorqueCheckFinding('not compared', None, within)
+        assert torque_check_lines(level, found, {}) == [within]
+
+
+def test_both_lines_are_said_beside_an_alarm_the_within_zone_line_first():
+    found = TorqueCheckFinding('unconfirmed', LINE, 'within')
+    assert torque_check_lines('ERROR', found, {}) == ['within', LINE]
+    assert torque_check_lines('OK', found, {}) == ['within']
+
+
+def test_nothing_heard_says_nothing():
+    assert torque_check_lines('ERROR', None, {}) == []
+    assert torque_check_lines('ERROR', TorqueCheckFinding('none found'), {}) == []

@@ -12,6 +12,7 @@ import math
 
 import pytest
 from reducer_twin.cli import main
+from reducer_twin.core.life_basis import TorqueCheckFinding
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.fleet.live import LiveHistory, read_start
@@ -169,9 +170,24 @@ def test_a_live_alarm_on_the_flanks_play_says_the_test_torque_was_not_compared(
     # A bag's summary said it beside such an alarm ("inputs"); a live segment's did not.
     life = LifeConfig(warn_s=warn_h * 3600.0, error_s=0.5 * 3600.0)
     row = _fleet_row(tmp_path / 'f.db', records, capsys, life,
-                     ('not compared', NOT_COMPARED))
+                     TorqueCheckFinding('not compared', NOT_COMPARED))
     assert row['test_torque_check'] == 'not compared'
     assert row['inputs'] == ([NOT_COMPARED] if said else [])
+
+
+WITHIN_ZONE = ('the lost motion read from the flanks (0.65 arcmin, their extrapolation to no '
+               'load) is 0.74 +- 0.01 arcmin (104.6 standard errors) less than the width its '
+               'bins give at the lost-motion test torque (23.5 N·m) less the windup there')
+
+
+def test_a_live_reducer_read_within_a_soft_zone_says_so_whatever_its_level(
+        tmp_path, records, capsys):
+    # A bag's row says it among its inputs (an input warning); a live one did not.
+    life = LifeConfig(warn_s=3600.0, error_s=0.5 * 3600.0)
+    row = _fleet_row(tmp_path / 'f.db', records, capsys, life,
+                     TorqueCheckFinding('not compared', None, WITHIN_ZONE))
+    assert row['verdict'] == 'OK' and row['test_torque_check'] == 'not compared'
+    assert row['inputs'] == [WITHIN_ZONE]
 
 
 def test_a_live_segment_without_a_check_heard_says_nothing_of_it(tmp_path, records, capsys):

@@ -14,7 +14,7 @@ import json
 import subprocess
 
 from cli_runs import run_cli
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from full_disk import fill, small_tmpfs
 import numpy as np
 import pytest
@@ -26,6 +26,7 @@ from reducer_twin.analysis.stages import JointBack
 from reducer_twin.cli import main
 from reducer_twin.core.errors import InvalidParameter
 from reducer_twin.core.joint_twin import joint_topic
+from reducer_twin.core.life_basis import TorqueCheckFinding
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record, LifeConfig
 from reducer_twin.core.units import ARCMIN, HOUR
@@ -33,6 +34,7 @@ from reducer_twin.fleet.store import FleetStore, iso_from_ns
 from reducer_twin.msg_adapters.layouts import record_values, TE_FEATURES, WEAR_ESTIMATE
 from reducer_twin.msg_adapters.ros import from_multiarray, to_multiarray
 from reducer_twin.nodes.qos import latest_qos, stream_qos
+from reducer_twin.nodes.torque_check import to_status
 from reducer_twin.nodes.wear_estimator import WearEstimatorNode
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -193,11 +195,11 @@ def test_the_live_history_carries_what_te_monitor_found_at_the_test_torque(
         ros, tmp_path, records, capsys):
     # The fleet row of a bag says it; one of a live reducer had nothing to say it from.
     est = LiveEstimator(ros, tmp_path)
-    pub = est.probe.publisher(joint_topic(est.joint, 'test_torque_check'), KeyValue,
+    pub = est.probe.publisher(joint_topic(est.joint, 'test_torque_check'), DiagnosticStatus,
                               latest_qos())
     ros.wait_matched(pub)
-    pub.publish(KeyValue(key='none found', value=''))
-    ros.spin_until(lambda: est.node.live.test_torque_check == ('none found', None),
+    pub.publish(to_status(est.joint, TorqueCheckFinding('none found')))
+    ros.spin_until(lambda: est.node.live.test_torque_check == TorqueCheckFinding('none found'),
                    what='the check at the wear estimator')
     est.send(records[:3])
     assert est.node.flush_store() == 0

@@ -69,3 +69,25 @@ def soft_zone_swing(zone_arcmin, knee_fraction, seed=0, period_s=6.0, rate_hz=10
     te = (-0.5 * zone_arcmin * ARCMIN * np.clip(torque / knee, -1.0, 1.0) - torque / stiffness
           + rng.normal(0.0, 0.5 * ARCMIN / 60.0, t.size))
     return t, theta, omega, te, torque + rng.normal(0.0, 2.0, t.size)
+
+
+def within_zone_swing(play_arcmin, zone_arcmin, knee_nm, seed=0, rate_hz=1000.0):
+    """
+    Return a joint swinging through the vertical whose loads never leave its soft zone.
+
+    Under 60 N*m of gravity and a 6-s swing, every load lies below the knee at ``knee_nm``:
+    the curve has ``play_arcmin`` of play and a soft zone ``zone_arcmin`` wide at the knee,
+    taken up in proportion to the load, so its width at the lost-motion test torque is
+    ``play + zone * 23.5 / knee`` less nothing but the windup, and the flanks' extrapolation
+    to no load reads about the play. Returns 60 s as :func:`soft_zone_swing`.
+    """
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(round(60.0 * rate_hz))) / rate_hz
+    theta = 0.5 * math.pi + 1.2 * np.sin(TWO_PI * t / 6.0)
+    omega = 1.2 * TWO_PI / 6.0 * np.cos(TWO_PI * t / 6.0)
+    torque = 60.0 * np.cos(theta)
+    stiffness = model_tables(PARAMS).series_stiffness
+    te = (-0.5 * play_arcmin * ARCMIN * np.tanh(torque / 0.5)
+          - 0.5 * zone_arcmin * ARCMIN * np.clip(torque / knee_nm, -1.0, 1.0)
+          - torque / stiffness + rng.normal(0.0, 0.5 * ARCMIN / 60.0, t.size))
+    return t, theta, omega, te, torque + rng.normal(0.0, 2.0, t.size)
