@@ -18,7 +18,8 @@ into a straight line of width against load, and the windows' lost motion read. W
 line's width at the test torque, less the catalogue windup, exceeds the lost motion read by
 as much as a soft zone must fall short to be said (:data:`.soft_zone.SHORTFALL_RAD`, a
 :data:`.soft_zone.SHORTFALL_SHARE` of it, over :data:`.soft_zone.MIN_WINDOWS` windows) and
-by :data:`.soft_zone.HINT_SIGMAS` standard error or more (the line gives it): as a soft
+by :data:`.soft_zone.HINT_SIGMAS` standard error or more (the line gives it), the line's
+width growing with the load faster than the windup by as many standard errors: as a soft
 zone not yet said is told (:attr:`.soft_zone.SoftZoneCheck.caveat`), since the error it
 warns of is the optimistic one, and the floors keep units without a soft zone quiet.
 Nothing is changed in the lost motion given: the width at the test torque of such bins is
@@ -103,7 +104,8 @@ class WithinZoneCheck:
             ``width`` (the line's, less the catalogue windup), ``read`` (the windows'
             mean), ``gap`` (``width - read``) and its standard error ``gap_sd`` [rad] (the
             line's residual scatter and the windows' counted), ``slope`` (the line's
-            slope over the catalogue windup's, ``2/k``), ``windows``; None before
+            slope over the catalogue windup's, ``2/k``) and its standard error
+            ``slope_sd``, ``windows``; None before
             :data:`.soft_zone.MIN_WINDOWS` windows or without a line.
 
         """
@@ -121,9 +123,11 @@ class WithinZoneCheck:
         read = z1 / m
         var_read = max(z2 / m - read * read, 0.0) / max(m - 1.0, 1.0)
         width = a + b * tt - 2.0 * tt / self.series_stiffness
+        k2 = self.series_stiffness / 2.0
         return {'width': width, 'read': read, 'gap': width - read,
                 'gap_sd': math.sqrt(var_line + var_read),
-                'slope': b * self.series_stiffness / 2.0, 'windows': self.windows}
+                'slope': b * k2, 'slope_sd': math.sqrt(scale * s0 / det) * k2,
+                'windows': self.windows}
 
     @property
     def reason(self):
@@ -140,7 +144,11 @@ class WithinZoneCheck:
         if found is None:
             return None
         gap, sd, width = found['gap'], found['gap_sd'], found['width']
-        if not (gap >= SHORTFALL_RAD and gap >= SHORTFALL_SHARE * width
+        # A zone being taken up widens the curve faster than the windup (slope above 1): a
+        # gap from bins whose width does not grow so is no soft zone but the line's scatter
+        # (independent-generator forearms, slopes -5.7 and -1.3 at 1.4-1.8 standard errors).
+        steep = found['slope'] - 1.0 >= HINT_SIGMAS * found['slope_sd']
+        if not (steep and gap >= SHORTFALL_RAD and gap >= SHORTFALL_SHARE * width
                 and gap >= HINT_SIGMAS * sd):
             return None
         lo, hi = (s * self.takeup_torque for s in SPAN)
