@@ -61,7 +61,10 @@ TE_FEATURES = Layout('te_features', (
 Per-window TE features and duty of one joint (paper Table 5 style); ``lost_motion_rad`` is
 the play the loaded flanks give, the catalogue's lost motion ``soft_zone_shortfall_rad`` less
 but not below ``soft_zone_width_rad``, the width those flanks' comparison gives at the test
-torque (both 0 unless a soft zone reaching beyond the test torque is said).
+torque (both 0 unless a soft zone reaching beyond the test torque is said). A negative
+``soft_zone_shortfall_rad``: loads that never leave a soft zone, the flanks' reading below
+the width their bins give at the test torque (``soft_zone_width_rad``, less the windup), the
+lost motion given that much more but not above that width.
 """
 
 WEAR_ESTIMATE = Layout('wear', (
@@ -80,7 +83,8 @@ offset) and its covariance, the estimated lost motion now and when new, the duty
 relative standard error, and the observed growth law ``z = β + k·(A/A_now)^g`` in the Archard
 exposure ``A`` with its covariance and the probability that it holds. ``lost_motion_rad`` is
 at the test torque: the play the loaded flanks give (``lost_motion_obs_rad``, the growth law)
-less ``soft_zone_shortfall_rad`` where a soft zone reaches beyond the test torque.
+less ``soft_zone_shortfall_rad`` where a soft zone reaches beyond the test torque (negative:
+more, where the loads never leave one).
 """
 
 REMAINING_LIFE = Layout('remaining_life', (

@@ -13,6 +13,8 @@ there is nothing to say; the run says them (:func:`.reading.warn`) and keeps the
 :class:`.results.JointResult`.
 """
 
+import math
+
 from reducer_twin.core.errors import StateFileError
 from reducer_twin.core.joint_twin import TwinFront
 from reducer_twin.core.life_basis import play_clause, rate_resolved, rate_unresolved
@@ -283,7 +285,7 @@ def carried_front(state, params):
     return {'front': front}, None
 
 
-def soft_zone_carried_line(soft_zone, wear):
+def soft_zone_carried_line(soft_zone, wear, within_zone=None):
     """
     Say a soft zone carried over from the reducer's last bag that this one has not shown.
 
@@ -296,15 +298,19 @@ def soft_zone_carried_line(soft_zone, wear):
         The soft zone this bag showed (:attr:`.joint_twin.TwinFront.soft_zone`).
     wear : ndarray or None
         The joint's wear records (rows of :data:`.layouts.WEAR_ESTIMATE`).
+    within_zone : str or None
+        Where the shortfall carried is negative (loads within a soft zone): this bag's own
+        line of it (:attr:`.window_analysis.WindowAnalyzer.within_zone`), if said.
 
     Returns
     -------
     str or None
-        The line, or None when this bag showed its soft zone or none was carried.
+        The line, or None when this bag showed what was carried or none was carried.
 
     """
     short = _latest_shortfall(wear)
-    if soft_zone is not None or not short > 0.0:
+    shown = soft_zone if short > 0.0 else within_zone
+    if shown is not None or short == 0.0 or not math.isfinite(short):
         return None
     return carried_line(short)
 

@@ -643,8 +643,8 @@ class _Run:
             res.test_torque_check = front.analyzer.test_torque_check
             res.inputs += self._say(joint, joint_words.not_compared_line(
                 res.observed, res.levels, res.wear, front.analyzer.test_torque_not_compared))
-            res.inputs += self._say(joint, joint_words.soft_zone_carried_line(res.soft_zone,
-                                                                              res.wear))
+            res.inputs += self._say(joint, joint_words.soft_zone_carried_line(
+                res.soft_zone, res.wear, front.analyzer.within_zone))
             res.time_offset_s = front.twin.calibration.to_carry
             res.front_state = front.twin.state()
             self._say(joint, joint_words.rate_line(res.observed, res.wear))

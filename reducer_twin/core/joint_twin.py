@@ -219,8 +219,9 @@ class HealthSummary:
         The accuracy limit [arcmin].
     soft_zone_shortfall_arcmin : float
         The soft zone the lost motion is given at the test torque with (the play less it),
-        found by this stream or carried over from the reducer's last (:mod:`.soft_zone`);
-        0 without one [arcmin].
+        found by this stream or carried over from the reducer's last (:mod:`.soft_zone`;
+        negative: the lost motion read below its bins' width there, given more,
+        :mod:`.within_zone`); 0 without one [arcmin].
 
     """
 
@@ -298,7 +299,7 @@ class HealthSummary:
                'rejected_updates': self.rejected_updates}
         if self.te_pp_arcmin is not None:
             out['te_pp_arcmin'] = self.te_pp_arcmin
-        if self.soft_zone_shortfall_arcmin > 0.0:
+        if self.soft_zone_shortfall_arcmin != 0.0:
             out['soft_zone_shortfall_arcmin'] = self.soft_zone_shortfall_arcmin
         return out
 

@@ -212,7 +212,7 @@ def play_limit(wear_record, limit):
     where the play reaches ``limit`` plus it. ``limit`` itself where the record has none.
     """
     shortfall = float(wear_record.get('soft_zone_shortfall_rad', 0.0))
-    return limit + shortfall if math.isfinite(shortfall) and shortfall > 0.0 else limit
+    return limit + shortfall if math.isfinite(shortfall) and shortfall != 0.0 else limit
 
 
 def _law_reach(wear_record, limit):
@@ -427,7 +427,7 @@ def play_clause(level, check, line, wear_record):
     """
     if not line or check not in TEST_TORQUE_CAVEATS or level not in ('WARN', 'ERROR'):
         return None
-    return None if float(wear_record.get('soft_zone_shortfall_rad', 0.0)) > 0.0 else line
+    return None if float(wear_record.get('soft_zone_shortfall_rad', 0.0)) != 0.0 else line
 
 
 @dataclass(frozen=True)

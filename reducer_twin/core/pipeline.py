@@ -414,7 +414,7 @@ class EstimatorStage:
                      f'{self.estimator.exposure_s / HOUR:.1f} h')
             # Carried as from an earlier bag: it stays until this stream's check says one.
             self.soft_zone_shortfall = float(getattr(loaded, 'soft_zone_shortfall', 0.0))
-            if self.soft_zone_shortfall > 0.0:
+            if self.soft_zone_shortfall != 0.0:
                 self.log(carried_line(self.soft_zone_shortfall))
         else:
             self.estimator = WearEstimator(params, config)
@@ -461,16 +461,22 @@ class EstimatorStage:
         Returns the estimator's update result (``status``, ``nis``, ...); the stage's last
         observation and soft-zone shortfall follow the window, as in :meth:`process`:
         the shortfall the window carries, but no more than takes the play the estimator
-        follows down to the window's ``soft_zone_width`` (:func:`taken_off`).
+        follows down to the window's ``soft_zone_width`` (:func:`taken_off`); a negative one
+        (loads within a soft zone, :mod:`.within_zone`) adds no more than takes it up to
+        that width.
         """
         said = self.estimator.service_verdict
         result = self.estimator.step(features)
         self.last_observation = float(features.lost_motion)
         shortfall = float(getattr(features, 'soft_zone_shortfall', 0.0))
-        if math.isfinite(shortfall) and shortfall > 0.0:
-            self.soft_zone_shortfall = taken_off(
-                shortfall, float(getattr(features, 'soft_zone_width', 0.0)),
-                lambda: self.estimator.lost_motion(self.estimator.growth_trend())[0])
+        taken = 0.0 if not (math.isfinite(shortfall) and shortfall != 0.0) else taken_off(
+            shortfall, float(getattr(features, 'soft_zone_width', 0.0)),
+            lambda: self.estimator.lost_motion(self.estimator.growth_trend())[0])
+        if shortfall > 0.0 or taken < 0.0 or (shortfall < 0.0 < -self.soft_zone_shortfall):
+            # A soft zone, or loads within one that give the lost motion more than the play
+            # followed (the play already that wide: nothing added, a soft zone carried over
+            # from the reducer's last stream stays).
+            self.soft_zone_shortfall = taken
             self._soft_zone_said = True
         elif self._soft_zone_said:
             # This stream's check said it and no longer does: its evidence is followed.
@@ -505,7 +511,7 @@ class EstimatorStage:
         """
         if self.store is not None:
             state = self.estimator.state_dict()
-            if self.soft_zone_shortfall > 0.0:
+            if self.soft_zone_shortfall != 0.0:
                 state[SOFT_ZONE_KEY] = float(self.soft_zone_shortfall)
             self.store.save(state)
 
@@ -600,10 +606,15 @@ def taken_off(shortfall, width, play):
     taken off a play read 6 % high). So it is taken off only down to the ``width`` the
     same comparison gives at the test torque: ``min(shortfall, max(play - width, 0))``.
 
+    A negative shortfall is the other way round (:mod:`.within_zone`): loads that never
+    leave a soft zone, the flanks' reading below the width its bins give at the test
+    torque. It is added only up to that width: ``max(shortfall, min(play - width, 0))``.
+
     Parameters
     ----------
     shortfall : float or ndarray
-        The soft zone's shortfall [rad] (> 0; per window for the report's readings).
+        The soft zone's shortfall [rad] (per window for the report's readings; negative:
+        a lost motion read below the width at the test torque, added).
     width : float or ndarray
         The width at the test torque [rad]; 0 or less: not known (a record from before
         it was carried), the whole shortfall is taken off.
@@ -614,7 +625,7 @@ def taken_off(shortfall, width, play):
     Returns
     -------
     float or ndarray
-        The shortfall taken off [rad], 0 to ``shortfall``.
+        The shortfall taken off [rad], from 0 to ``shortfall``.
 
     """
     width = np.asarray(width, dtype=float)
@@ -623,8 +634,10 @@ def taken_off(shortfall, width, play):
         return shortfall
     with np.errstate(invalid='ignore'):
         above = np.asarray(play(), dtype=float) - width
-    taken = np.where(known & np.isfinite(above),
-                     np.minimum(shortfall, np.maximum(above, 0.0)), shortfall)
+    bounded = np.where(np.asarray(shortfall) >= 0.0,
+                       np.minimum(shortfall, np.maximum(above, 0.0)),
+                       np.maximum(shortfall, np.minimum(above, 0.0)))
+    taken = np.where(known & np.isfinite(above), bounded, shortfall)
     return float(taken) if taken.ndim == 0 else taken
 
 

@@ -521,7 +521,8 @@ def carried_line(shortfall):
     Parameters
     ----------
     shortfall : float
-        The shortfall carried over from the reducer's last recording [rad].
+        The shortfall carried over from the reducer's last recording [rad] (negative: the
+        lost motion read below its bins' width at the test torque, :mod:`.within_zone`).
 
     Returns
     -------
@@ -529,6 +530,11 @@ def carried_line(shortfall):
         The line (the bag analysis's ``WARNING`` and input line, the live log).
 
     """
+    if shortfall < 0.0:
+        return ('the lost motion and remaining life are given at the width an earlier '
+                'recording of this reducer showed at the lost-motion test torque, its loads '
+                "within a soft zone (the flanks' reading plus "
+                f'{-shortfall / ARCMIN:.2f} arcmin); this recording has not shown it yet')
     return ('the lost motion and remaining life are given at the lost-motion test torque with '
             'the soft zone an earlier recording of this reducer found (the play '
             f'{shortfall / ARCMIN:.2f} arcmin wider than the width there); this recording has '

@@ -411,9 +411,12 @@ class WindowFit:
         n_ord = len(self.orders)
         amp = np.hypot(beta[:, 0:2 * n_ord:2], beta[:, 1:2 * n_ord:2])
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
-        soft = self.soft_zone.said
-        shortfall, zone_width = (0.0, 0.0) if soft is None else (
-            float(soft['shortfall']), float(soft['width']))
+        # The lost motion at the test torque: the play less a soft zone's shortfall, or the
+        # flanks' reading plus the gap to the width of loads within one (negative).
+        soft, within = self.soft_zone.said, self.within_zone.said
+        shortfall, zone_width = (float(soft['shortfall']), float(soft['width'])) \
+            if soft is not None else (-float(within['gap']), float(within['width'])) \
+            if within is not None else (0.0, 0.0)
         out = []
         for k in range(n_win):
             use = usable[k]

@@ -22,9 +22,12 @@ by :data:`.soft_zone.HINT_SIGMAS` standard error or more (the line gives it), th
 width growing with the load faster than the windup by as many standard errors: as a soft
 zone not yet said is told (:attr:`.soft_zone.SoftZoneCheck.caveat`), since the error it
 warns of is the optimistic one, and the floors keep units without a soft zone quiet.
-Nothing is changed in the lost motion given: the width at the test torque of such bins is
-itself short where the friction loop has not opened (a wrist of ``bench_random_forms.py``
-seed 17038 reads 1.54 arcmin there against a true 2.30, and 0.81 by the flanks).
+Where it is said, the lost motion and remaining life are given at that width, the
+catalogue's definition, as a soft zone's are given at the test torque (the windows carry
+the gap as a negative shortfall: :func:`.pipeline.taken_off`, :func:`.life_basis.play_limit`).
+It is still short where the friction loop of such small loads has not opened (a wrist of
+``bench_random_forms.py`` seed 17038 reads 1.54 arcmin there against a true 2.30, and 0.81
+by the flanks), and the line says so.
 
 Measured (one-off scripts over the pooled bins of whole recordings, 2026-12-08): the model's
 simulator and the independent generator within 0.03 arcmin of their reading (nine joints,
@@ -130,15 +133,12 @@ class WithinZoneCheck:
                 'windows': self.windows}
 
     @property
-    def reason(self):
+    def said(self):
         """
-        Say when the lost motion read falls short of the bins' width at the test torque.
+        Return the gap's figures (:meth:`gap`) where it is said, else None.
 
-        Returns
-        -------
-        str or None
-            One line, or None.
-
+        The lost motion is then given at the width (the windows carry ``-gap`` as their
+        soft-zone shortfall, :func:`.pipeline.taken_off`).
         """
         found = self.gap()
         if found is None:
@@ -151,6 +151,23 @@ class WithinZoneCheck:
         if not (steep and gap >= SHORTFALL_RAD and gap >= SHORTFALL_SHARE * width
                 and gap >= HINT_SIGMAS * sd):
             return None
+        return found
+
+    @property
+    def reason(self):
+        """
+        Say when the lost motion read falls short of the bins' width at the test torque.
+
+        Returns
+        -------
+        str or None
+            One line, or None.
+
+        """
+        found = self.said
+        if found is None:
+            return None
+        gap, sd, width = found['gap'], found['gap_sd'], found['width']
         lo, hi = (s * self.takeup_torque for s in SPAN)
         return (f'the lost motion read from the flanks ({found["read"] / ARCMIN:.2f} arcmin, '
                 'their extrapolation to no load) is '
@@ -161,6 +178,7 @@ class WithinZoneCheck:
                 f'{found["windows"]} windows): the width grows with the load '
                 f'{found["slope"]:.1f} times as fast as the stiffness of the reducer gives, the '
                 'play still being taken up across these loads (a soft zone whose knee lies '
-                'beyond them), so the lost motion is likely more than given and the remaining '
-                'life less; where the friction loop of such small loads has not opened, more '
-                'than that width too. A recording whose loads pass the knee decides')
+                'beyond them): the lost motion and remaining life are given no lower than that '
+                'width from here on; where the friction loop of such small loads has not '
+                'opened, the lost motion is more than that width too. A recording whose loads '
+                'pass the knee decides')

@@ -608,7 +608,7 @@ def join_store(stage, store, robot, joint, params, estimator_config, life_config
             raise StateFileError(f'parameter store: the state of {robot}/{joint} in the '
                                  f'fleet store {store} cannot be used: {err}') from None
         stage.restored_from = f'fleet store {store} ({robot}/{joint})'
-        if stage.soft_zone_shortfall > 0.0:
+        if stage.soft_zone_shortfall != 0.0:
             log(f'{robot}/{joint}: {carried_line(stage.soft_zone_shortfall)}')
     elif start.new_reducer:
         # Fitted new: not the unit the configuration's service time was of.

@@ -94,9 +94,9 @@ def _load(path, params, config=None):
         raise StateFileError(f'{path}: {err}') from err
     shortfall = state.get(SOFT_ZONE_KEY, 0.0)
     if isinstance(shortfall, bool) or not isinstance(shortfall, (int, float)) \
-            or not math.isfinite(shortfall) or shortfall < 0.0:
-        raise StateFileError(f'{path}: {SOFT_ZONE_KEY} must be a finite number of at least '
-                             f'0 rad, got {shortfall!r}')
+            or not math.isfinite(shortfall):
+        raise StateFileError(f'{path}: {SOFT_ZONE_KEY} must be a finite number of radians, '
+                             f'got {shortfall!r}')
     return estimator, float(shortfall)
 
 
@@ -117,7 +117,8 @@ class LoadedState:
         Why the primary file was not used.
     soft_zone_shortfall : float
         The soft zone's shortfall the stage gave the lost motion less when it saved the
-        state (:attr:`.pipeline.EstimatorStage.soft_zone_shortfall`; 0 without one) [rad].
+        state (:attr:`.pipeline.EstimatorStage.soft_zone_shortfall`; 0 without one,
+        negative where loads within a soft zone gave it more, :mod:`.within_zone`) [rad].
 
     """
 

@@ -89,7 +89,8 @@ def estimator_status(stage, rejected, live=None):
               'state_writes_recovered': writer.recoveries if writer else 0,
               'state_file': str(stage.state_path or 'none'),
               'restored_from': stage.restored_from or 'new reducer'}
-    if stage.soft_zone_shortfall > 0.0:    # the lost motion is given less a soft zone
+    # The lost motion is given less a soft zone (negative: more, loads within one).
+    if stage.soft_zone_shortfall != 0.0:
         values['soft_zone_shortfall_arcmin'] = rad_to_arcmin(stage.soft_zone_shortfall)
     level = 'OK' if rejected == 0 else 'WARN'
     error = writer.error if writer is not None else None

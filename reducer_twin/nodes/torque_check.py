@@ -8,7 +8,9 @@ width at the test torque too little to say a soft zone (``'unconfirmed'``), or n
 (``'not compared'``), the lost motion is the loaded flanks' play, more than the catalogue's
 lost motion where such a zone exists: an alarm resting on it says so. Where the lost motion
 read lies below its own bins' width at the test torque (loads that never leave a soft
-zone), the remaining life is likely too long: said beside the life whatever its level.
+zone), it is given at that width, itself short where the friction loop of such loads has
+not opened, so the remaining life may still be too long: said beside the life whatever its
+level.
 One rule, :func:`.life_basis.torque_check_lines`, the bag analysis' too.
 
 ``/reducer_twin/<joint>/test_torque_check`` carries a ``diagnostic_msgs/DiagnosticStatus``

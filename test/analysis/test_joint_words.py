@@ -104,3 +104,26 @@ def test_an_alarm_on_the_loaded_flanks_play_says_the_test_torque_was_not_compare
     # the test torque already.
     wear[-1, WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')] = 1e-4
     assert said(True, ['ERROR'], wear, line) is None
+
+
+def _wear_with_shortfall(shortfall):
+    wear = np.zeros((1, len(WEAR_ESTIMATE.fields)))
+    wear[0, WEAR_ESTIMATE.fields.index('soft_zone_shortfall_rad')] = shortfall
+    return wear
+
+
+def test_what_an_earlier_bag_found_at_the_test_torque_is_said_until_this_one_shows_it():
+    # A soft zone (a positive shortfall) or loads within one (negative) carried over from
+    # the reducer's last bag: said while this bag's own check has not shown the same.
+    soft = joint_words.soft_zone_carried_line(None, _wear_with_shortfall(4e-4))
+    assert 'the soft zone an earlier recording of this reducer found' in soft
+    within = joint_words.soft_zone_carried_line(None, _wear_with_shortfall(-2e-4))
+    assert "its loads within a soft zone (the flanks' reading plus 0.69 arcmin)" in within
+    assert joint_words.soft_zone_carried_line({'width': 1.0}, _wear_with_shortfall(4e-4)) \
+        is None
+    assert joint_words.soft_zone_carried_line(None, _wear_with_shortfall(-2e-4),
+                                              'the lost motion read ...') is None
+    # The other finding does not stand for it.
+    assert joint_words.soft_zone_carried_line(None, _wear_with_shortfall(4e-4),
+                                              'the lost motion read ...') == soft
+    assert joint_words.soft_zone_carried_line(None, _wear_with_shortfall(0.0)) is None

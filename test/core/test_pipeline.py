@@ -20,7 +20,7 @@ from reducer_twin.core.errors import InvalidInput, InvalidParameter
 from reducer_twin.core.estimator import EstimatorConfig
 from reducer_twin.core.life_basis import curve_extrapolation, faster_than_wear, growth_law
 from reducer_twin.core.life_basis import implied_log_rate, life_trend_probability
-from reducer_twin.core.life_basis import LOG_RATE_PLAUSIBLE, rate_resolved
+from reducer_twin.core.life_basis import LOG_RATE_PLAUSIBLE, play_limit, rate_resolved
 from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.pipeline import CLOCK_RESET_S, duty_to_record
 from reducer_twin.core.pipeline import EstimatorStage, features_from_record
@@ -314,6 +314,36 @@ def test_a_soft_zone_is_taken_off_the_play_only_down_to_the_width_at_the_test_to
     assert near['soft_zone_shortfall_rad'] == 0.0
     assert taken_off(0.5 * ARCMIN, 0.0, lambda: 1 / 0) == 0.5 * ARCMIN   # width not known
     assert taken_off(0.5 * ARCMIN, 1.0 * ARCMIN, lambda: math.nan) == 0.5 * ARCMIN
+
+
+def test_loads_within_a_soft_zone_give_the_lost_motion_up_to_the_width_at_the_test_torque(
+        windows):
+    # A lost motion read below its bins' width at the test torque (core/within_zone.py):
+    # the windows carry the gap as a negative shortfall, added no further than that width,
+    # and the limit is met that much sooner.
+    plain = EstimatorStage(PARAMS)
+    run(plain, windows)
+    play = plain.record(windows[-1].t_end)['lost_motion_rad']
+
+    def given(gap, width):
+        stage = EstimatorStage(PARAMS)
+        run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': -gap,
+                                       'soft_zone_width': width}) for w in windows])
+        return stage, stage.record(windows[-1].t_end)
+
+    stage, below = given(0.6 * ARCMIN, play + 0.8 * ARCMIN)
+    assert below['lost_motion_rad'] == pytest.approx(play + 0.6 * ARCMIN, abs=1e-3 * ARCMIN)
+    assert below['soft_zone_shortfall_rad'] == pytest.approx(-0.6 * ARCMIN, abs=1e-3 * ARCMIN)
+    assert play_limit(below, 3.0 * ARCMIN) == pytest.approx(2.4 * ARCMIN, abs=1e-3 * ARCMIN)
+    # Up to the width only; nothing where the play followed is already that wide.
+    _, near = given(0.6 * ARCMIN, play + 0.2 * ARCMIN)
+    assert near['lost_motion_rad'] == pytest.approx(play + 0.2 * ARCMIN, abs=1e-3 * ARCMIN)
+    _, wide = given(0.6 * ARCMIN, play - 0.1 * ARCMIN)
+    assert wide['lost_motion_rad'] == pytest.approx(play)
+    assert wide['soft_zone_shortfall_rad'] == 0.0
+    # A later window that no longer says it: the stream's evidence is followed.
+    stage.step(windows[-1])
+    assert stage.soft_zone_shortfall == 0.0
 
 
 def test_a_soft_zone_follows_its_stream_and_one_carried_over_stays_until_the_stream_says(
