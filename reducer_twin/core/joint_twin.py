@@ -18,6 +18,7 @@ which the nodes' parameters, ``config/twin.yaml`` and ``analyze --config``
 are derived.
 """
 
+import copy
 from dataclasses import dataclass
 import math
 from types import MappingProxyType
@@ -491,7 +492,8 @@ class TwinFront:
 
         The encoders' time offset a next stream may start from
         (:attr:`.pipeline.TimeOffsetCalibration.to_carry`: not while the clocks drift) and
-        the soft-zone check's pools (:meth:`.soft_zone.SoftZoneCheck.state`). The rest of
+        the pools of the soft-zone and within-zone checks (:meth:`.soft_zone.SoftZoneCheck.state`,
+        :meth:`.within_zone.WithinZoneCheck.state`). The rest of
         the window analysis (the flank pool, the friction fit) is relearnt by the first
         windows of any stream.
 
@@ -499,13 +501,14 @@ class TwinFront:
         -------
         dict
             ``kind`` (:data:`FRONT_STATE_KIND`), ``version``, ``windows`` (analysed so far),
-            ``time_offset_s`` (or None), ``soft_zone`` and ``maintenance`` (the last
-            maintenance event followed, or None).
+            ``time_offset_s`` (or None), ``soft_zone``, ``within_zone`` and
+            ``maintenance`` (the last maintenance event followed, or None).
 
         """
         return {'kind': FRONT_STATE_KIND, 'version': FRONT_STATE_VERSION,
                 'windows': self.windows, 'time_offset_s': self.calibration.to_carry,
                 'soft_zone': self.analyzer.fit.soft_zone.state(),
+                'within_zone': self.analyzer.fit.within_zone.state(),
                 'maintenance': self.maintenance}
 
     def continue_from(self, state):
@@ -548,12 +551,23 @@ class TwinFront:
         event = state.get('maintenance')
         if event is not None and not isinstance(event, str):
             raise StateFileError(f'maintenance must be null or an event text, got {event!r}')
+        # Made for the same reducer as the soft-zone check's; a state from before it was
+        # kept has none, and the check starts afresh. Read first: nothing is changed by a
+        # state that raises.
+        within = copy.copy(self.analyzer.fit.within_zone)
+        try:
+            if state.get('within_zone') is not None:
+                within.continue_from(state['within_zone'])
+        except (KeyError, TypeError, ValueError) as err:
+            raise StateFileError(f"within_zone is not a within-zone check's state: {err}") \
+                from None
         check = self.analyzer.fit.soft_zone
         lines = []
         try:
             other = check.other_reducer(state['soft_zone'])
             if other is None:
                 check.continue_from(state['soft_zone'])
+                self.analyzer.fit.within_zone = within
         except (KeyError, TypeError, ValueError) as err:
             raise StateFileError(f"soft_zone is not a soft-zone check's state: {err}") from None
         if other is not None:

@@ -97,6 +97,41 @@ class WithinZoneCheck:
             self._read = self._fade * self._read + np.array([1.0, z, z * z])
             self.windows += 1
 
+    def state(self):
+        """
+        Return the check's pools as plain JSON-able data, to continue after a restart.
+
+        Returns
+        -------
+        dict
+            ``bins`` (the line's 7 weighted sums), ``read`` (the readings' 3), ``windows``.
+
+        """
+        return {'bins': self._bins.tolist(), 'read': self._read.tolist(),
+                'windows': self.windows}
+
+    def continue_from(self, state):
+        """
+        Continue from :meth:`state` of a check of the same reducer.
+
+        Raises
+        ------
+        ValueError
+            If the state is not a check's (wrong sizes, values not finite, a negative
+            count); the check is then left as it was.
+        KeyError, TypeError
+            If a key is missing or a value is of the wrong type.
+
+        """
+        bins = np.array(state['bins'], dtype=float)
+        read = np.array(state['read'], dtype=float)
+        windows = state['windows']
+        if not (bins.shape == (7,) and read.shape == (3,) and np.all(np.isfinite(bins))
+                and np.all(np.isfinite(read)) and isinstance(windows, int)
+                and not isinstance(windows, bool) and windows >= 0):
+            raise ValueError('bins must be 7 finite sums, read 3, windows a count')
+        self._bins, self._read, self.windows = bins, read, windows
+
     def gap(self):
         """
         Return the width at the test torque less the windup, the lost motion read, and the gap.

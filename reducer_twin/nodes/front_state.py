@@ -26,7 +26,7 @@ SUFFIX = '.te_monitor.json'
 """The ending of a ``te_monitor``'s state file in ``state_dir``."""
 
 PARAMETERS = {
-    'state_file': ('', "te_monitor state file (time offset, soft-zone check); '' = "
+    'state_file': ('', "te_monitor state file (time offset, soft-zone checks); '' = "
                        f"<state_dir>/<joint>{SUFFIX}; 'none' = keep no state"),
     'state_dir': ('', "directory of state files; '' = $XDG_STATE_HOME/reducer_twin")}
 """The node's plain parameters of its state (``declare_plain``)."""

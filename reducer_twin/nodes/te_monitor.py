@@ -11,7 +11,7 @@ link-encoder time offset, the window analysis); each completed window is publish
 duty), what the window analysis found at the test torque on ``.../test_torque_check``
 (:mod:`~reducer_twin.nodes.torque_check`). Window length, gap bridging, aging, analysis
 period: the fields of :class:`~reducer_twin.core.joint_twin.TwinConfig`. What the front
-learnt of the reducer (the encoders' time offset, the soft-zone check) is kept in a state
+learnt of the reducer (the encoders' time offset, the soft-zone checks) is kept in a state
 file after every batch of windows and continued from on start; a replaced reducer (the
 ``maintenance`` event) starts the window analysis afresh (:mod:`~reducer_twin.nodes.front_state`).
 

@@ -25,7 +25,7 @@ from reducer_twin.core.params import ReducerParams
 from reducer_twin.core.simulator import JointSimulator, SimConfig
 from reducer_twin.core.transmission_error import lost_motion
 from reducer_twin.core.units import ARCMIN
-from te_streams import soft_zone_swing
+from te_streams import soft_zone_swing, within_zone_swing
 
 PARAMS = ReducerParams()
 AGING = 180_000.0
@@ -454,8 +454,50 @@ def test_a_front_state_of_another_reducers_check_starts_the_check_afresh(learnt_
     assert front.calibration.carried     # the encoders are the joint's, not the reducer's
 
 
+def _within_zone_windows(front, seconds, t0_s=0.0):
+    """Feed ``seconds`` of a swing whose loads never leave its soft zone; return its windows."""
+    t, theta, omega, te, effort = within_zone_swing(0.5, 3.0, 80.0)
+    keep = t < seconds
+    t, theta, omega, te, effort = t[keep] + t0_s, theta[keep], omega[keep], te[keep], effort[keep]
+    windows = []
+    for k in range(0, t.size, 500):
+        piece = slice(k, k + 500)
+        windows += front.update(t[piece], 81.0 * (theta[piece] - te[piece]), theta[piece],
+                                effort[piece], omega[piece])
+    return windows
+
+
+def test_a_front_continued_from_its_state_gives_loads_within_a_soft_zone_their_width_at_once():
+    # The within-zone check's pools are kept with the soft-zone check's: a restarted
+    # te_monitor's windows carry the gap to the width at the test torque from the first,
+    # where a fresh check needs two windows again (the lost motion given drops meanwhile).
+    learnt = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    _within_zone_windows(learnt, 30.0)
+    said = learnt.analyzer.fit.within_zone.said
+    assert said is not None and learnt.analyzer.within_zone is not None
+    state = json.loads(json.dumps(learnt.state()))
+    front = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    front.continue_from(state)
+    assert front.analyzer.fit.within_zone.said == said
+    windows = _within_zone_windows(front, 10.0, t0_s=60.0)
+    assert windows and all(w.soft_zone_shortfall < 0.0 for w in windows)
+    fresh = _within_zone_windows(TwinFront(PARAMS, TwinConfig(friction_in_effort=0)), 10.0,
+                                 t0_s=60.0)
+    assert fresh[0].soft_zone_shortfall == 0.0
+    # A state from before the check was kept continues without it.
+    del state['within_zone']
+    older = TwinFront(PARAMS, TwinConfig(friction_in_effort=0))
+    older.continue_from(state)
+    assert older.analyzer.fit.within_zone.windows == 0
+
+
 @pytest.mark.parametrize('change, message', [
     (lambda s: s.update(kind='reducer_twin.estimator'), "must be 'reducer_twin.front_state'"),
+    (lambda s: s.update(within_zone={'bins': [0.0] * 6, 'read': [0.0] * 3, 'windows': 1}),
+     "within_zone is not a within-zone check's state: bins must be 7 finite sums"),
+    (lambda s: s.update(within_zone={'bins': [0.0] * 7, 'read': [0.0] * 3, 'windows': -1}),
+     'windows a count'),
+    (lambda s: s.update(within_zone={'bins': [0.0] * 7}), 'within_zone is not a within-zone'),
     (lambda s: s.update(version=2), 'version 1'),
     (lambda s: s.update(time_offset_s='10 ms'), 'time_offset_s must be null or a finite'),
     (lambda s: s.update(time_offset_s=float('inf')), 'time_offset_s must be null or a finite'),
@@ -472,6 +514,7 @@ def test_a_broken_front_state_is_refused_naming_the_value_and_changes_nothing(
     with pytest.raises(StateFileError, match=re.escape(message)):
         front.continue_from(state)
     assert front.calibration.applied is None and front.analyzer.fit.soft_zone.windows == 0
+    assert front.analyzer.fit.within_zone.windows == 0
 
 
 def test_a_replaced_reducer_starts_the_window_analysis_afresh_and_keeps_the_time_offset(
