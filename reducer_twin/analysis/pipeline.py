@@ -640,6 +640,7 @@ class _Run:
             res.velocity = _velocity_source(front.analyzer)
             res.inputs = self._say(joint, *front.twin.input_warnings().values())
             res.soft_zone = front.twin.soft_zone
+            res.within_zone = front.analyzer.within_zone_said
             res.test_torque_check = front.analyzer.test_torque_check
             res.inputs += self._say(joint, joint_words.not_compared_line(
                 res.observed, res.levels, res.wear, front.analyzer.test_torque_not_compared))

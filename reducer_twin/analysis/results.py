@@ -41,6 +41,8 @@ class JointResult:
         ``ground_truth`` records from the bag, if it has them.
     soft_zone : dict or None
         A soft zone beyond the test torque, where said (:attr:`.joint_twin.TwinFront.soft_zone`).
+    within_zone : dict or None
+        Loads within a soft zone, where said (:attr:`.within_zone.WithinZoneCheck.said`).
     time_offset_s : float or None
         The encoders' time offset the joint's next bag may start from
         (:attr:`.pipeline.TimeOffsetCalibration.to_carry`).
@@ -66,6 +68,7 @@ class JointResult:
     velocity: str = None
     service: dict = None
     soft_zone: dict = None
+    within_zone: dict = None
     test_torque_check: str = None
     time_offset_s: float = None
     front_state: dict = None
@@ -102,6 +105,13 @@ class JointResult:
             ``taken_off_arcmin``, what the lost motion given was taken off the play by: the
             shortfall, less where the play followed lies nearer the width,
             :func:`.pipeline.taken_off`; None when not observed; else None),
+            ``within_zone`` (where the lost motion read from the flanks is below the width
+            its bins give at the test torque, :mod:`.within_zone`, in arcmin:
+            ``width_arcmin``, that width less the catalogue windup, ``read_arcmin``, the
+            windows' reading, ``gap_arcmin``, ``gap_sd_arcmin``, ``slope`` (the width's
+            growth with the load over the windup's), ``windows`` and ``added_arcmin``, what
+            the lost motion given was raised by: the gap, less where the play followed lies
+            nearer the width; None when not observed; else None),
             ``test_torque_check`` (what comparing the width at the test torque with the
             flanks of higher loads found: ``'soft zone'``, ``'unconfirmed'`` (a shortfall
             past the floor that is not said: too few windows or standard errors, or under a
@@ -138,12 +148,16 @@ class JointResult:
         out['velocity'] = self.velocity
         out['inputs'] = list(self.inputs)
         out['soft_zone'] = soft_zone_numbers(self.soft_zone)
+        out['within_zone'] = within_zone_numbers(self.within_zone) if observed else None
         out['test_torque_check'] = self.test_torque_check if observed else None
+        taken = wear.get('soft_zone_shortfall_rad') if observed else None
         if out['soft_zone'] is not None:
             # What the lost motion given was taken off the play by (pipeline.taken_off).
-            taken = wear.get('soft_zone_shortfall_rad') if observed else None
             out['soft_zone']['taken_off_arcmin'] = None if taken is None else \
                 rad_to_arcmin(float(taken))
+        if out['within_zone'] is not None:
+            out['within_zone']['added_arcmin'] = None if taken is None else \
+                rad_to_arcmin(max(-float(taken), 0.0))
         out.update(life_basis(wear, life, observed))
         out['service'] = self.service
         return out
@@ -205,7 +219,8 @@ class BagResult:
                             'observed': False, 'windows': 0, 'reason': reason,
                             'partial': None, 'pairing': None, 'velocity': None,
                             **life_basis({}, {}, False), 'service': None, 'inputs': [],
-                            'soft_zone': None, 'test_torque_check': None}
+                            'soft_zone': None, 'within_zone': None,
+                            'test_torque_check': None}
         return {'joints': joints,
                 'messages_per_s': float(rate) if math.isfinite(rate) else None}
 
@@ -232,6 +247,31 @@ def soft_zone_numbers(said):
            for key in ('width', 'play', 'shortfall', 'shortfall_sd')}
     out['windows'] = int(said['windows'])
     out['few_samples'] = bool(said.get('few_samples', False))
+    return out
+
+
+def within_zone_numbers(said):
+    """
+    Return the within-zone check's figures in edge units (``--json``), or None.
+
+    Parameters
+    ----------
+    said : dict or None
+        :attr:`.within_zone.WithinZoneCheck.said` ([rad]).
+
+    Returns
+    -------
+    dict or None
+        ``width_arcmin``, ``read_arcmin``, ``gap_arcmin``, ``gap_sd_arcmin``, ``slope`` and
+        ``windows``.
+
+    """
+    if said is None:
+        return None
+    out = {f'{key}_arcmin': rad_to_arcmin(float(said[key]))
+           for key in ('width', 'read', 'gap', 'gap_sd')}
+    out['slope'] = float(said['slope'])
+    out['windows'] = int(said['windows'])
     return out
 
 

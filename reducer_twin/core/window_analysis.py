@@ -347,6 +347,11 @@ class WindowAnalyzer:
         return self.fit.within_zone.reason if self.windows_observed else None
 
     @property
+    def within_zone_said(self):
+        """Return the within-zone check's figures where said, else None (``.said``)."""
+        return self.fit.within_zone.said if self.windows_observed else None
+
+    @property
     def test_torque_check(self):
         """Return what the width at the test torque showed (``SoftZoneCheck.outcome``), or None."""
         return self.fit.soft_zone.outcome if self.windows_observed else None

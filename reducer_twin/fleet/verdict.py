@@ -135,7 +135,8 @@ def fleet_row(reducer, params):
         latest analysis read its inputs otherwise than published, as ``analyze --json``
         gives them: encoders stamped apart, a play still taken up at the test torque, ...)
         and ``soft_zone`` (the latest analysis's figures of such a play, as ``analyze
-        --json`` gives them; else None) and ``test_torque_check`` (what the latest
+        --json`` gives them; else None), ``within_zone`` (its figures of loads within a
+        soft zone, likewise) and ``test_torque_check`` (what the latest
         analysis's comparisons of the width at the test torque found, as ``analyze
         --json`` gives it: ``'not compared'`` or ``'unconfirmed'`` where the lost motion
         is the loaded flanks' play; None where unknown).
@@ -159,6 +160,7 @@ def fleet_row(reducer, params):
     row['inputs'] = list(summary.get('inputs') or [])
     row['lost_motion_std_arcmin'] = None
     row['soft_zone'] = summary.get('soft_zone')
+    row['within_zone'] = summary.get('within_zone')
     row['test_torque_check'] = summary.get('test_torque_check')
     verdict = (state or {}).get('service_verdict')
     row['service_hours'] = float(state['config']['service_time_s']) / HOUR \

@@ -48,7 +48,7 @@ JSON_KEYS = {'wear_um', 'wear_std_um', 'rul_p10_h', 'rul_p50_h', 'rul_p90_h',
              'lost_motion_arcmin', 'lost_motion_std_arcmin', 'messages', 'rejected',
              'observed', 'windows', 'reason', 'partial', 'pairing', 'velocity',
              'rate_resolved', 'faster_than_wear', 'growth_law', 'curve_extrapolation',
-             'service', 'inputs', 'soft_zone', 'test_torque_check'}
+             'service', 'inputs', 'soft_zone', 'within_zone', 'test_torque_check'}
 DERIVED = ('te', 'te_features', 'wear', 'remaining_life', 'ground_truth')
 DIAG_KEYS = ['wear_um', 'wear_std_um', 'rate_scale', 'lost_motion_arcmin',
              'lost_motion_std_arcmin', 'lost_motion_obs_arcmin', 'rul_p10_h', 'rul_p50_h',
@@ -118,6 +118,7 @@ def test_the_json_has_the_issue_shape_and_the_estimate_approaches_the_truth(
         # the width there with the loaded flanks: --json says so; with a clean answer (OK)
         # no line does (an alarm would carry one, test_joint_words.py).
         assert got['soft_zone'] is None and got['test_torque_check'] == 'not compared'
+        assert got['within_zone'] is None
         assert not any('test torque' in line for line in got['inputs'])
     # The joint that wears twice as fast is estimated more worn, with less life left.
     assert data['joints']['joint_2']['wear_um'] > 1.5 * data['joints']['joint_1']['wear_um']

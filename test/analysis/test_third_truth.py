@@ -227,6 +227,13 @@ def test_a_wrist_whose_loads_never_leave_its_soft_zone_is_given_the_width_at_the
     assert read < given <= width + 0.005
     assert abs(given - true) < abs(read - true)
     assert wrist['rul_p10_h'] <= truth['remaining_life_end_h'] <= wrist['rul_p90_h']
+    # The line's figures, for a machine: --json's within_zone.
+    figures = wrist['within_zone']
+    assert figures['width_arcmin'] == pytest.approx(width, abs=0.005)
+    assert figures['read_arcmin'] == pytest.approx(read, abs=0.005)
+    assert figures['gap_arcmin'] == pytest.approx(width - read, abs=0.01)
+    assert figures['slope'] > 1.0 and figures['windows'] >= 2
+    assert 0.0 < figures['added_arcmin'] <= figures['gap_arcmin'] + 1e-9
     # Not compared with the flanks of higher loads, but not said to be their play either.
     assert wrist['test_torque_check'] == 'not compared'
     assert not any('no window held' in line for line in wrist['inputs'])

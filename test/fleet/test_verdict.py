@@ -225,6 +225,9 @@ def test_the_row_carries_the_soft_zones_figures_of_the_latest_analysis():
                'shortfall_sd_arcmin': 0.05, 'windows': 10}
     reducer.summary['soft_zone'] = figures
     assert fleet_row(reducer, PARAMS)['soft_zone'] == figures
+    assert fleet_row(reducer, PARAMS)['within_zone'] is None
+    reducer.summary['within_zone'] = {'gap_arcmin': 0.65}
+    assert fleet_row(reducer, PARAMS)['within_zone'] == {'gap_arcmin': 0.65}
 
 
 def test_the_row_says_what_the_comparisons_at_the_test_torque_found():
