@@ -282,21 +282,24 @@ def test_a_soft_zone_gives_the_lost_motion_at_the_test_torque_and_the_limit_met_
     assert [p.p50 for p in both] == [stage.prediction(before).p50, got.p50]
 
 
+def _given(windows, shortfall=0.0, width=0.0):
+    """Run a stage over ``windows`` carrying a soft-zone shortfall; return it and its record."""
+    stage = EstimatorStage(PARAMS)
+    run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall,
+                                   'soft_zone_width': width}) for w in windows])
+    return stage, stage.record(windows[-1].t_end)
+
+
 def test_a_soft_zone_is_taken_off_the_play_only_down_to_the_width_at_the_test_torque(
         windows):
     # The estimate follows the play its windows read; where their loads seldom pass the
     # soft zone's knee it lies near the width at the test torque, not at the play of the
     # far flanks. Taken off whole there, a shortfall left a third-generator base 0.02
     # arcmin for a true 1.19 (never below zero, now: no more than down to the width).
-    plain = EstimatorStage(PARAMS)
-    run(plain, windows)
-    play = plain.record(windows[-1].t_end)['lost_motion_rad']
+    play = _given(windows)[1]['lost_motion_rad']
 
     def given(shortfall, width):
-        stage = EstimatorStage(PARAMS)
-        run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': shortfall,
-                                       'soft_zone_width': width}) for w in windows])
-        return stage.record(windows[-1].t_end)
+        return _given(windows, shortfall, width)[1]
 
     # Windows that read the play of the far flanks: the whole shortfall, as before.
     far = given(0.5 * ARCMIN, play - 0.5 * ARCMIN)
@@ -321,15 +324,10 @@ def test_loads_within_a_soft_zone_give_the_lost_motion_up_to_the_width_at_the_te
     # A lost motion read below its bins' width at the test torque (core/within_zone.py):
     # the windows carry the gap as a negative shortfall, added no further than that width,
     # and the limit is met that much sooner.
-    plain = EstimatorStage(PARAMS)
-    run(plain, windows)
-    play = plain.record(windows[-1].t_end)['lost_motion_rad']
+    play = _given(windows)[1]['lost_motion_rad']
 
     def given(gap, width):
-        stage = EstimatorStage(PARAMS)
-        run(stage, [SimpleNamespace(**{**vars(w), 'soft_zone_shortfall': -gap,
-                                       'soft_zone_width': width}) for w in windows])
-        return stage, stage.record(windows[-1].t_end)
+        return _given(windows, -gap, width)
 
     stage, below = given(0.6 * ARCMIN, play + 0.8 * ARCMIN)
     assert below['lost_motion_rad'] == pytest.approx(play + 0.6 * ARCMIN, abs=1e-3 * ARCMIN)
