@@ -287,7 +287,8 @@ class HealthSummary:
         Return the summary as a dict.
 
         ``te_pp_arcmin`` only once a window was seen, ``soft_zone_shortfall_arcmin`` only
-        while the lost motion is given at the test torque less a soft zone.
+        while the lost motion is given at the test torque less a soft zone (negative: more,
+        loads within one).
         """
         out = {'wear_um': self.wear_um, 'wear_std_um': self.wear_std_um,
                'rate_scale': self.rate_scale, 'lost_motion_arcmin': self.lost_motion_arcmin,
