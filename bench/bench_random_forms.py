@@ -17,7 +17,8 @@ lost motion clearly below the limit), joints called worn out whose truth has lif
 (and how many of them say their lost motion is the loaded flanks' play, the width at the
 test torque not compared: ``test_torque_check``), the joints that say their lost motion
 reads below their bins' width at the test torque (:mod:`reducer_twin.core.within_zone`)
-and how many of those read 30 % low or more say it, and
+and how many of those read 30 % low or more say it, those that say their lost motion
+depends on how far the windows' loads reach (:mod:`reducer_twin.core.load_reach`), and
 for the observed ones the lost motion's error against the generator's truth at the
 recording's end (median, p90 and max of the absolute relative error; the share within
 10 %) and where the true remaining life lies against the P10-P90 given (within, below,
@@ -106,7 +107,9 @@ def run_one(seed, work):
             'false_worn_out': p90 == 0.0 and life > 0.0,
             # Said that its lost motion reads below its bins' width at the test torque
             # (core/within_zone.py): loads that never leave a soft zone.
-            'within_zone': any(WITHIN_ZONE in line for line in got.get('inputs') or ())}
+            'within_zone': any(WITHIN_ZONE in line for line in got.get('inputs') or ()),
+            # Said that its lost motion depends on the windows' reach (core/load_reach.py).
+            'load_reach': any(LOAD_REACH in line for line in got.get('inputs') or ())}
     return outcome
 
 
@@ -115,6 +118,9 @@ LIMIT_ARCMIN = 3.0
 
 WITHIN_ZONE = 'their extrapolation to no load'
 """A fragment of the line of :attr:`.within_zone.WithinZoneCheck.reason`."""
+
+LOAD_REACH = "depends on how far the windows' loads reach"
+"""A fragment of the line of :attr:`.load_reach.LoadReachCheck.reason`."""
 
 LOW = -0.3
 """A lost motion read this far below the truth (relative) or more: the life far too long."""
@@ -186,6 +192,11 @@ def summary(outcomes, gen):
                  if said else '')
               + f'; of the {len(low)} read {-100 * LOW:.0f} % low or more, '
               f'{sum(j["within_zone"] for j in low)} say it')
+        reach = [j['error'] for j in seen if j['load_reach']]
+        print("  said to depend on how far the windows' loads reach: "
+              f'{len(reach)} joints'
+              + (f', signed errors {", ".join(f"{100 * e:+.0f} %" for e in sorted(reach))}'
+                 if reach else ''))
         for kind in KINDS:
             k = np.abs([j['error'] for j in seen if j['kind'] == kind])
             if k.size:

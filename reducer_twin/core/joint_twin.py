@@ -493,8 +493,9 @@ class TwinFront:
 
         The encoders' time offset a next stream may start from
         (:attr:`.pipeline.TimeOffsetCalibration.to_carry`: not while the clocks drift) and
-        the pools of the soft-zone and within-zone checks (:meth:`.soft_zone.SoftZoneCheck.state`,
-        :meth:`.within_zone.WithinZoneCheck.state`). The rest of
+        the pools of the soft-zone, within-zone and load-reach checks
+        (:meth:`.soft_zone.SoftZoneCheck.state`, :meth:`.within_zone.WithinZoneCheck.state`,
+        :meth:`.load_reach.LoadReachCheck.state`). The rest of
         the window analysis (the flank pool, the friction fit) is relearnt by the first
         windows of any stream.
 
@@ -502,7 +503,7 @@ class TwinFront:
         -------
         dict
             ``kind`` (:data:`FRONT_STATE_KIND`), ``version``, ``windows`` (analysed so far),
-            ``time_offset_s`` (or None), ``soft_zone``, ``within_zone`` and
+            ``time_offset_s`` (or None), ``soft_zone``, ``within_zone``, ``load_reach`` and
             ``maintenance`` (the last maintenance event followed, or None).
 
         """
@@ -510,6 +511,7 @@ class TwinFront:
                 'windows': self.windows, 'time_offset_s': self.calibration.to_carry,
                 'soft_zone': self.analyzer.fit.soft_zone.state(),
                 'within_zone': self.analyzer.fit.within_zone.state(),
+                'load_reach': self.analyzer.fit.load_reach.state(),
                 'maintenance': self.maintenance}
 
     def continue_from(self, state):
@@ -556,19 +558,20 @@ class TwinFront:
         # kept has none, and the check starts afresh. Read first: nothing is changed by a
         # state that raises.
         within = copy.copy(self.analyzer.fit.within_zone)
-        try:
-            if state.get('within_zone') is not None:
-                within.continue_from(state['within_zone'])
-        except (KeyError, TypeError, ValueError) as err:
-            raise StateFileError(f"within_zone is not a within-zone check's state: {err}") \
-                from None
+        reach = copy.copy(self.analyzer.fit.load_reach)
+        for key, check in (('within_zone', within), ('load_reach', reach)):
+            try:
+                if state.get(key) is not None:
+                    check.continue_from(state[key])
+            except (KeyError, TypeError, ValueError) as err:
+                raise StateFileError(f"{key} is not its check's state: {err}") from None
         check = self.analyzer.fit.soft_zone
         lines = []
         try:
             other = check.other_reducer(state['soft_zone'])
             if other is None:
                 check.continue_from(state['soft_zone'])
-                self.analyzer.fit.within_zone = within
+                self.analyzer.fit.within_zone, self.analyzer.fit.load_reach = within, reach
         except (KeyError, TypeError, ValueError) as err:
             raise StateFileError(f"soft_zone is not a soft-zone check's state: {err}") from None
         if other is not None:
@@ -642,7 +645,8 @@ class TwinFront:
         window that compared the width at the test torque showed a soft zone
         (:attr:`.soft_zone.SoftZoneCheck.caveat`); ``'within_zone'``: a lost motion read
         below its bins' width at the test torque, loads that never leave a soft zone
-        (:mod:`.within_zone`).
+        (:mod:`.within_zone`); ``'load_reach'``: a lost motion read that depends on how
+        far the windows' loads reach (:mod:`.load_reach`).
         """
         found = (('velocity', self.analyzer.velocity_fault),
                  ('velocity_leads', self.analyzer.velocity_leads),
@@ -655,7 +659,8 @@ class TwinFront:
                  ('te_step', self.analyzer.te_stepped),
                  ('soft_zone', self.analyzer.soft_zone),
                  ('test_torque', self.analyzer.test_torque_caveat),
-                 ('within_zone', self.analyzer.within_zone))
+                 ('within_zone', self.analyzer.within_zone),
+                 ('load_reach', self.analyzer.load_reach))
         return {kind: line for kind, line in found if line is not None}
 
     @property

@@ -347,6 +347,14 @@ class WindowAnalyzer:
         return self.fit.within_zone.reason if self.windows_observed else None
 
     @property
+    def load_reach(self):
+        """Say when the lost motion read depends on the windows' reach (:mod:`.load_reach`)."""
+        # Loads within a soft zone (:attr:`within_zone`) are the more telling line.
+        if not self.windows_observed or self.within_zone is not None:
+            return None
+        return self.fit.load_reach.reason
+
+    @property
     def within_zone_said(self):
         """Return the within-zone check's figures where said, else None (``.said``)."""
         return self.fit.within_zone.said if self.windows_observed else None

@@ -41,6 +41,7 @@ from .duty_summary import duty_summaries, DutySummary
 from .effort_check import EffortCheck, PLAUSIBLE_LOST_MOTION_RAD
 from .flanks import FlankPool
 from .friction_fit import FrictionFit
+from .load_reach import LoadReachCheck
 from .soft_zone import NEAR_FLANK_SAMPLES, SoftZoneCheck
 from .te_extraction import TIME_OFFSET_LINEAR_S
 from .torque_smoothing import nominal_step, TorqueSmoothing
@@ -240,6 +241,7 @@ class WindowFit:
                                              compliance_prior, min_bins)
         self.soft_zone = SoftZoneCheck(self.takeup_torque, tables.series_stiffness)
         self.within_zone = WithinZoneCheck(self.takeup_torque, tables.series_stiffness)
+        self.load_reach = LoadReachCheck()
         self.windows_friction_unknown = 0
         self.windows_offset_unremoved = 0   # withheld: a time offset not yet removed
         self.largest_unremoved_offset_s = 0.0
@@ -397,6 +399,8 @@ class WindowFit:
         # (encoders in other units read as stamped 0.1-1 s apart, and it was learnt).
         offset[implausible] = np.nan
         self.within_zone.observe(torque_h, width, std, usable, fit[2])
+        self.load_reach.observe(np.where(usable, torque_h, 0.0).max(axis=1, initial=0.0),
+                                fit[2], fit[3])
         fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant

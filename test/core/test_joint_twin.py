@@ -494,10 +494,12 @@ def test_a_front_continued_from_its_state_gives_loads_within_a_soft_zone_their_w
 @pytest.mark.parametrize('change, message', [
     (lambda s: s.update(kind='reducer_twin.estimator'), "must be 'reducer_twin.front_state'"),
     (lambda s: s.update(within_zone={'bins': [0.0] * 6, 'read': [0.0] * 3, 'windows': 1}),
-     "within_zone is not a within-zone check's state: bins must be 7 finite sums"),
+     "within_zone is not its check's state: bins must be 7 finite sums"),
     (lambda s: s.update(within_zone={'bins': [0.0] * 7, 'read': [0.0] * 3, 'windows': -1}),
      'windows a count'),
-    (lambda s: s.update(within_zone={'bins': [0.0] * 7}), 'within_zone is not a within-zone'),
+    (lambda s: s.update(within_zone={'bins': [0.0] * 7}), "within_zone is not its check's"),
+    (lambda s: s.update(load_reach={'sums': [0.0] * 7, 'reach': [], 'windows': True}),
+     "load_reach is not its check's state: sums must be 7 finite sums"),
     (lambda s: s.update(version=2), 'version 1'),
     (lambda s: s.update(time_offset_s='10 ms'), 'time_offset_s must be null or a finite'),
     (lambda s: s.update(time_offset_s=float('inf')), 'time_offset_s must be null or a finite'),
@@ -515,6 +517,7 @@ def test_a_broken_front_state_is_refused_naming_the_value_and_changes_nothing(
         front.continue_from(state)
     assert front.calibration.applied is None and front.analyzer.fit.soft_zone.windows == 0
     assert front.analyzer.fit.within_zone.windows == 0
+    assert front.analyzer.fit.load_reach.windows == 0
 
 
 def test_a_replaced_reducer_starts_the_window_analysis_afresh_and_keeps_the_time_offset(
