@@ -11,13 +11,15 @@ its standard error says: third-generator bases and wrists read 17-59 % low at 0.
 arcmin, their windows reaching furthest 0.3-1.6 arcmin apart from those reaching least.
 
 Measured (``bench_random_forms.py`` seeds 9000, 15000, 17000 and 19000, 160 recordings, and
-two of 21000's, re-analysed, 2026-12-08): said of 5 third-generator joints, read 35, 32,
-28, 19 and 17 % low (22 at one standard error, 15 of them low, 4 high); of none of the
-independent generator's 143 observed joints, not even at one standard error.
+two of 21000's, re-analysed, 2026-12-08): said of 5 third-generator joints, four read 35,
+32, 28 and 17 % low and one 9 % high; of none of the independent generator's 143 observed
+joints (a line against the reach alone, without time, said none of them either even at one
+standard error, but over a whole life's windows it took the unit's wear for the reach).
 
 :class:`LoadReachCheck` pools, over the stream's recent windows
-(:data:`.soft_zone.SHORTFALL_MEMORY`), a straight line of the windows' lost motion against
-the largest load of the bins each read it from, weighted by their standard errors and
+(:data:`.soft_zone.SHORTFALL_MEMORY`), a plane of the windows' lost motion against the
+largest load each read it over and against time (so that a unit wearing, or a duty that
+changes with time, is not taken for the reach), weighted by their standard errors and
 scaled by the line's own scatter where it exceeds them (the Birge ratio). Where the reading
 changes across the loads the windows reach (their 10th to 90th percentile) by as much as a
 soft zone must fall short to be said (:data:`.soft_zone.SHORTFALL_RAD`, a
@@ -36,17 +38,17 @@ from .soft_zone import SHORTFALL_MEMORY, SHORTFALL_RAD, SHORTFALL_SHARE
 from .units import ARCMIN
 
 MIN_WINDOWS = 6
-"""Windows the line needs: its two coefficients and four degrees of freedom for its scatter."""
+"""Windows the line needs: its three coefficients and three degrees of freedom for its scatter."""
 
 SIGMAS = 3.0
 """
 Standard errors of the change from which it is said.
 
-The slope's standard error rests on the scatter of a few windows about the line, itself
+The slope's standard error rests on the scatter of a few windows about the plane, itself
 uncertain: measured on windows reading one lost motion scattered by 1 arcmin (400 draws,
 the 0.2-arcmin and one-fifth floors met), a change of one standard error or more is found in
-20-42 % of them from 30 down to 4 windows, of two in 3-17 %, of three in 0-10 % (2.3 % from
-6 windows, 0.5 % from 12).
+19-35 % of them from 30 down to 6 windows, of two in 2-10 %, of three in 0-4 % (4.3 % from
+6 windows, 1.3 % from 12).
 """
 
 KEEP = int(round(SHORTFALL_MEMORY))
@@ -58,28 +60,43 @@ class LoadReachCheck:
 
     def __init__(self):
         self._fade = 1.0 - 1.0 / SHORTFALL_MEMORY
-        self._sums = np.zeros(7)    # n, Σw, Σw·x, Σw·x², Σw·y, Σw·x·y, Σw·y²
-        self._reach = []            # the windows' reach [N·m], recent first dropped
+        self._S = np.zeros((3, 3))  # Σ w·u·uᵀ, u = [1, reach, time]
+        self._r = np.zeros(3)       # Σ w·u·y
+        self._yy = 0.0              # Σ w·y²
+        self._n = 0.0               # windows, faded
+        self._t0 = None             # the first window's end [s]: times are taken from it
+        self._last = 0.0            # the latest window's time from it [s]
+        self._reach = []            # the latest KEEP windows' reach [N·m]
         self.windows = 0
 
-    def observe(self, reach, lost_motion, lost_motion_std):
+    def observe(self, reach, lost_motion, lost_motion_std, t_end):
         """
         Add the windows of one batch, in stream order.
 
         Parameters
         ----------
         reach : ndarray, shape (W,)
-            The largest load of the bins each window read its lost motion from [N·m].
+            The largest load each window read its lost motion over [N·m].
         lost_motion, lost_motion_std : ndarray, shape (W,)
             The lost motion each window read and its standard error [rad] (NaN: none).
+        t_end : ndarray, shape (W,)
+            The windows' ends [s]: the reading's drift in time (the unit wearing) is
+            fitted beside the reach, so that it is not taken for it.
 
         """
-        for x, y, sd in zip(reach, lost_motion, lost_motion_std):
-            if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(sd) and sd > 0.0):
+        for x, y, sd, t in zip(reach, lost_motion, lost_motion_std, t_end):
+            if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(sd) and sd > 0.0
+                    and math.isfinite(t)):
                 continue
+            if self._t0 is None:
+                self._t0 = float(t)
+            u = np.array([1.0, float(x), float(t) - self._t0])
             w = 1.0 / (sd * sd)
-            self._sums = self._fade * self._sums + np.array(
-                [1.0, w, w * x, w * x * x, w * y, w * x * y, w * y * y])
+            self._S = self._fade * self._S + w * np.outer(u, u)
+            self._r = self._fade * self._r + w * y * u
+            self._yy = self._fade * self._yy + w * y * y
+            self._n = self._fade * self._n + 1.0
+            self._last = u[2]
             self._reach = (self._reach + [float(x)])[-KEEP:]
             self.windows += 1
 
@@ -90,30 +107,38 @@ class LoadReachCheck:
         Returns
         -------
         dict or None
-            ``change`` (from the 10th to the 90th percentile of the reach) and its
-            standard error ``change_sd`` [rad], ``low`` and ``high`` (the line's reading
-            there) [rad], ``reach_low`` and ``reach_high`` [N·m], ``mean`` (the windows'
-            weighted mean reading) [rad], ``windows``; None before :data:`MIN_WINDOWS`
-            windows or without a line.
+            ``change`` (from the 10th to the 90th percentile of the reach, at one time)
+            and its standard error ``change_sd`` [rad], ``low`` and ``high`` (the line's
+            reading there, now) [rad], ``reach_low`` and ``reach_high`` [N·m], ``mean``
+            (the windows' weighted mean reading) [rad], ``windows``; None before
+            :data:`MIN_WINDOWS` windows or where the reach or the time does not vary.
 
         """
-        n, s0, s1, s2, sy, sxy, syy = self._sums
-        det = s0 * s2 - s1 * s1
-        if self.windows < MIN_WINDOWS or n < MIN_WINDOWS - 0.5 or not det > 1e-12 * s0 * s2:
+        if self.windows < MIN_WINDOWS or self._n < MIN_WINDOWS - 0.5:
             return None
-        a, b = (s2 * sy - s1 * sxy) / det, (s0 * sxy - s1 * sy) / det
-        rss = max(syy - a * sy - b * sxy, 0.0)
-        scale = max(1.0, rss / (n - 2.0))
+        scale = np.sqrt(np.diag(self._S))
+        if not np.all(scale > 0.0):
+            return None
+        norm = self._S / np.outer(scale, scale)
+        if np.linalg.cond(norm) > 1e12:
+            return None
+        inv = np.linalg.inv(norm) / np.outer(scale, scale)
+        beta = inv @ self._r
+        rss = max(self._yy - beta @ self._r, 0.0)
+        birge = max(1.0, rss / (self._n - 3.0))
         lo, hi = np.percentile(self._reach, (10.0, 90.0))
-        sd_b = math.sqrt(scale * s0 / det)
-        return {'change': b * (hi - lo), 'change_sd': sd_b * (hi - lo),
-                'low': a + b * lo, 'high': a + b * hi, 'reach_low': float(lo),
-                'reach_high': float(hi), 'mean': sy / s0, 'windows': self.windows}
+        sd_b = math.sqrt(birge * inv[1, 1])
+        now = beta[0] + beta[2] * self._last
+        return {'change': beta[1] * (hi - lo), 'change_sd': sd_b * (hi - lo),
+                'low': now + beta[1] * lo, 'high': now + beta[1] * hi,
+                'reach_low': float(lo), 'reach_high': float(hi),
+                'mean': self._r[0] / self._S[0, 0], 'windows': self.windows}
 
     def state(self):
         """Return the check's pools as plain JSON-able data, to continue after a restart."""
-        return {'sums': self._sums.tolist(), 'reach': list(self._reach),
-                'windows': self.windows}
+        return {'S': self._S.ravel().tolist(), 'r': self._r.tolist(), 'yy': self._yy,
+                'n': self._n, 't0': self._t0, 'last': self._last,
+                'reach': list(self._reach), 'windows': self.windows}
 
     def continue_from(self, state):
         """
@@ -128,16 +153,22 @@ class LoadReachCheck:
             If a key is missing or a value is of the wrong type.
 
         """
-        sums = np.array(state['sums'], dtype=float)
+        S = np.array(state['S'], dtype=float)
+        r = np.array(state['r'], dtype=float)
+        scalars = [float(state[k]) for k in ('yy', 'n', 'last')]
+        t0 = None if state['t0'] is None else float(state['t0'])
         reach = [float(x) for x in state['reach']]
         windows = state['windows']
-        if not (sums.shape == (7,) and np.all(np.isfinite(sums))
-                and len(reach) <= KEEP and all(map(math.isfinite, reach))
+        finite = [S, r, np.array(scalars), np.array(reach)]
+        if not (S.shape == (9,) and r.shape == (3,) and all(np.all(np.isfinite(a))
+                                                            for a in finite)
+                and (t0 is None or math.isfinite(t0)) and len(reach) <= KEEP
                 and isinstance(windows, int) and not isinstance(windows, bool)
                 and windows >= 0):
-            raise ValueError(f'sums must be 7 finite sums, reach at most {KEEP} '
-                             'finite loads, windows a count')
-        self._sums, self._reach, self.windows = sums, reach, windows
+            raise ValueError(f'S must be 9 finite sums, r 3, reach at most {KEEP} finite '
+                             'loads, windows a count')
+        self._S, self._r, (self._yy, self._n, self._last) = S.reshape(3, 3), r, scalars
+        self._t0, self._reach, self.windows = t0, reach, windows
 
     @property
     def reason(self):

@@ -400,7 +400,7 @@ class WindowFit:
         offset[implausible] = np.nan
         self.within_zone.observe(torque_h, width, std, usable, fit[2])
         self.load_reach.observe(np.where(usable, torque_h, 0.0).max(axis=1, initial=0.0),
-                                fit[2], fit[3])
+                                fit[2], fit[3], t[np.asarray(ends) - 1])
         fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant

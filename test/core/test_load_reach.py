@@ -23,7 +23,8 @@ def _observed(reading_of, n=12, seed=0, scatter=SD):
     reach = np.linspace(30.0, 80.0, n)
     rng.shuffle(reach)
     check = LoadReachCheck()
-    check.observe(reach, reading_of(reach) + rng.normal(0.0, scatter, n), np.full(n, SD))
+    check.observe(reach, reading_of(reach) + rng.normal(0.0, scatter, n), np.full(n, SD),
+                  2.0 * np.arange(n))
     return check
 
 
@@ -76,9 +77,22 @@ def test_the_pools_continue_after_a_restart_and_a_broken_state_changes_nothing()
     again.continue_from(json.loads(json.dumps(check.state())))
     assert again.change() == check.change() and again.reason == check.reason
     broken = LoadReachCheck()
-    for state in ({'sums': [0.0] * 6, 'reach': [], 'windows': 1},
-                  {'sums': [0.0] * 7, 'reach': [float('nan')], 'windows': 1},
-                  {'sums': [0.0] * 7, 'reach': [], 'windows': -1}):
-        with pytest.raises(ValueError, match='sums must be 7 finite sums'):
-            broken.continue_from(state)
+    good = check.state()
+    for change in ({'S': [0.0] * 8}, {'reach': [float('nan')]}, {'windows': -1},
+                   {'t0': float('inf')}):
+        with pytest.raises(ValueError, match='S must be 9 finite sums'):
+            broken.continue_from({**good, **change})
     assert broken.windows == 0 and broken.change() is None
+
+
+def test_a_reading_that_grows_in_time_is_not_taken_for_the_reach():
+    # A unit wearing while the duty's reach drifts with it (a whole life's windows):
+    # the reading's drift in time is fitted beside the reach.
+    n = 30
+    t = 2.0 * np.arange(n)
+    reach = 30.0 + 50.0 * t / t[-1] + np.random.default_rng(1).normal(0.0, 5.0, n)
+    check = LoadReachCheck()
+    check.observe(reach, (1.0 + 1.5 * t / t[-1]) * ARCMIN, np.full(n, SD), t)
+    found = check.change()
+    assert abs(found['change']) < 2.0 * found['change_sd'] + 0.02 * ARCMIN
+    assert check.reason is None
