@@ -144,14 +144,9 @@ class LoadReachCheck:
         """
         Continue from :meth:`state` of a check of the same joint.
 
-        Raises
-        ------
-        ValueError
-            If the state is not a check's (wrong sizes, values not finite, a negative
-            count); the check is then left as it was.
-        KeyError, TypeError
-            If a key is missing or a value is of the wrong type.
-
+        Raises as :meth:`.within_zone.WithinZoneCheck.continue_from` does (ValueError for
+        values of a wrong size or not finite, KeyError or TypeError for a missing key or a
+        wrong type), the check left as it was.
         """
         S = np.array(state['S'], dtype=float)
         r = np.array(state['r'], dtype=float)
