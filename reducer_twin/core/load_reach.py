@@ -13,8 +13,9 @@ arcmin, their windows reaching furthest 0.3-1.6 arcmin apart from those reaching
 Measured (``bench_random_forms.py`` seeds 9000, 15000, 17000 and 19000, 160 recordings, and
 two of 21000's, re-analysed, 2026-12-08): said of 5 third-generator joints, four read 35,
 32, 28 and 17 % low and one 9 % high; of none of the independent generator's 143 observed
-joints (a line against the reach alone, without time, said none of them either even at one
-standard error, but over a whole life's windows it took the unit's wear for the reach).
+joints (a line against the reach alone said none of them either, even at one standard
+error, but it takes a reading that grows in time for the reach where the reach drifts with
+it: a unit wearing over a whole life's windows).
 
 :class:`LoadReachCheck` pools, over the stream's recent windows
 (:data:`.soft_zone.SHORTFALL_MEMORY`), a plane of the windows' lost motion against the
