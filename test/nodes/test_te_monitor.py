@@ -486,6 +486,14 @@ def test_a_lost_motion_read_below_its_bins_width_is_published_for_the_life(ros):
     assert values['test_torque_check'] == 'not compared' and values['line'] == ''
     assert heard[-1].level == DiagnosticStatus.WARN
     assert heard[-1].message == values['within_zone']
+    # The windows from then on carry the gap to that width (a negative shortfall), so the
+    # wear estimator gives the lost motion no lower than it.
+    said = monitor.node.twin.analyzer.within_zone_said
+    ros.spin_until(lambda: len(monitor.features) >= monitor.node.twin.analyzer.windows_emitted,
+                   what='every window on te_features')
+    last = from_multiarray(monitor.features[-1], TE_FEATURES)
+    assert last['soft_zone_shortfall_rad'] < -0.2 * ARCMIN
+    assert last['soft_zone_width_rad'] == pytest.approx(said['width'], rel=0.1)
 
 
 def _swing_rows(seed, t0, late_s):
