@@ -37,6 +37,7 @@ import numpy as np
 
 from .soft_zone import SHORTFALL_MEMORY, SHORTFALL_RAD, SHORTFALL_SHARE
 from .units import ARCMIN
+from .window_ops import FadedLeastSquares
 
 MIN_WINDOWS = 6
 """Windows the line needs: its three coefficients and three degrees of freedom for its scatter."""
@@ -60,11 +61,7 @@ class LoadReachCheck:
     """Compare the lost motion read by windows whose loads reach differently far."""
 
     def __init__(self):
-        self._fade = 1.0 - 1.0 / SHORTFALL_MEMORY
-        self._S = np.zeros((3, 3))  # Σ w·u·uᵀ, u = [1, reach, time]
-        self._r = np.zeros(3)       # Σ w·u·y
-        self._yy = 0.0              # Σ w·y²
-        self._n = 0.0               # windows, faded
+        self._plane = FadedLeastSquares(3, 1.0 - 1.0 / SHORTFALL_MEMORY)  # u = [1, reach, t]
         self._t0 = None             # the first window's end [s]: times are taken from it
         self._last = 0.0            # the latest window's time from it [s]
         self._reach = []            # the latest KEEP windows' reach [N·m]
@@ -91,13 +88,8 @@ class LoadReachCheck:
                 continue
             if self._t0 is None:
                 self._t0 = float(t)
-            u = np.array([1.0, float(x), float(t) - self._t0])
-            w = 1.0 / (sd * sd)
-            self._S = self._fade * self._S + w * np.outer(u, u)
-            self._r = self._fade * self._r + w * y * u
-            self._yy = self._fade * self._yy + w * y * y
-            self._n = self._fade * self._n + 1.0
-            self._last = u[2]
+            self._last = float(t) - self._t0
+            self._plane.add([1.0, float(x), self._last], [y], [1.0 / (sd * sd)])
             self._reach = (self._reach + [float(x)])[-KEEP:]
             self.windows += 1
 
@@ -115,30 +107,22 @@ class LoadReachCheck:
             :data:`MIN_WINDOWS` windows or where the reach or the time does not vary.
 
         """
-        if self.windows < MIN_WINDOWS or self._n < MIN_WINDOWS - 0.5:
+        fit = self._plane.solve() if self.windows >= MIN_WINDOWS \
+            and self._plane.n >= MIN_WINDOWS - 0.5 else None
+        if fit is None:
             return None
-        scale = np.sqrt(np.diag(self._S))
-        if not np.all(scale > 0.0):
-            return None
-        norm = self._S / np.outer(scale, scale)
-        if np.linalg.cond(norm) > 1e12:
-            return None
-        inv = np.linalg.inv(norm) / np.outer(scale, scale)
-        beta = inv @ self._r
-        rss = max(self._yy - beta @ self._r, 0.0)
-        birge = max(1.0, rss / (self._n - 3.0))
+        beta, cov = fit
         lo, hi = np.percentile(self._reach, (10.0, 90.0))
-        sd_b = math.sqrt(birge * inv[1, 1])
+        sd_b = math.sqrt(cov[1, 1])
         now = beta[0] + beta[2] * self._last
         return {'change': beta[1] * (hi - lo), 'change_sd': sd_b * (hi - lo),
                 'low': now + beta[1] * lo, 'high': now + beta[1] * hi,
                 'reach_low': float(lo), 'reach_high': float(hi),
-                'mean': self._r[0] / self._S[0, 0], 'windows': self.windows}
+                'mean': self._plane.r[0] / self._plane.S[0, 0], 'windows': self.windows}
 
     def state(self):
         """Return the check's pools as plain JSON-able data, to continue after a restart."""
-        return {'S': self._S.ravel().tolist(), 'r': self._r.tolist(), 'yy': self._yy,
-                'n': self._n, 't0': self._t0, 'last': self._last,
+        return {'plane': self._plane.state(), 't0': self._t0, 'last': self._last,
                 'reach': list(self._reach), 'windows': self.windows}
 
     def continue_from(self, state):
@@ -149,22 +133,20 @@ class LoadReachCheck:
         values of a wrong size or not finite, KeyError or TypeError for a missing key or a
         wrong type), the check left as it was.
         """
-        S = np.array(state['S'], dtype=float)
-        r = np.array(state['r'], dtype=float)
-        scalars = [float(state[k]) for k in ('yy', 'n', 'last')]
+        plane = FadedLeastSquares(3, self._plane.fade)
+        plane.continue_from(state['plane'])
+        last = float(state['last'])
         t0 = None if state['t0'] is None else float(state['t0'])
         reach = [float(x) for x in state['reach']]
         windows = state['windows']
-        finite = [S, r, np.array(scalars), np.array(reach)]
-        if not (S.shape == (9,) and r.shape == (3,) and all(np.all(np.isfinite(a))
-                                                            for a in finite)
-                and (t0 is None or math.isfinite(t0)) and len(reach) <= KEEP
+        if not (math.isfinite(last) and (t0 is None or math.isfinite(t0))
+                and len(reach) <= KEEP and all(map(math.isfinite, reach))
                 and isinstance(windows, int) and not isinstance(windows, bool)
                 and windows >= 0):
-            raise ValueError(f'S must be 9 finite sums, r 3, reach at most {KEEP} finite '
-                             'loads, windows a count')
-        self._S, self._r, (self._yy, self._n, self._last) = S.reshape(3, 3), r, scalars
-        self._t0, self._reach, self.windows = t0, reach, windows
+            raise ValueError(f'last and t0 must be finite, reach at most {KEEP} finite loads, '
+                             'windows a count')
+        self._plane, self._last, self._t0 = plane, last, t0
+        self._reach, self.windows = reach, windows
 
     @property
     def reason(self):

@@ -472,7 +472,8 @@ class EstimatorStage:
         taken = 0.0 if not (math.isfinite(shortfall) and shortfall != 0.0) else taken_off(
             shortfall, float(getattr(features, 'soft_zone_width', 0.0)),
             lambda: self.estimator.lost_motion(self.estimator.growth_trend())[0])
-        if shortfall > 0.0 or taken < 0.0 or (shortfall < 0.0 < -self.soft_zone_shortfall):
+        added_before = shortfall < 0.0 and self.soft_zone_shortfall < 0.0
+        if shortfall > 0.0 or taken < 0.0 or added_before:
             # A soft zone, or loads within one that give the lost motion more than the play
             # followed (the play already that wide: nothing added, a soft zone carried over
             # from the reducer's last stream stays).

@@ -400,7 +400,7 @@ class WindowFit:
         offset[implausible] = np.nan
         self.within_zone.observe(torque_h, width, std, usable, fit[2])
         self.load_reach.observe(np.where(usable, torque_h, 0.0).max(axis=1, initial=0.0),
-                                fit[2], fit[3], t[np.asarray(ends) - 1])
+                                fit[2], fit[3], t[ends - 1])
         fit = [a.tolist() for a in fit]
         # Mean TE under load, harmonics and time-offset term removed.
         # Per window: sum of TE minus the fitted terms' sums (the coefficients are constant
@@ -417,10 +417,12 @@ class WindowFit:
         amp = np.where(ident[:, 0:2 * n_ord:2] & ident[:, 1:2 * n_ord:2], amp, np.nan)
         # The lost motion at the test torque: the play less a soft zone's shortfall, or the
         # flanks' reading plus the gap to the width of loads within one (negative).
+        shortfall, zone_width = 0.0, 0.0
         soft, within = self.soft_zone.said, self.within_zone.said
-        shortfall, zone_width = (float(soft['shortfall']), float(soft['width'])) \
-            if soft is not None else (-float(within['gap']), float(within['width'])) \
-            if within is not None else (0.0, 0.0)
+        if soft is not None:
+            shortfall, zone_width = float(soft['shortfall']), float(soft['width'])
+        elif within is not None:
+            shortfall, zone_width = -float(within['gap']), float(within['width'])
         out = []
         for k in range(n_win):
             use = usable[k]

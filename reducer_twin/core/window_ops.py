@@ -176,3 +176,101 @@ def _identifiability(sub):
     with np.errstate(divide='ignore'):
         share = 1.0 / np.diagonal(inv, axis1=1, axis2=2)
     return inv, np.where(np.isfinite(share), share, 0.0)
+
+
+class FadedLeastSquares:
+    """
+    Weighted least squares over a stream's recent windows, older windows faded.
+
+    The normal equations ``Σ w·u·uᵀ``, ``Σ w·u·y``, ``Σ w·y²`` and the count of rows are
+    kept, each window's rows added at once and everything before them multiplied by
+    ``fade``; the solution's covariance is scaled by the rows' scatter about it where it
+    exceeds their standard errors (the Birge ratio). Used by the checks that compare the
+    windows' readings with a line or plane pooled over the stream
+    (:mod:`.within_zone`, :mod:`.load_reach`).
+
+    Parameters
+    ----------
+    size : int
+        The number of regressors ``k`` (a row ``u`` holds ``k`` values).
+    fade : float
+        The factor a window's rows are kept by at each next window (0-1).
+
+    """
+
+    MAX_CONDITION = 1e12
+    """Condition number of the scaled normal matrix beyond which nothing is solved."""
+
+    def __init__(self, size, fade):
+        self.size, self.fade = int(size), float(fade)
+        self.S = np.zeros((self.size, self.size))
+        self.r = np.zeros(self.size)
+        self.yy = 0.0
+        self.n = 0.0
+
+    def add(self, u, y, w):
+        """
+        Add one window's rows after fading the earlier ones.
+
+        Parameters
+        ----------
+        u : ndarray, shape (m, k)
+            Regressors.
+        y, w : ndarray, shape (m,)
+            Readings and their weights (inverse variances).
+
+        """
+        u, y, w = np.atleast_2d(u), np.asarray(y, dtype=float), np.asarray(w, dtype=float)
+        self.S = self.fade * self.S + (u * w[:, None]).T @ u
+        self.r = self.fade * self.r + u.T @ (w * y)
+        self.yy = self.fade * self.yy + float(w @ (y * y))
+        self.n = self.fade * self.n + float(y.size)
+
+    def solve(self):
+        """
+        Return the coefficients and their covariance (Birge-scaled), or None.
+
+        Returns
+        -------
+        tuple or None
+            ``(beta, cov)``; None with no more rows than regressors, or a normal matrix
+            singular or conditioned past :data:`MAX_CONDITION`.
+
+        """
+        scale = np.sqrt(np.diag(self.S))
+        if not (self.n > self.size and np.all(scale > 0.0)):
+            return None
+        norm = self.S / np.outer(scale, scale)
+        if not np.linalg.cond(norm) < self.MAX_CONDITION:
+            return None
+        inv = np.linalg.inv(norm) / np.outer(scale, scale)
+        beta = inv @ self.r
+        rss = max(self.yy - float(beta @ self.r), 0.0)
+        return beta, inv * max(1.0, rss / (self.n - self.size))
+
+    def state(self):
+        """Return the sums as plain JSON-able data."""
+        return {'S': self.S.ravel().tolist(), 'r': self.r.tolist(), 'yy': self.yy,
+                'n': self.n}
+
+    def continue_from(self, state):
+        """
+        Continue from :meth:`state`.
+
+        Raises
+        ------
+        ValueError
+            If a sum is of the wrong size or not finite; nothing is changed then.
+        KeyError, TypeError
+            If a key is missing or a value is of the wrong type.
+
+        """
+        S = np.array(state['S'], dtype=float)
+        r = np.array(state['r'], dtype=float)
+        yy, n = float(state['yy']), float(state['n'])
+        if not (S.shape == (self.size ** 2,) and r.shape == (self.size,)
+                and np.all(np.isfinite(S)) and np.all(np.isfinite(r))
+                and np.isfinite(yy) and np.isfinite(n) and n >= 0.0):
+            raise ValueError(f'S must be {self.size ** 2} finite sums, r {self.size}, yy and '
+                             'n finite')
+        self.S, self.r, self.yy, self.n = S.reshape(self.size, self.size), r, yy, n

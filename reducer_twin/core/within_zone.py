@@ -44,6 +44,7 @@ import numpy as np
 from .soft_zone import HINT_SIGMAS, MIN_WINDOWS, SHORTFALL_MEMORY, SHORTFALL_RAD
 from .soft_zone import SHORTFALL_SHARE
 from .units import ARCMIN
+from .window_ops import FadedLeastSquares
 
 SPAN = (0.5, 2.5)
 """Bins from and to these multiples of the test torque give the line read at it."""
@@ -66,7 +67,7 @@ class WithinZoneCheck:
         self.takeup_torque = float(takeup_torque)
         self.series_stiffness = float(series_stiffness)
         self._fade = 1.0 - 1.0 / SHORTFALL_MEMORY
-        self._bins = np.zeros(7)    # n, Σw, Σw·T, Σw·T², Σw·H, Σw·T·H, Σw·H²
+        self._line = FadedLeastSquares(2, self._fade)     # the bins' width against the load
         self._read = np.zeros(3)    # n, Σ lost motion, Σ lost motion²
         self.windows = 0
 
@@ -89,10 +90,9 @@ class WithinZoneCheck:
         for k in range(torque_b.shape[0]):
             if not math.isfinite(lost_motion[k]) or not inside[k].any():
                 continue
-            t, h = torque_b[k, inside[k]], width_b[k, inside[k]]
-            w = 1.0 / std_b[k, inside[k]] ** 2
-            self._bins = self._fade * self._bins + np.array(
-                [t.size, w.sum(), w @ t, w @ t ** 2, w @ h, w @ (t * h), w @ h ** 2])
+            t = torque_b[k, inside[k]]
+            self._line.add(np.column_stack([np.ones(t.size), t]), width_b[k, inside[k]],
+                           1.0 / std_b[k, inside[k]] ** 2)
             z = float(lost_motion[k])
             self._read = self._fade * self._read + np.array([1.0, z, z * z])
             self.windows += 1
@@ -107,7 +107,7 @@ class WithinZoneCheck:
             ``bins`` (the line's 7 weighted sums), ``read`` (the readings' 3), ``windows``.
 
         """
-        return {'bins': self._bins.tolist(), 'read': self._read.tolist(),
+        return {'line': self._line.state(), 'read': self._read.tolist(),
                 'windows': self.windows}
 
     def continue_from(self, state):
@@ -123,14 +123,14 @@ class WithinZoneCheck:
             If a key is missing or a value is of the wrong type.
 
         """
-        bins = np.array(state['bins'], dtype=float)
+        line = FadedLeastSquares(2, self._fade)
+        line.continue_from(state['line'])
         read = np.array(state['read'], dtype=float)
         windows = state['windows']
-        if not (bins.shape == (7,) and read.shape == (3,) and np.all(np.isfinite(bins))
-                and np.all(np.isfinite(read)) and isinstance(windows, int)
+        if not (read.shape == (3,) and np.all(np.isfinite(read)) and isinstance(windows, int)
                 and not isinstance(windows, bool) and windows >= 0):
-            raise ValueError('bins must be 7 finite sums, read 3, windows a count')
-        self._bins, self._read, self.windows = bins, read, windows
+            raise ValueError('read must be 3 finite sums, windows a count')
+        self._line, self._read, self.windows = line, read, windows
 
     def gap(self):
         """
@@ -147,16 +147,13 @@ class WithinZoneCheck:
             :data:`.soft_zone.MIN_WINDOWS` windows or without a line.
 
         """
-        n, s0, s1, s2, sh, sth, shh = self._bins
-        det = s0 * s2 - s1 * s1
-        if self.windows < MIN_WINDOWS or not det > 0.0 or n < 3:
-            return None
-        a, b = (s2 * sh - s1 * sth) / det, (s0 * sth - s1 * sh) / det
         # Scaled by the line's own scatter where it exceeds the bins' standard errors.
-        rss = max(shh - a * sh - b * sth, 0.0)
-        scale = max(1.0, rss / (n - 2))
+        fit = self._line.solve() if self.windows >= MIN_WINDOWS and self._line.n >= 3 else None
+        if fit is None:
+            return None
+        (a, b), cov = fit
         tt = self.takeup_torque
-        var_line = scale * (s2 - 2.0 * tt * s1 + tt * tt * s0) / det
+        var_line = cov[0, 0] + 2.0 * tt * cov[0, 1] + tt * tt * cov[1, 1]
         m, z1, z2 = self._read
         read = z1 / m
         var_read = max(z2 / m - read * read, 0.0) / max(m - 1.0, 1.0)
@@ -164,7 +161,7 @@ class WithinZoneCheck:
         k2 = self.series_stiffness / 2.0
         return {'width': width, 'read': read, 'gap': width - read,
                 'gap_sd': math.sqrt(var_line + var_read),
-                'slope': b * k2, 'slope_sd': math.sqrt(scale * s0 / det) * k2,
+                'slope': b * k2, 'slope_sd': math.sqrt(cov[1, 1]) * k2,
                 'windows': self.windows}
 
     @property

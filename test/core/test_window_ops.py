@@ -3,6 +3,8 @@
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
+import pytest
+from reducer_twin.core.window_ops import FadedLeastSquares
 from reducer_twin.core.window_ops import MIN_IDENTIFIABILITY, shifted, solve_identifiable_many
 from reducer_twin.core.window_ops import window_mean, window_medians
 
@@ -78,3 +80,33 @@ def test_a_regressor_another_explains_is_left_out_and_the_rest_solved_exactly():
     beta, ident = solve_identifiable_many(normal[None], rhs[None], energy[None])
     assert ident[0].all()
     np.testing.assert_allclose(beta[0], [2.0, -3.0, 0.0], atol=1e-9)
+
+
+def test_a_faded_line_recovers_its_coefficients_and_scales_its_covariance_by_the_scatter():
+    rng = np.random.default_rng(0)
+    fit = FadedLeastSquares(2, 0.9)
+    assert fit.solve() is None                      # no rows
+    fit.add([[1.0, 1.0]], [3.0], [1.0])
+    fit.add([[1.0, 2.0]], [5.0], [1.0])
+    assert fit.solve() is None                      # no more rows than coefficients
+    for _ in range(40):
+        x = rng.uniform(0.0, 10.0, 5)
+        fit.add(np.column_stack([np.ones(5), x]), 1.0 + 2.0 * x + rng.normal(0.0, 0.5, 5),
+                np.full(5, 1.0 / 0.01 ** 2))
+    beta, cov = fit.solve()
+    np.testing.assert_allclose(beta, [1.0, 2.0], atol=0.3)
+    # Standard errors of 0.01 claimed, 0.5 scattered: the covariance is widened to it.
+    assert 0.02 < np.sqrt(cov[1, 1]) < 0.1
+    again = FadedLeastSquares(2, 0.9)
+    again.continue_from(fit.state())
+    np.testing.assert_array_equal(again.solve()[0], beta)
+
+
+def test_old_windows_fade_away():
+    fit = FadedLeastSquares(1, 0.5)
+    for _ in range(60):
+        fit.add([[1.0]], [1.0], [1.0])
+    for _ in range(60):
+        fit.add([[1.0]], [3.0], [1.0])
+    assert fit.solve()[0][0] == pytest.approx(3.0, abs=1e-9)
+    assert fit.n == pytest.approx(2.0)
